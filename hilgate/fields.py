@@ -1,0 +1,162 @@
+"""Reading validated values out of located YAML, one key at a time.
+
+:class:`Fields` wraps one mapping: it refuses unknown keys up front (with a "did you mean" for
+typos, because a misspelt key must never fall back silently to a default), and each ``get`` checks
+one value with a small checker function that raises :class:`SceneError` naming file, line and key.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from typing import Any, Callable, Iterable, Sequence
+
+from .located import Node, SceneError
+
+MISSING: Any = object()
+
+Checker = Callable[[Node, str], Any]
+
+
+def describe(node: Node) -> str:
+    value = node.value
+    if isinstance(value, dict):
+        return "a mapping"
+    if isinstance(value, list):
+        return "a list"
+    if value is None:
+        return "empty (null)"
+    if isinstance(value, bool):
+        return f"the boolean {str(value).lower()}"
+    if isinstance(value, str):
+        return f"the text {value!r}"
+    return f"{value!r}"
+
+
+def join_path(path: str, key: str | int) -> str:
+    if isinstance(key, int):
+        return f"{path}[{key}]"
+    return f"{path}.{key}" if path else key
+
+
+class Fields:
+    def __init__(self, node: Node, path: str, known: Iterable[str]):
+        if not node.is_map:
+            raise node.error(path, f"must be a mapping of keys, not {describe(node)}")
+        self.node = node
+        self.path = path
+        self.known = list(known)
+        for key, child in node.items():
+            if key not in self.known:
+                raise child.error(join_path(path, key), unknown_key_message(key, self.known))
+
+    def __contains__(self, key: str) -> bool:
+        return key in self.node.value
+
+    def child(self, key: str) -> Node | None:
+        return self.node.value.get(key)
+
+    def sub(self, key: str) -> str:
+        return join_path(self.path, key)
+
+    def get(self, key: str, check: Checker, default: Any = MISSING) -> Any:
+        child = self.node.value.get(key)
+        if child is None:
+            if default is MISSING:
+                raise self.node.error(self.path, f"missing required key {key!r}")
+            return default
+        return check(child, self.sub(key))
+
+    def error(self, message: str) -> SceneError:
+        return self.node.error(self.path, message)
+
+
+def unknown_key_message(key: str, known: Sequence[str]) -> str:
+    close = difflib.get_close_matches(key, known, n=1, cutoff=0.6)
+    if close:
+        return f"unknown key (did you mean {close[0]!r}?)"
+    return f"unknown key; expected one of: {', '.join(known)}"
+
+
+# -- checkers ------------------------------------------------------------------------------------
+
+
+def number(minimum: float | None = None, maximum: float | None = None, *, above: float | None = None,
+           allow_inf: bool = False) -> Checker:
+    def check(node: Node, path: str) -> float:
+        value = node.value
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise node.error(path, f"must be a number, not {describe(node)}")
+        value = float(value)
+        if math.isnan(value) or (math.isinf(value) and not allow_inf):
+            raise node.error(path, f"must be a finite number, not {value}")
+        if minimum is not None and value < minimum:
+            raise node.error(path, f"must be at least {minimum:g}, not {value:g}")
+        if above is not None and value <= above:
+            raise node.error(path, f"must be greater than {above:g}, not {value:g}")
+        if maximum is not None and value > maximum:
+            raise node.error(path, f"must be at most {maximum:g}, not {value:g}")
+        return value
+
+    return check
+
+
+def integer(minimum: int | None = None, maximum: int | None = None) -> Checker:
+    def check(node: Node, path: str) -> int:
+        value = node.value
+        if isinstance(value, float) and value.is_integer():
+            value = int(value)
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise node.error(path, f"must be a whole number, not {describe(node)}")
+        if minimum is not None and value < minimum:
+            raise node.error(path, f"must be at least {minimum}, not {value}")
+        if maximum is not None and value > maximum:
+            raise node.error(path, f"must be at most {maximum}, not {value}")
+        return value
+
+    return check
+
+
+def text(node: Node, path: str) -> str:
+    if not isinstance(node.value, str) or not node.value:
+        raise node.error(path, f"must be a non-empty text, not {describe(node)}")
+    return node.value
+
+
+def boolean(node: Node, path: str) -> bool:
+    if not isinstance(node.value, bool):
+        raise node.error(path, f"must be true or false, not {describe(node)}")
+    return node.value
+
+
+def choice(*options: str) -> Checker:
+    def check(node: Node, path: str) -> str:
+        value = node.value
+        if not isinstance(value, str) or value not in options:
+            raise node.error(path, f"must be one of {', '.join(options)}, not {describe(node)}")
+        return value
+
+    return check
+
+
+def vector(length: int = 3) -> Checker:
+    item = number()
+
+    def check(node: Node, path: str) -> tuple[float, ...]:
+        if not node.is_list or len(node.value) != length:
+            raise node.error(path, f"must be a list of {length} numbers like [x, y, z], not {describe(node)}")
+        return tuple(item(child, join_path(path, i)) for i, child in enumerate(node.value))
+
+    return check
+
+
+def items(node: Node, path: str) -> list[Node]:
+    if not node.is_list:
+        raise node.error(path, f"must be a list, not {describe(node)}")
+    return node.value
+
+
+def mapping(node: Node, path: str) -> dict[str, Node]:
+    if not node.is_map:
+        raise node.error(path, f"must be a mapping of keys, not {describe(node)}")
+    return node.value

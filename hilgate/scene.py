@@ -1,0 +1,552 @@
+"""Scene files: load, merge presets, apply ``--set`` overrides, validate whole, return typed specs.
+
+A scene is validated completely before anything is built from it, so a bad scene never half-starts
+(and a bad reload never disturbs the running one).  Every error is a :class:`SceneError` printed as
+``FILE:LINE: key.path: what is wrong``.  The format is DESIGN.md's "Scene file" section.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.resources
+import math
+import os
+import re
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from .fields import (
+    MISSING, Fields, boolean, choice, describe, integer, items, join_path, mapping, number, text, vector,
+)
+from .located import Node, SceneError, load_file, load_text, parse_scalar
+from .models.errormodel import UNITS, ErrorModel
+from .models.expr import ExprError, compile_expression
+from .models.flows import FlowSpec
+from .models.frame import BROADCAST
+from .models.mac import REGISTRY as MAC_REGISTRY
+from .models.mac import Mac, Param
+from .models.medium import Channel
+from .models.modem import ModemParams
+
+__all__ = [
+    "SceneError", "Scene", "VehicleSpec", "PoseSpec", "LinkSpec", "MacSpec", "load_scene", "load_scene_text",
+    "preset_names", "POSE_KINDS", "BACKENDS",
+]
+
+TOP_KEYS = ("name", "seed", "duration_s", "channels", "vehicles", "links", "flows", "trace")
+CHANNEL_KEYS = ("speed_mps", "min_delay_s")
+VEHICLE_KEYS = ("pose",)
+MODEM_KEYS = (
+    "bitrate_bps", "tx_delay_s", "rx_delay_s", "tx_jitter_s", "rx_jitter_s", "fifo_bytes", "range_m",
+    "error", "mac", "packet", "duplex", "promiscuous",
+)
+LINK_KEYS = ("vehicle", "backend", "model", "address", "channel", "tx_channel", "rx_channel") + MODEM_KEYS
+FLOW_KEYS = ("from", "to", "size_bytes", "interval_s", "rate_hz", "poisson", "start_s", "stop_s")
+BACKENDS = ("sim",)
+PACKET_CLASSES = ("raw", "vl1b", "vl2b", "dlf16", "dlf32", "simple:N")
+LINK_ID = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,200}$")
+
+
+@dataclass(frozen=True)
+class PoseSpec:
+    """``kind`` names the pose source; ``params`` is what its checker returned (hashable)."""
+
+    kind: str
+    params: Any
+
+
+@dataclass(frozen=True)
+class VehicleSpec:
+    name: str
+    pose: PoseSpec
+    line: int = field(default=0, compare=False)
+
+
+@dataclass(frozen=True)
+class MacSpec:
+    protocol: str
+    params: tuple[tuple[str, Any], ...] = ()
+
+    def build(self) -> Mac:
+        return mac_class(self.protocol)(**dict(self.params))
+
+
+@dataclass(frozen=True)
+class LinkSpec:
+    id: str
+    vehicle: str
+    backend: str
+    model: str | None
+    params: ModemParams
+    mac: MacSpec
+    packet: str
+    file: str = field(default="", compare=False)
+    line: int = field(default=0, compare=False)
+
+
+@dataclass
+class Scene:
+    name: str
+    seed: int
+    duration_s: float
+    channels: dict[str, Channel]
+    vehicles: dict[str, VehicleSpec]
+    links: dict[str, LinkSpec]
+    flows: list[FlowSpec]
+    trace_file: str | None
+    path: str
+
+    def link_of_address(self, channel: str, address: int) -> LinkSpec | None:
+        for link in self.links.values():
+            if link.params.rx_channel == channel and link.params.address == address:
+                return link
+        return None
+
+
+# -- presets --------------------------------------------------------------------------------------
+
+
+def preset_names() -> list[str]:
+    folder = importlib.resources.files("hilgate.models")
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".yaml"))
+
+
+def _load_preset(name_node: Node, path: str, scene_dir: str) -> Node:
+    name = text(name_node, path)
+    if name.endswith((".yaml", ".yml")) or os.sep in name:
+        file = name if os.path.isabs(name) else os.path.join(scene_dir, name)
+        node = load_file(file)
+    else:
+        resource = importlib.resources.files("hilgate.models") / f"{name}.yaml"
+        if not re.fullmatch(r"[A-Za-z0-9_.-]+", name) or not resource.is_file():
+            raise name_node.error(path, f"unknown modem model {name!r}; presets: {', '.join(preset_names())} "
+                                        "(or a path to your own .yaml)")
+        node = load_text(resource.read_text(encoding="utf-8"), f"models/{name}.yaml")
+    if node is None or not node.is_map:
+        raise SceneError(node.file if node else name, node.line if node else 0, "", "a modem preset must be a mapping of link keys")
+    Fields(node, "", MODEM_KEYS)
+    return node
+
+
+def _merge(base: Node, override: Node) -> Node:
+    """Key-by-key override, one level into nested mappings (``error``, ``mac``)."""
+    if not (base.is_map and override.is_map):
+        return override
+    merged = dict(base.value)
+    for key, value in override.items():
+        merged[key] = _merge(merged[key], value) if key in merged else value
+    return Node(merged, override.file, override.line)
+
+
+# -- --set overrides ------------------------------------------------------------------------------
+
+
+def apply_override(root: Node, assignment: str) -> None:
+    """``links.*.mac.protocol=s-fama``: set a value, ``*`` matching every key at that level."""
+    if "=" not in assignment:
+        raise SceneError("--set", 0, assignment, "expected KEY.PATH=VALUE")
+    path, raw = assignment.split("=", 1)
+    parts = [p for p in path.strip().split(".")]
+    if not all(parts):
+        raise SceneError("--set", 0, path, "empty key in the path")
+    value = parse_scalar(raw)
+
+    def to_node(v: Any) -> Node:
+        if isinstance(v, dict):
+            return Node({str(k): to_node(x) for k, x in v.items()}, "--set", 0)
+        if isinstance(v, list):
+            return Node([to_node(x) for x in v], "--set", 0)
+        return Node(v, "--set", 0)
+
+    def walk(node: Node, index: int, where: str) -> int:
+        key = parts[index]
+        if not node.is_map:
+            raise SceneError("--set", 0, where, f"is {describe(node)}, cannot set {key!r} in it")
+        targets = list(node.value) if key == "*" else [key]
+        done = 0
+        for name in targets:
+            if index == len(parts) - 1:
+                node.value[name] = to_node(value)
+                done += 1
+            else:
+                child = node.value.get(name)
+                if child is None:
+                    child = node.value[name] = Node({}, "--set", 0)
+                done += walk(child, index + 1, join_path(where, name))
+        return done
+
+    if walk(root, 0, "") == 0:
+        raise SceneError("--set", 0, path, "matched nothing")
+
+
+# -- checkers for scene sections ------------------------------------------------------------------
+
+
+def _range_pair(node: Node, path: str) -> tuple[float, float]:
+    if not node.is_list or len(node.value) != 2:
+        raise node.error(path, f"must be [min, max] in metres, not {describe(node)}")
+    low = number(0)(node.value[0], join_path(path, 0))
+    high = number(0, allow_inf=True)(node.value[1], join_path(path, 1))
+    if high < low:
+        raise node.error(path, f"max {high:g} is below min {low:g}")
+    return (low, high)
+
+
+def _error_model(node: Node, path: str) -> ErrorModel:
+    f = Fields(node, path, ("unit", "expr"))
+    unit = f.get("unit", choice(*UNITS), "packet")
+    expr_node = f.child("expr")
+    if expr_node is None:
+        raise f.error("missing required key 'expr' (e.g. \"6e-13 * d^13.7\")")
+    try:
+        expression = compile_expression(expr_node.value)
+    except ExprError as exc:
+        raise expr_node.error(f.sub("expr"), f"bad error-rate expression: {exc}") from None
+    return ErrorModel(unit, expression)
+
+
+def _packet_class(node: Node, path: str) -> str:
+    value = node.value
+    if isinstance(value, str):
+        if value in ("raw", "vl1b", "vl2b", "dlf16", "dlf32"):
+            return value
+        match = re.fullmatch(r"simple:(\d+)", value)
+        if match and 2 <= int(match.group(1)) <= 8000:
+            return value
+    raise node.error(path, f"must be one of {', '.join(PACKET_CLASSES)} (N from 2 to 8000), not {describe(node)}")
+
+
+def mac_class(protocol: str) -> type[Mac]:
+    if protocol in MAC_REGISTRY:
+        return MAC_REGISTRY[protocol]
+    module_name, _, class_name = protocol.partition(":")
+    module = importlib.import_module(module_name)
+    cls = getattr(module, class_name)
+    if not (isinstance(cls, type) and issubclass(cls, Mac)):
+        raise TypeError(f"{protocol} is not a subclass of hilgate.models.mac.Mac")
+    return cls
+
+
+def _param_value(param: Param, node: Node, path: str) -> Any:
+    if param.kind == "number":
+        return number(param.minimum, param.maximum)(node, path)
+    if param.kind == "integer":
+        low = None if param.minimum is None else int(param.minimum)
+        high = None if param.maximum is None else int(param.maximum)
+        return integer(low, high)(node, path)
+    if param.kind == "boolean":
+        return boolean(node, path)
+    if param.kind == "pair":
+        pair = vector(2)(node, path)
+        if param.minimum is not None and min(pair) < param.minimum:
+            raise node.error(path, f"values must be at least {param.minimum:g}")
+        if pair[1] < pair[0]:
+            raise node.error(path, f"max {pair[1]:g} is below min {pair[0]:g}")
+        return pair
+    raise node.error(path, f"internal: unknown parameter kind {param.kind!r}")
+
+
+def _mac_spec(node: Node, path: str) -> MacSpec:
+    if isinstance(node.value, str):  # shorthand: mac: cs-aloha
+        node = Node({"protocol": Node(node.value, node.file, node.line)}, node.file, node.line)
+    values = mapping(node, path)
+    proto_node = values.get("protocol")
+    if proto_node is None:
+        raise node.error(path, "missing required key 'protocol'")
+    protocol = text(proto_node, join_path(path, "protocol"))
+    if protocol not in MAC_REGISTRY and ":" not in protocol:
+        raise proto_node.error(join_path(path, "protocol"),
+                               f"unknown MAC protocol {protocol!r}; built in: {', '.join(MAC_REGISTRY)} "
+                               "(or package.module:ClassName)")
+    try:
+        cls = mac_class(protocol)
+    except Exception as exc:  # the user's own module: any import problem is a scene error
+        raise proto_node.error(join_path(path, "protocol"), f"cannot load MAC {protocol!r}: {exc}") from None
+    f = Fields(node, path, ("protocol",) + tuple(cls.PARAMETERS))
+    params = []
+    for key, param in cls.PARAMETERS.items():
+        value = f.get(key, lambda n, p, param=param: _param_value(param, n, p), param.default)
+        if value is not None:
+            params.append((key, value))
+    return MacSpec(protocol, tuple(params))
+
+
+# -- pose sources ---------------------------------------------------------------------------------
+
+
+def _static_pose(node: Node, path: str) -> Any:
+    return vector()(node, path)
+
+
+def _leg(node: Node, path: str) -> dict[str, Any]:
+    f = Fields(node, path, ("hold_s", "to", "speed_mps", "duration_s"))
+    if "hold_s" in f:
+        if any(k in f for k in ("to", "speed_mps", "duration_s")):
+            raise f.error("a leg is either {hold_s} or {to, speed_mps} or {to, duration_s}")
+        return {"hold_s": f.get("hold_s", number(0))}
+    to = f.get("to", vector())
+    if ("speed_mps" in f) == ("duration_s" in f):
+        raise f.error("a leg with 'to' needs exactly one of speed_mps or duration_s")
+    if "speed_mps" in f:
+        return {"to": to, "speed_mps": f.get("speed_mps", number(above=0))}
+    return {"to": to, "duration_s": f.get("duration_s", number(0))}
+
+
+def _path_pose(node: Node, path: str) -> Any:
+    f = Fields(node, path, ("start", "legs", "loop"))
+    start = f.get("start", vector())
+    legs_node = f.child("legs")
+    legs = [] if legs_node is None else [_leg(n, join_path(f.sub("legs"), i)) for i, n in enumerate(items(legs_node, f.sub("legs")))]
+    loop = f.get("loop", boolean, False)
+    if loop:
+        from .models.trajectories import path_segments
+
+        segments = path_segments(start, legs)
+        if segments[-1].t1 <= 0:
+            raise f.error("a looping path needs legs that take time")
+        end = segments[-1].p1
+        if math.dist(end, start) > 1e-6:
+            raise f.error(f"a looping path must end where it starts {list(start)}, it ends at {list(end)}")
+    return (start, tuple(tuple(sorted(leg.items())) for leg in legs), loop)
+
+
+def _waypoints_pose(node: Node, path: str) -> Any:
+    rows = []
+    previous = -math.inf
+    for i, row in enumerate(items(node, path)):
+        values = vector(4)(row, join_path(path, i))
+        if values[0] <= previous:
+            raise row.error(join_path(path, i), f"times must increase: {values[0]:g} after {previous:g}")
+        previous = values[0]
+        rows.append(values)
+    if not rows:
+        raise node.error(path, "needs at least one [t, x, y, z] row")
+    return tuple(rows)
+
+
+POSE_KINDS: dict[str, Callable[[Node, str], Any]] = {
+    "static": _static_pose,
+    "path": _path_pose,
+    "waypoints": _waypoints_pose,
+}
+
+
+def _vehicle(name: str, node: Node, path: str) -> VehicleSpec:
+    f = Fields(node, path, VEHICLE_KEYS)
+    pose_node = f.child("pose")
+    if pose_node is None:
+        raise f.error("missing required key 'pose'")
+    pose_path = f.sub("pose")
+    kinds = mapping(pose_node, pose_path)
+    if len(kinds) != 1:
+        raise pose_node.error(pose_path, f"give exactly one pose source: {', '.join(POSE_KINDS)}")
+    (kind, params_node), = kinds.items()
+    if kind not in POSE_KINDS:
+        raise params_node.error(join_path(pose_path, kind), unknown_pose(kind))
+    params = POSE_KINDS[kind](params_node, join_path(pose_path, kind))
+    return VehicleSpec(name, PoseSpec(kind, params), node.line)
+
+
+def unknown_pose(kind: str) -> str:
+    from .fields import unknown_key_message
+
+    return unknown_key_message(kind, list(POSE_KINDS)).replace("unknown key", "unknown pose source")
+
+
+# -- links ----------------------------------------------------------------------------------------
+
+
+def _link(link_id: str, node: Node, path: str, scene: dict[str, Any], scene_dir: str) -> LinkSpec:
+    if not LINK_ID.match(link_id):
+        raise node.error(path, "a link id must be letters, digits, '_', '.' or '-' (it names POSIX queues)")
+    Fields(node, path, LINK_KEYS)  # unknown keys first, before the preset hides them
+    model_node = node.value.get("model")
+    merged = node
+    if model_node is not None:
+        merged = _merge(_load_preset(model_node, join_path(path, "model"), scene_dir), node)
+    f = Fields(merged, path, LINK_KEYS)
+    vehicle = f.get("vehicle", text)
+    if vehicle not in scene["vehicles"]:
+        raise f.child("vehicle").error(f.sub("vehicle"), f"no vehicle {vehicle!r} in the scene")
+    backend = f.get("backend", choice(*BACKENDS), "sim")
+    channels = scene["channels"]
+    if "channel" in f:
+        if "tx_channel" in f or "rx_channel" in f:
+            raise f.error("give either channel or tx_channel + rx_channel, not both")
+        tx_channel = rx_channel = f.get("channel", text)
+    elif "tx_channel" in f or "rx_channel" in f:
+        tx_channel = f.get("tx_channel", text)
+        rx_channel = f.get("rx_channel", text)
+    elif len(channels) == 1:
+        tx_channel = rx_channel = next(iter(channels))
+    else:
+        raise f.error(f"missing 'channel' (the scene has several: {', '.join(channels)})")
+    for key, value in (("channel", tx_channel), ("tx_channel", tx_channel), ("rx_channel", rx_channel)):
+        if value not in channels and key in f:
+            raise f.child(key).error(f.sub(key), f"no channel {value!r} in the scene; channels: {', '.join(channels)}")
+    params = ModemParams(
+        address=f.get("address", integer(0, BROADCAST - 1), -1),
+        tx_channel=tx_channel,
+        rx_channel=rx_channel,
+        bitrate_bps=f.get("bitrate_bps", number(above=0), 1000.0),
+        tx_delay_s=f.get("tx_delay_s", number(0), 0.0),
+        rx_delay_s=f.get("rx_delay_s", number(0), 0.0),
+        tx_jitter_s=f.get("tx_jitter_s", number(0), 0.0),
+        rx_jitter_s=f.get("rx_jitter_s", number(0), 0.0),
+        fifo_bytes=f.get("fifo_bytes", integer(1), 500_000),
+        range_m=f.get("range_m", _range_pair, (0.0, math.inf)),
+        error=f.get("error", _error_model, ErrorModel("packet", "0")),
+        duplex=f.get("duplex", choice("half", "full"), "half"),
+        promiscuous=f.get("promiscuous", boolean, False),
+    )
+    mac = f.get("mac", _mac_spec, MacSpec("none"))
+    packet = f.get("packet", _packet_class, "vl2b")
+    model = None if model_node is None else str(model_node.value)
+    return LinkSpec(link_id, vehicle, backend, model, params, mac, packet, node.file, node.line)
+
+
+def _assign_addresses(links: dict[str, LinkSpec], nodes: dict[str, Node]) -> dict[str, LinkSpec]:
+    """Links without ``address`` get the smallest free one; two links that listen on one channel
+    must not share an address."""
+    used = {link.params.address for link in links.values() if link.params.address >= 0}
+    next_free = 1
+    result: dict[str, LinkSpec] = {}
+    owners: dict[tuple[str, int], str] = {}
+    for link_id, link in links.items():
+        if link.params.address < 0:
+            while next_free in used:
+                next_free += 1
+            if next_free >= BROADCAST:
+                raise nodes[link_id].error(f"links.{link_id}", "no free address left (0..254)")
+            used.add(next_free)
+            link = _replace_params(link, address=next_free)
+        key = (link.params.rx_channel, link.params.address)
+        if key in owners:
+            raise nodes[link_id].error(
+                f"links.{link_id}.address",
+                f"address {link.params.address} is already used by link {owners[key]!r} on channel {key[0]!r}",
+            )
+        owners[key] = link_id
+        result[link_id] = link
+    return result
+
+
+def _replace_params(link: LinkSpec, **changes: Any) -> LinkSpec:
+    from dataclasses import replace
+
+    return replace(link, params=replace(link.params, **changes))
+
+
+# -- flows ----------------------------------------------------------------------------------------
+
+
+def _flow(node: Node, path: str, links: dict[str, LinkSpec], duration: float) -> FlowSpec:
+    f = Fields(node, path, FLOW_KEYS)
+    src = f.get("from", text)
+    if src not in links:
+        raise f.child("from").error(f.sub("from"), f"no link {src!r}; links: {', '.join(links)}")
+    dst = f.get("to", text)
+    if dst != "*":
+        if dst not in links:
+            raise f.child("to").error(f.sub("to"), f"no link {dst!r} (or \"*\" for broadcast)")
+        if dst == src:
+            raise f.child("to").error(f.sub("to"), "a flow cannot go to its own link")
+        if links[dst].params.rx_channel != links[src].params.tx_channel:
+            raise f.child("to").error(
+                f.sub("to"),
+                f"{dst!r} listens on channel {links[dst].params.rx_channel!r} but {src!r} transmits on "
+                f"{links[src].params.tx_channel!r}: it can never hear this flow",
+            )
+    size = f.get("size_bytes", integer(1))
+    if ("interval_s" in f) == ("rate_hz" in f):
+        raise f.error("give exactly one of interval_s or rate_hz")
+    if "interval_s" in f:
+        interval = f.get("interval_s", number(above=0))
+    else:
+        interval = 1.0 / f.get("rate_hz", number(above=0))
+    poisson = f.get("poisson", boolean, False)
+    start = f.get("start_s", number(0), 0.0)
+    stop = f.get("stop_s", number(0, allow_inf=True), math.inf)
+    if stop <= start:
+        raise f.child("stop_s").error(f.sub("stop_s"), f"must be after start_s ({start:g})")
+    return FlowSpec(src, dst, size, interval, poisson, start, stop)
+
+
+# -- the whole scene ------------------------------------------------------------------------------
+
+
+def _validate(root: Node | None, file: str) -> Scene:
+    if root is None:
+        raise SceneError(file, 0, "", "the scene is empty")
+    f = Fields(root, "", TOP_KEYS)
+    scene_dir = os.path.dirname(os.path.abspath(file)) if not file.startswith("<") else os.getcwd()
+    name = f.get("name", text, os.path.splitext(os.path.basename(file))[0])
+    seed = f.get("seed", integer(0, 2**63 - 1), 1)
+    duration = f.get("duration_s", number(above=0), 60.0)
+
+    channels: dict[str, Channel] = {}
+    channels_node = f.child("channels")
+    if channels_node is None:
+        raise f.error("missing required key 'channels' (e.g. acoustic: {speed_mps: 1500})")
+    for cname, cnode in mapping(channels_node, "channels").items():
+        cf = Fields(cnode, join_path("channels", cname), CHANNEL_KEYS)
+        channels[cname] = Channel(cname, cf.get("speed_mps", number(above=0)), cf.get("min_delay_s", number(0), 0.0))
+    if not channels:
+        raise channels_node.error("channels", "define at least one channel")
+
+    vehicles: dict[str, VehicleSpec] = {}
+    vehicles_node = f.child("vehicles")
+    if vehicles_node is None:
+        raise f.error("missing required key 'vehicles'")
+    for vname, vnode in mapping(vehicles_node, "vehicles").items():
+        vehicles[vname] = _vehicle(vname, vnode, join_path("vehicles", vname))
+
+    links_node = f.child("links")
+    if links_node is None:
+        raise f.error("missing required key 'links'")
+    link_nodes = mapping(links_node, "links")
+    context = {"channels": channels, "vehicles": vehicles}
+    links = {lid: _link(lid, lnode, join_path("links", lid), context, scene_dir) for lid, lnode in link_nodes.items()}
+    links = _assign_addresses(links, link_nodes)
+
+    flows: list[FlowSpec] = []
+    flows_node = f.child("flows")
+    if flows_node is not None and flows_node.value is not None:
+        for i, fnode in enumerate(items(flows_node, "flows")):
+            flows.append(_flow(fnode, join_path("flows", i), links, duration))
+
+    trace_file = None
+    trace_node = f.child("trace")
+    if trace_node is not None:
+        tf = Fields(trace_node, "trace", ("file",))
+        trace_file = tf.get("file", text, None)
+    return Scene(name, seed, duration, channels, vehicles, links, flows, trace_file, file)
+
+
+def load_scene(path: str, overrides: list[str] | tuple[str, ...] = ()) -> Scene:
+    root = load_file(path)
+    for assignment in overrides:
+        if root is None:
+            root = Node({}, path, 0)
+        apply_override(root, assignment)
+    return _validate(root, path)
+
+
+def load_scene_text(text_: str, file: str = "<scene>", overrides: list[str] | tuple[str, ...] = ()) -> Scene:
+    root = load_text(text_, file)
+    for assignment in overrides:
+        apply_override(root, assignment)
+    return _validate(root, file)
+
+
+def scene_summary(scene: Scene) -> str:
+    """A few lines for ``hilgate check``."""
+    lines = [f"scene {scene.name!r}: {len(scene.channels)} channels, {len(scene.vehicles)} vehicles, "
+             f"{len(scene.links)} links, {len(scene.flows)} flows, seed {scene.seed}, {scene.duration_s:g} s"]
+    for link in scene.links.values():
+        p = link.params
+        channel = p.tx_channel if p.tx_channel == p.rx_channel else f"{p.tx_channel}->{p.rx_channel}"
+        model = f" ({link.model})" if link.model else ""
+        lines.append(f"  {link.id}: {link.backend}{model} on {link.vehicle}, addr {p.address}, {channel}, "
+                     f"{p.bitrate_bps:g} bit/s, mac {link.mac.protocol}, packet {link.packet}")
+    return "\n".join(lines)

@@ -1,0 +1,78 @@
+"""``hilgate sim``: run a scene in virtual time, as fast as the CPU allows."""
+
+from __future__ import annotations
+
+import json
+import logging
+import sys
+import time
+from typing import Any, TextIO
+
+from .recorder import Recorder
+from .scene import Scene
+from .scheduler import VirtualScheduler
+from .world import World
+
+log = logging.getLogger(__name__)
+
+
+class ProgressBar:
+    """One line on a terminal, redrawn in place; silent when stderr is not a terminal."""
+
+    def __init__(self, total: float, stream: TextIO = sys.stderr, width: int = 30):
+        self.total = total
+        self.stream = stream
+        self.width = width
+        self.started = time.perf_counter()
+
+    def update(self, t: float, events: int) -> None:
+        fraction = min(1.0, t / self.total) if self.total > 0 else 1.0
+        filled = int(fraction * self.width)
+        elapsed = time.perf_counter() - self.started
+        speed = t / elapsed if elapsed > 0 else 0.0
+        self.stream.write(
+            f"\r[{'#' * filled}{'.' * (self.width - filled)}] {fraction * 100:5.1f}%  t={t:,.1f}/{self.total:,.1f} s"
+            f"  {events:,} events  {speed:,.0f}x real time "
+        )
+        self.stream.flush()
+
+    def done(self) -> None:
+        self.stream.write("\n")
+        self.stream.flush()
+
+
+def simulate(
+    scene: Scene,
+    until: float | None = None,
+    seed: int | None = None,
+    trace: TextIO | None = None,
+    progress: bool = False,
+) -> dict[str, Any]:
+    """Run ``scene`` for ``until`` simulated seconds (default its ``duration_s``) and return the summary."""
+    seed = scene.seed if seed is None else seed
+    until = scene.duration_s if until is None else until
+    recorder = Recorder(trace)
+    clock = VirtualScheduler()
+    world = World(scene, clock, recorder, seed)
+    world.start()
+    started = time.perf_counter()
+    if progress:
+        bar = ProgressBar(until)
+        steps = 200
+        for step in range(1, steps + 1):
+            clock.run(until * step / steps)
+            bar.update(clock.now(), clock.events)
+        bar.done()
+    else:
+        clock.run(until)
+    wall = time.perf_counter() - started
+    recorder.close()
+    log.info("simulated %.1f s in %.3f s wall (%d events, %d arrivals)", until, wall, clock.events, world.medium.arrivals)
+    summary = recorder.summary(scene, seed, until, wall, world.modems.values())
+    return summary
+
+
+def write_summary(summary: dict[str, Any], path: str) -> None:
+    with open(path, "w", encoding="utf-8") as handle:
+        json.dump(summary, handle, indent=2)
+        handle.write("\n")

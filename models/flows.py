@@ -1,0 +1,77 @@
+"""Built-in traffic generators: a constant interval or a Poisson process, unicast or broadcast."""
+
+from __future__ import annotations
+
+import random
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from .frame import Frame
+
+if TYPE_CHECKING:
+    from .clock import Clock
+    from .modem import SimModem
+
+
+@dataclass(frozen=True)
+class FlowSpec:
+    src: str
+    dst: str  # link id or "*"
+    size_bytes: int
+    interval_s: float  # mean gap for Poisson flows
+    poisson: bool = False
+    start_s: float = 0.0
+    stop_s: float = float("inf")
+
+
+class FlowSource:
+    """Offers ``size_bytes`` frames to ``modem`` at ``start_s``, ``start_s + interval_s``, … (computed
+    as ``start_s + k·interval_s``, so no rounding error builds up), or with exponential gaps from
+    ``start_s``, while before ``stop_s``."""
+
+    def __init__(
+        self,
+        spec: FlowSpec,
+        modem: "SimModem",
+        dst_addr: int,
+        clock: "Clock",
+        rng: random.Random,
+        stats: Any = None,
+    ):
+        self.spec = spec
+        self.modem = modem
+        self.dst_addr = dst_addr
+        self.clock = clock
+        self.rng = rng
+        self.stats = stats
+        self._count = 0
+        self._handle = None
+
+    def start(self) -> None:
+        first = self.spec.start_s
+        if self.spec.poisson:
+            first += self.rng.expovariate(1.0 / self.spec.interval_s)
+        self._schedule(first)
+
+    def stop(self) -> None:
+        if self._handle is not None:
+            self.clock.cancel(self._handle)
+            self._handle = None
+
+    def _schedule(self, t: float) -> None:
+        if t < self.spec.stop_s:
+            self._handle = self.clock.at(t, self._fire)
+        else:
+            self._handle = None
+
+    def _fire(self) -> None:
+        t = self.clock.now()
+        spec = self.spec
+        modem = self.modem
+        frame = Frame(modem.medium.new_frame_id(), modem.id, spec.dst, self.dst_addr, spec.size_bytes, t, self.stats)
+        modem.send(frame)
+        self._count += 1
+        if spec.poisson:
+            self._schedule(t + self.rng.expovariate(1.0 / spec.interval_s))
+        else:
+            self._schedule(spec.start_s + self._count * spec.interval_s)

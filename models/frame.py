@@ -1,0 +1,52 @@
+"""What travels through the simulated stack: one frame on its way from a sender's FIFO to the air."""
+
+from __future__ import annotations
+
+from typing import Any
+
+BROADCAST = 255
+"""The broadcast address, as DataLinkFrame and the EvoLogics modems use it."""
+
+DATA = "data"
+
+
+class Frame:
+    """A frame of ``size`` bytes on air.
+
+    ``src``/``dst`` are link ids for the trace (``dst`` is ``"*"`` for broadcast); ``dst_addr`` is the
+    MAC address receivers match against.  ``flow`` points at the statistics of the flow that offered
+    it (None for frames from applications) so that counting an event is one attribute access.
+    ``payload`` carries the GLI packet bytes for frames from applications.  MAC protocols make their
+    own control frames with another ``kind`` and may hang the data frame they serve on ``ref``.
+    """
+
+    __slots__ = ("id", "src", "dst", "dst_addr", "size", "t0", "flow", "payload", "kind", "ref", "seq")
+
+    def __init__(
+        self,
+        id: int,
+        src: str,
+        dst: str,
+        dst_addr: int,
+        size: int,
+        t0: float,
+        flow: Any = None,
+        payload: bytes | None = None,
+        kind: str = DATA,
+        ref: "Frame | None" = None,
+        seq: int = 0,
+    ):
+        self.id = id
+        self.src = src
+        self.dst = dst
+        self.dst_addr = dst_addr
+        self.size = size
+        self.t0 = t0
+        self.flow = flow
+        self.payload = payload
+        self.kind = kind
+        self.ref = ref
+        self.seq = seq
+
+    def __repr__(self) -> str:
+        return f"Frame(#{self.id} {self.kind} {self.src}->{self.dst} {self.size}B)"

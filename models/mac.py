@@ -1,0 +1,92 @@
+"""The MAC hook of the simulated modem, and the protocol that does nothing (``mac: none``).
+
+A MAC sits between the modem's transmit FIFO and its PHY.  It is *told*:
+
+- ``on_enqueue()``: the application (or a flow) put a frame in the FIFO;
+- ``on_tx_done(frame)``: the PHY finished putting ``frame`` on air;
+- ``on_frame(frame, cause, addressed)``: an arrival ended at this modem; ``cause`` is None for a good
+  frame, else ``"prop"``, ``"col"`` or ``"mult"``; ``addressed`` says whether it was meant for this
+  modem (its address, broadcast, or the modem is promiscuous).  Only frames for this modem are
+  reported unless the MAC sets ``hears_all`` (to overhear RTS/CTS, for example).
+- timers it set itself fire (plain callbacks through ``modem.clock``).
+
+It *may*, through the modem (see :class:`hilgate.models.modem.SimModem`):
+
+- ``modem.fifo`` / ``modem.fifo_pop()``: look at and take frames from the FIFO;
+- ``modem.transmit(frame)``: put a frame on air (after the modem's intrinsic delay and jitter);
+  ``modem.phy_busy`` is true from then until ``on_tx_done``;
+- ``modem.deliver(frame)``: hand a good frame up to the application (after the rx delay);
+- ``modem.channel_busy()``: carrier sense, true while something arrives or the modem transmits;
+- ``modem.clock.at(t, fn, *args)`` / ``modem.clock.cancel(handle)``: timers;
+- ``modem.rng``: its own seeded random stream, so backoffs are reproducible;
+- ``modem.observer.mac(t, modem, frame, ev, ...)``: trace MAC outcomes (``retx``, ``giveup``, ``backoff``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, ClassVar
+
+if TYPE_CHECKING:
+    from .frame import Frame
+    from .modem import SimModem
+
+
+@dataclass(frozen=True)
+class Param:
+    """One scene parameter of a MAC: ``kind`` is number, integer, pair (of numbers) or boolean;
+    a ``default`` of None means the MAC computes it from the modem when it is not given."""
+
+    kind: str
+    default: Any = None
+    minimum: float | None = None
+    maximum: float | None = None
+    doc: str = ""
+
+
+class Mac:
+    """Base class of every MAC protocol; the defaults are those of ``mac: none``.
+
+    ``PARAMETERS`` declares the scene keys the protocol takes (besides ``protocol``); the scene
+    loader validates them and passes them to the constructor as keyword arguments."""
+
+    name = "none"
+    hears_all = False
+    PARAMETERS: ClassVar[dict[str, Param]] = {}
+
+    def __init__(self, **params: Any):
+        if params:
+            raise TypeError(f"mac {self.name!r} takes no parameters, got {', '.join(sorted(params))}")
+        self.modem: SimModem | None = None
+
+    def attach(self, modem: "SimModem") -> None:
+        self.modem = modem
+
+    def on_enqueue(self) -> None:
+        self._send_next()
+
+    def on_tx_done(self, frame: "Frame") -> None:
+        self._send_next()
+
+    def on_frame(self, frame: "Frame", cause: str | None, addressed: bool) -> None:
+        if cause is None and addressed:
+            self.modem.deliver(frame)
+
+    def _send_next(self) -> None:
+        modem = self.modem
+        if not modem.phy_busy and modem.fifo:
+            modem.transmit(modem.fifo_pop())
+
+    def describe(self) -> dict[str, Any]:
+        return {"protocol": self.name}
+
+
+class NoMac(Mac):
+    """Transmit the head of the FIFO as soon as the PHY is free: the timing rule of DESIGN.md exactly."""
+
+
+REGISTRY: dict[str, type[Mac]] = {"none": NoMac}
+
+
+def register(name: str, cls: type[Mac]) -> None:
+    REGISTRY[name] = cls

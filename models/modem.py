@@ -1,0 +1,223 @@
+"""The simulated modem: transmit FIFO in bytes, intrinsic delays and jitter, bitrate, half duplex.
+
+This is DESIGN.md's timing model, steps 1, 2 and 6, with the MAC deciding when the head of the FIFO
+goes to the PHY.  A frame leaves the FIFO when the MAC hands it to the PHY; from then until the end
+of its transmission the PHY is busy.  With ``mac: none`` that gives exactly
+
+    t_s = max(t0, t_free) + tx_delay + N(0, tx_jitter)   (extra delay never negative)
+    delivery = t_e + rx_delay + N(0, rx_jitter)          (extra delay never negative)
+"""
+
+from __future__ import annotations
+
+import json
+import random
+from collections import deque
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Callable
+
+from .errormodel import NO_ERRORS, ErrorModel
+from .frame import BROADCAST
+from .mac import Mac, NoMac
+from .observer import NullObserver, Observer
+
+if TYPE_CHECKING:
+    from .clock import Clock
+    from .frame import Frame
+    from .medium import Arrival, Medium
+    from .trajectories import PoseSource
+
+
+@dataclass(frozen=True)
+class ModemParams:
+    """Everything that shapes a simulated modem's behaviour (the link keys of a scene)."""
+
+    address: int
+    tx_channel: str
+    rx_channel: str
+    bitrate_bps: float = 1000.0
+    tx_delay_s: float = 0.0
+    rx_delay_s: float = 0.0
+    tx_jitter_s: float = 0.0
+    rx_jitter_s: float = 0.0
+    fifo_bytes: int = 500_000
+    range_m: tuple[float, float] = (0.0, float("inf"))
+    error: ErrorModel = field(default=NO_ERRORS)
+    duplex: str = "half"
+    promiscuous: bool = False
+
+
+@dataclass
+class LinkStats:
+    tx_packets: int = 0
+    rx_packets: int = 0
+    fifo_drops: int = 0
+    fifo_peak_bytes: int = 0
+
+
+class SimModem:
+    """One simulated modem, attached to a :class:`~hilgate.models.medium.Medium`."""
+
+    def __init__(
+        self,
+        link_id: str,
+        vehicle: str,
+        pose: "PoseSource",
+        params: ModemParams,
+        clock: "Clock",
+        medium: "Medium",
+        rng: random.Random,
+        observer: Observer | None = None,
+        mac: Mac | None = None,
+    ):
+        self.id = link_id
+        self.json_id = json.dumps(link_id)
+        self.vehicle = vehicle
+        self.pose = pose
+        self.clock = clock
+        self.medium = medium
+        self.rng = rng
+        self.observer: Observer = observer or NullObserver()
+        self.stats = LinkStats()
+        self.upper: Callable[["Frame"], Any] | None = None
+        self.fifo: deque[Frame] = deque()
+        self.queued_bytes = 0
+        self.phy_busy = False
+        self.tx_start = float("-inf")
+        self.tx_end = float("-inf")
+        self.rx_pending: list[Arrival] = []
+        self.neighbours: list = []
+        self.configure(params)
+        self.set_mac(mac or NoMac())
+        medium.attach(self)
+
+    def configure(self, params: ModemParams) -> None:
+        """Take new parameters in place (a scene reload); frames in the FIFO are kept."""
+        self.params = params
+        self.address = params.address
+        self.tx_channel = params.tx_channel
+        self.rx_channel = params.rx_channel
+        self.bitrate = float(params.bitrate_bps)
+        self.tx_delay = params.tx_delay_s
+        self.rx_delay = params.rx_delay_s
+        self.tx_jitter = params.tx_jitter_s
+        self.rx_jitter = params.rx_jitter_s
+        self.fifo_bytes = params.fifo_bytes
+        self.range_m = params.range_m
+        self.error = params.error
+        self.error_free = params.error.constant_zero
+        self.half_duplex = params.duplex == "half"
+        self.promiscuous = params.promiscuous
+        if hasattr(self, "mac"):
+            self.hears_all = self.promiscuous or self.mac.hears_all
+            self.medium.topology_changed()
+
+    def set_mac(self, mac: Mac) -> None:
+        self.mac = mac
+        mac.attach(self)
+        self.hears_all = self.promiscuous or mac.hears_all
+
+    # -- from the application ------------------------------------------------------------------
+
+    def send(self, frame: "Frame") -> bool:
+        """Offer a frame to the transmit FIFO; False if it did not fit (dropped, cause ``fifo``)."""
+        t = self.clock.now()
+        if self.queued_bytes + frame.size > self.fifo_bytes:
+            self.stats.fifo_drops += 1
+            self.observer.drop(t, self, frame, "fifo")
+            return False
+        self.fifo.append(frame)
+        self.queued_bytes += frame.size
+        if self.queued_bytes > self.stats.fifo_peak_bytes:
+            self.stats.fifo_peak_bytes = self.queued_bytes
+        self.observer.enq(t, self, frame)
+        self.mac.on_enqueue()
+        return True
+
+    # -- what a MAC may use -------------------------------------------------------------------
+
+    def fifo_pop(self) -> "Frame":
+        frame = self.fifo.popleft()
+        self.queued_bytes -= frame.size
+        return frame
+
+    def transmit(self, frame: "Frame") -> None:
+        """Put ``frame`` on air after the intrinsic delay and jitter; the PHY is busy until it ends."""
+        self.phy_busy = True
+        extra = self.tx_delay
+        if self.tx_jitter:
+            extra += self.rng.gauss(0.0, self.tx_jitter)
+        if extra > 0.0:
+            self.clock.at(self.clock.now() + extra, self._on_air, frame)
+        else:
+            self._on_air(frame)
+
+    def airtime(self, size: int) -> float:
+        return size * 8.0 / self.bitrate
+
+    def deliver(self, frame: "Frame") -> None:
+        """Hand a good frame to the application after the rx delay and jitter."""
+        extra = self.rx_delay
+        if self.rx_jitter:
+            extra += self.rng.gauss(0.0, self.rx_jitter)
+        if extra > 0.0:
+            self.clock.at(self.clock.now() + extra, self._deliver_now, frame)
+        else:
+            self._deliver_now(frame)
+
+    def channel_busy(self) -> bool:
+        """Carrier sense: something is arriving at this modem now, or it is transmitting."""
+        now = self.clock.now()
+        if self.tx_start <= now < self.tx_end:
+            return True
+        for arrival in self.rx_pending:
+            if arrival.start <= now < arrival.end:
+                return True
+        return False
+
+    # -- inside the modem ---------------------------------------------------------------------
+
+    def _on_air(self, frame: "Frame") -> None:
+        t = self.clock.now()
+        duration = frame.size * 8.0 / self.bitrate
+        end = t + duration
+        self.tx_start = t
+        self.tx_end = end
+        if self.half_duplex:
+            for arrival in self.rx_pending:
+                if arrival.start < end and arrival.end > t:
+                    arrival.collided = True
+        self.stats.tx_packets += 1
+        self.observer.tx(t, self, frame)
+        self.medium.transmit(self, frame, t, duration)
+        self.clock.at(end, self._off_air, frame)
+
+    def _off_air(self, frame: "Frame") -> None:
+        self.phy_busy = False
+        self.mac.on_tx_done(frame)
+
+    def arrival_end(self, arrival: "Arrival") -> None:
+        """The medium's call at the end of an arrival this modem must judge."""
+        frame = arrival.frame
+        if arrival.error:
+            cause = "mult" if arrival.collided else "prop"
+        else:
+            cause = "col" if arrival.collided else None
+        addressed = frame.dst_addr == self.address or frame.dst_addr == BROADCAST or self.promiscuous
+        if cause is not None and addressed:
+            self.observer.err(self.clock.now(), self, frame, cause)
+        if addressed or self.mac.hears_all:
+            self.mac.on_frame(frame, cause, addressed)
+
+    def unreachable(self, frame: "Frame") -> None:
+        """A frame for this modem was sent while it was out of the sender's range (or had no pose)."""
+        self.observer.err(self.clock.now(), self, frame, "range")
+
+    def _deliver_now(self, frame: "Frame") -> None:
+        self.stats.rx_packets += 1
+        self.observer.rx(self.clock.now(), self, frame)
+        if self.upper is not None:
+            self.upper(frame)
+
+    def __repr__(self) -> str:
+        return f"SimModem({self.id!r} addr={self.address})"
