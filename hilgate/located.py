@@ -95,9 +95,9 @@ class _Builder:
             self.loader.dispose()
         if root is None:
             return None
-        return self.convert(root)
+        return self.convert(root, "")
 
-    def convert(self, node: yaml.Node) -> Node:
+    def convert(self, node: yaml.Node, path: str) -> Node:
         line = node.start_mark.line + 1
         if isinstance(node, yaml.MappingNode):
             try:
@@ -110,17 +110,18 @@ class _Builder:
                 if not isinstance(key, (str, int, float, bool)) or isinstance(key, bool):
                     raise SceneError(self.file, key_node.start_mark.line + 1, "", f"a key must be a name, not {key!r}")
                 key = str(key)
+                key_path = f"{path}.{key}" if path else key
                 if key in result:
                     raise SceneError(
-                        self.file, key_node.start_mark.line + 1, key,
+                        self.file, key_node.start_mark.line + 1, key_path,
                         f"duplicate key (first given on line {result[key].line})",
                     )
-                converted = self.convert(value_node)
+                converted = self.convert(value_node, key_path)
                 converted.line = key_node.start_mark.line + 1  # where a reader looks for it
                 result[key] = converted
             return Node(result, self.file, line)
         if isinstance(node, yaml.SequenceNode):
-            return Node([self.convert(item) for item in node.value], self.file, line)
+            return Node([self.convert(item, f"{path}[{i}]") for i, item in enumerate(node.value)], self.file, line)
         return Node(self.scalar(node), self.file, line)
 
     def scalar(self, node: yaml.Node) -> Any:

@@ -18,6 +18,10 @@ from typing import TYPE_CHECKING, Iterable
 
 from .frame import BROADCAST
 
+OVERLAP_EPS = 1e-9
+"""Arrivals must overlap by more than a nanosecond to collide: back-to-back frames computed along
+different floating-point paths (t + τ + T versus (t + T) + τ) may otherwise "overlap" by one ulp."""
+
 if TYPE_CHECKING:
     from .clock import Clock
     from .frame import Frame
@@ -181,14 +185,15 @@ class Medium:
                 for other in pending:
                     if other.end > t:
                         live.append(other)
-                        if other.start < end and start < other.end:
+                        if other.start < end - OVERLAP_EPS and start < other.end - OVERLAP_EPS:
                             other.collided = True
                             arrival.collided = True
                 live.append(arrival)
                 receiver.rx_pending = live
             else:
                 pending.append(arrival)
-            if receiver.half_duplex and receiver.tx_end > start and receiver.tx_start < end:
+            if (receiver.half_duplex and receiver.tx_end - OVERLAP_EPS > start
+                    and receiver.tx_start < end - OVERLAP_EPS):
                 arrival.collided = True
             if receiver.hears_all or dst == receiver.address or dst == BROADCAST:
                 if not receiver.error_free:

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any, Callable
 from .errormodel import NO_ERRORS, ErrorModel
 from .frame import BROADCAST
 from .mac import Mac, NoMac
+from .medium import OVERLAP_EPS
 from .observer import NullObserver, Observer
 
 if TYPE_CHECKING:
@@ -185,7 +186,7 @@ class SimModem:
         self.tx_end = end
         if self.half_duplex:
             for arrival in self.rx_pending:
-                if arrival.start < end and arrival.end > t:
+                if arrival.start < end - OVERLAP_EPS and arrival.end - OVERLAP_EPS > t:
                     arrival.collided = True
         self.stats.tx_packets += 1
         self.observer.tx(t, self, frame)
