@@ -41,6 +41,39 @@ class ProgressBar:
         self.stream.flush()
 
 
+class Simulation:
+    """One virtual-time run of a scene; ``world`` and ``clock`` stay readable after :meth:`run`."""
+
+    def __init__(self, scene: Scene, until: float | None = None, seed: int | None = None,
+                 trace: TextIO | None = None):
+        self.scene = scene
+        self.seed = scene.seed if seed is None else seed
+        self.until = scene.duration_s if until is None else until
+        self.recorder = Recorder(trace)
+        self.clock = VirtualScheduler()
+        self.world = World(scene, self.clock, self.recorder, self.seed)
+
+    def run(self, progress: bool = False) -> dict[str, Any]:
+        """Run to the end and return the summary of DESIGN.md."""
+        clock, until = self.clock, self.until
+        self.world.start()
+        started = time.perf_counter()
+        if progress:
+            bar = ProgressBar(until)
+            steps = 200
+            for step in range(1, steps + 1):
+                clock.run(until * step / steps)
+                bar.update(clock.now(), clock.events)
+            bar.done()
+        else:
+            clock.run(until)
+        self.wall_time = time.perf_counter() - started
+        self.recorder.close()
+        log.info("simulated %.1f s in %.3f s wall (%d events, %d arrivals)",
+                 until, self.wall_time, clock.events, self.world.medium.arrivals)
+        return self.recorder.summary(self.scene, self.seed, until, self.wall_time, self.world.modems.values())
+
+
 def simulate(
     scene: Scene,
     until: float | None = None,
@@ -49,27 +82,7 @@ def simulate(
     progress: bool = False,
 ) -> dict[str, Any]:
     """Run ``scene`` for ``until`` simulated seconds (default its ``duration_s``) and return the summary."""
-    seed = scene.seed if seed is None else seed
-    until = scene.duration_s if until is None else until
-    recorder = Recorder(trace)
-    clock = VirtualScheduler()
-    world = World(scene, clock, recorder, seed)
-    world.start()
-    started = time.perf_counter()
-    if progress:
-        bar = ProgressBar(until)
-        steps = 200
-        for step in range(1, steps + 1):
-            clock.run(until * step / steps)
-            bar.update(clock.now(), clock.events)
-        bar.done()
-    else:
-        clock.run(until)
-    wall = time.perf_counter() - started
-    recorder.close()
-    log.info("simulated %.1f s in %.3f s wall (%d events, %d arrivals)", until, wall, clock.events, world.medium.arrivals)
-    summary = recorder.summary(scene, seed, until, wall, world.modems.values())
-    return summary
+    return Simulation(scene, until, seed, trace).run(progress)
 
 
 def write_summary(summary: dict[str, Any], path: str) -> None:

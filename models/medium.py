@@ -1,9 +1,12 @@
 """Who hears whom, when, and whether it survives: channels, propagation, range, collisions, errors.
 
 For one transmission the medium walks the sender's *neighbours* (every modem listening on the
-sender's transmit channel) once.  Each arrival costs a few attribute reads, one comparison against
-the receiver's short list of arrivals still on air, and, only when someone must learn its outcome,
-one error draw and one scheduled event.  Distances between vehicles that never move are computed
+sender's transmit channel) once.  An arrival that someone must judge (the addressed receiver, every
+receiver of a broadcast, a promiscuous modem or a MAC that overhears) gets an :class:`Arrival`, an
+overlap check against what the receiver hears, an error draw and one event at its end.  Any other
+arrival is only interference: a ``(start, end)`` pair in the receiver's ``rx_noise`` that can spoil
+the judged ones.  Expired entries are dropped as the lists are walked (``rx_noise`` once it holds
+more than a few), so each list stays as short as the number of frames on air at once.  Distances between vehicles that never move are computed
 once per pair; that is what keeps the hot path O(1) per arrival.
 
 The arithmetic is DESIGN.md's "timing and loss model", steps 3 to 5.
@@ -178,11 +181,11 @@ class Medium:
                 start = t + nb.min_delay + d / nb.speed
             end = start + duration
             count += 1
-            arrival = Arrival(frame, start, end, d)
-            pending = receiver.rx_pending
-            if pending:
+            if receiver.hears_all or dst == receiver.address or dst == BROADCAST:
+                # An arrival someone must judge: full bookkeeping, an error draw, an event at its end.
+                arrival = Arrival(frame, start, end, d)
                 live = []
-                for other in pending:
+                for other in receiver.rx_pending:
                     if other.end > t:
                         live.append(other)
                         if other.start < end - OVERLAP_EPS and start < other.end - OVERLAP_EPS:
@@ -190,12 +193,14 @@ class Medium:
                             arrival.collided = True
                 live.append(arrival)
                 receiver.rx_pending = live
-            else:
-                pending.append(arrival)
-            if (receiver.half_duplex and receiver.tx_end - OVERLAP_EPS > start
-                    and receiver.tx_start < end - OVERLAP_EPS):
-                arrival.collided = True
-            if receiver.hears_all or dst == receiver.address or dst == BROADCAST:
+                if not arrival.collided:
+                    for other_start, other_end in receiver.rx_noise:
+                        if other_start < end - OVERLAP_EPS and start < other_end - OVERLAP_EPS:
+                            arrival.collided = True
+                            break
+                    if (receiver.half_duplex and receiver.tx_end - OVERLAP_EPS > start
+                            and receiver.tx_start < end - OVERLAP_EPS):
+                        arrival.collided = True
                 if not receiver.error_free:
                     if nb.static:
                         per = nb.per_cache.get(size)
@@ -206,4 +211,13 @@ class Medium:
                     if per > 0.0 and (per >= 1.0 or receiver.rng.random() < per):
                         arrival.error = True
                 at(end, receiver.arrival_end, arrival)
+            else:
+                # Only interference: it can spoil arrivals at this receiver but has no outcome itself.
+                for other in receiver.rx_pending:
+                    if other.start < end - OVERLAP_EPS and start < other.end - OVERLAP_EPS:
+                        other.collided = True
+                noise = receiver.rx_noise
+                noise.append((start, end))
+                if len(noise) > 8:
+                    receiver.rx_noise = [span for span in noise if span[1] > t]
         self.arrivals += count

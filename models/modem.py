@@ -86,7 +86,8 @@ class SimModem:
         self.phy_busy = False
         self.tx_start = float("-inf")
         self.tx_end = float("-inf")
-        self.rx_pending: list[Arrival] = []
+        self.rx_pending: list[Arrival] = []  # judged arrivals that may still be on air
+        self.rx_noise: list[tuple[float, float]] = []  # (start, end) of arrivals that only interfere
         self.neighbours: list = []
         self.configure(params)
         self.set_mac(mac or NoMac())
@@ -173,6 +174,9 @@ class SimModem:
             return True
         for arrival in self.rx_pending:
             if arrival.start <= now < arrival.end:
+                return True
+        for start, end in self.rx_noise:
+            if start <= now < end:
                 return True
         return False
 
