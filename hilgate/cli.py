@@ -59,9 +59,116 @@ def cmd_sim(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_run(args: argparse.Namespace) -> int:
+    from .daemon import Daemon
+    from .paths import daemon_runtime_dir, default_scene
+
+    scene = args.scene or default_scene()
+    if args.speed <= 0:
+        raise SceneError("--speed", 0, "", f"must be positive, not {args.speed:g}")
+    status_line = args.status_line if args.status_line is not None else sys.stderr.isatty()
+    daemon = Daemon(scene, args.overrides, daemon_runtime_dir(args.runtime_dir), args.speed, args.tcp,
+                    args.trace, args.summary, args.until, status_line)
+    return daemon.run()
+
+
+def _control(args: argparse.Namespace):
+    import json
+    import os
+    import socket
+
+    from .paths import client_runtime_dir
+
+    path = os.path.join(client_runtime_dir(args.runtime_dir), "control.sock")
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    sock.settimeout(5.0)
+    try:
+        sock.connect(path)
+    except OSError as exc:
+        raise OSError(f"no hilgate daemon at {path} ({exc.strerror or exc})") from None
+    reader = sock.makefile("r", encoding="utf-8")
+
+    def request(obj: dict) -> dict:
+        sock.sendall((json.dumps(obj) + "\n").encode())
+        return json.loads(reader.readline())
+
+    version = json.loads(reader.readline())
+    return sock, reader, request, version
+
+
+def cmd_status(args: argparse.Namespace) -> int:
+    import json
+
+    sock, reader, request, _ = _control(args)
+    try:
+        if args.watch:
+            sock.settimeout(None)
+            sock.sendall((json.dumps({"class": "WATCH", "interval_s": args.watch}) + "\n").encode())
+            for line in reader:
+                _print_status(json.loads(line), args.json)
+            return 0
+        _print_status(request({"class": "STATUS"}), args.json)
+    finally:
+        sock.close()
+    return 0
+
+
+def _print_status(status: dict, as_json: bool) -> None:
+    import json
+
+    if as_json:
+        print(json.dumps({"links": status["links"], "vehicles": status["vehicles"]}), flush=True)
+        return
+    from .table import _render
+
+    print(f"t = {status.get('time', 0):.3f} s")
+    print(_render(["link", "backend", "state", "tx", "rx", "drops", "fifo B"],
+                  [[l["id"], l["backend"], l["state"], str(l["tx_packets"]), str(l["rx_packets"]), str(l["drops"]),
+                    str(l["fifo_bytes"])] for l in status["links"]]))
+    print()
+    print(_render(["vehicle", "source", "x", "y", "z", "age s"],
+                  [[v["name"], v["source"], *(f"{c:.3f}" for c in (v["position"] or [float("nan")] * 3)),
+                    f"{v['age_s']:.2f}"] for v in status["vehicles"]]), flush=True)
+
+
+def _open_link(args: argparse.Namespace):
+    from .client import Link
+    from .daemon import parse_tcp
+
+    return Link.open(args.link, tcp=parse_tcp(args.tcp) if args.tcp else None, runtime_dir=args.runtime_dir)
+
+
+def cmd_send(args: argparse.Namespace) -> int:
+    with _open_link(args) as link:
+        if args.text:
+            link.send(" ".join(args.text).encode(), args.to)
+        else:
+            for line in sys.stdin:
+                link.send(line.rstrip("\n").encode(), args.to)
+    return 0
+
+
+def cmd_listen(args: argparse.Namespace) -> int:
+    count = 0
+    with _open_link(args) as link:
+        print(f"listening on {link.id} (address {link.address}, {link.info['packet']})", file=sys.stderr)
+        while args.count is None or count < args.count:
+            message = link.recv(timeout=args.timeout)
+            if message is None:
+                break
+            count += 1
+            text = message.data.decode("utf-8", "backslashreplace") if not args.hex else message.data.hex()
+            print(f"{message.t:.6f} {message.src} -> {message.dst}: {text}", flush=True)
+    return 0
+
+
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "check": cmd_check,
     "sim": cmd_sim,
+    "run": cmd_run,
+    "status": cmd_status,
+    "send": cmd_send,
+    "listen": cmd_listen,
 }
 
 
@@ -86,6 +193,39 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--trace", help="write the event trace (JSON lines) here")
     p.add_argument("--summary", help="write the summary (JSON) here")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing at the end")
+
+    p = sub.add_parser("run", help="the daemon: GLI endpoints for every link, in real time")
+    _add_scene_args(p, optional=True)
+    p.add_argument("--speed", type=float, default=1.0, help="run the model at K times real time (default 1)")
+    p.add_argument("--tcp", metavar="[HOST:]PORT", help="also serve the socket GLI over TCP (loopback by default)")
+    p.add_argument("--runtime-dir", help="where the sockets go (default: $RUNTIME_DIRECTORY, /run/hilgate, "
+                                          "$XDG_RUNTIME_DIR/hilgate or /tmp/hilgate-UID)")
+    p.add_argument("--trace", help="append the event trace (JSON lines) here")
+    p.add_argument("--summary", help="write the summary (JSON) here on exit")
+    p.add_argument("--until", type=float, help="stop after this many model seconds")
+    p.add_argument("--status-line", action=argparse.BooleanOptionalAction, default=None,
+                   help="a live status line on stderr (default: when it is a terminal)")
+
+    for name, text in (("status", "show the running daemon's links and vehicles"),):
+        p = sub.add_parser(name, help=text)
+        p.add_argument("--json", action="store_true", help='one JSON object: {"links": [...], "vehicles": [...]}')
+        p.add_argument("--watch", type=float, metavar="S", help="print again every S seconds")
+        p.add_argument("--runtime-dir")
+
+    p = sub.add_parser("send", help="send text to a link (arguments, or one frame per stdin line)")
+    p.add_argument("link")
+    p.add_argument("text", nargs="*")
+    p.add_argument("--to", type=int, default=255, help="destination address (default 255, broadcast)")
+    p.add_argument("--tcp", metavar="[HOST:]PORT")
+    p.add_argument("--runtime-dir")
+
+    p = sub.add_parser("listen", help="print what a link receives")
+    p.add_argument("link")
+    p.add_argument("--count", type=int, help="stop after N frames")
+    p.add_argument("--timeout", type=float, help="stop after S seconds without a frame")
+    p.add_argument("--hex", action="store_true", help="print payloads in hex")
+    p.add_argument("--tcp", metavar="[HOST:]PORT")
+    p.add_argument("--runtime-dir")
     return parser
 
 
@@ -104,6 +244,13 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:
         print(f"hilgate: {exc}", file=sys.stderr)
         return 1
+    except Exception as exc:  # a client tool's error (GliError, …): one line, no traceback
+        from .client import GliError
+
+        if isinstance(exc, GliError):
+            print(f"hilgate: {exc}", file=sys.stderr)
+            return 1
+        raise
 
 
 if __name__ == "__main__":

@@ -211,9 +211,10 @@ def _packet_class(node: Node, path: str) -> str:
         if value in ("raw", "vl1b", "vl2b", "dlf16", "dlf32"):
             return value
         match = re.fullmatch(r"simple:(\d+)", value)
-        if match and 2 <= int(match.group(1)) <= 8000:
+        if match and 4 <= int(match.group(1)) <= 8000:
             return value
-    raise node.error(path, f"must be one of {', '.join(PACKET_CLASSES)} (N from 2 to 8000), not {describe(node)}")
+    raise node.error(path, f"must be one of {', '.join(PACKET_CLASSES)} (N, the whole packet, from 4 to 8000 "
+                           f"bytes), not {describe(node)}")
 
 
 def mac_class(protocol: str) -> type[Mac]:

@@ -1,12 +1,15 @@
 """A scene made live: pose sources, the medium, one simulated modem per ``sim`` link, and flows.
 
-The same :class:`World` serves ``hilgate sim`` (virtual clock) and the daemon (real-time clock).
-Every random stream is derived from the scene seed and the name of what uses it, so adding a flow
-does not change the backoffs of a modem, and a seed gives the same run byte for byte.
+The same :class:`World` serves ``hilgate sim`` (virtual clock) and the daemon (real-time clock), and
+:meth:`World.reconfigure` applies a new scene in place for the daemon's hot reload: modems keep
+their FIFO and statistics, only what changed is rebuilt.  Every random stream is derived from the
+scene seed and the name of what uses it, so adding a flow does not change the backoffs of a modem,
+and a seed gives the same run byte for byte.
 """
 
 from __future__ import annotations
 
+import logging
 import random
 from typing import Any
 
@@ -18,6 +21,8 @@ from .models.observer import Observer
 from .models.trajectories import PoseSource
 from .poses import build_pose
 from .scene import LinkSpec, Scene
+
+log = logging.getLogger(__name__)
 
 
 def random_stream(seed: int, *names: str) -> random.Random:
@@ -37,16 +42,21 @@ class World:
         for link in scene.links.values():
             if link.backend == "sim":
                 self.add_modem(link)
-        self.flows: list[FlowSource] = []
+        self.flows: list[FlowSource] = self._make_flows(scene, {})
+
+    def _make_flows(self, scene: Scene, reuse: dict[Any, Any]) -> list[FlowSource]:
+        flows = []
         for index, spec in enumerate(scene.flows):
             modem = self.modems.get(spec.src)
             if modem is None:
+                log.warning("flow %d from %s: not a simulated link, ignored", index, spec.src)
                 continue
             dst_addr = BROADCAST if spec.dst == "*" else scene.links[spec.dst].params.address
-            stats = observer.add_flow(spec) if hasattr(observer, "add_flow") else None
-            self.flows.append(
-                FlowSource(spec, modem, dst_addr, clock, random_stream(self.seed, "flow", str(index)), stats)
-            )
+            stats = reuse.get(spec)
+            if stats is None and hasattr(self.observer, "add_flow"):
+                stats = self.observer.add_flow(spec)
+            flows.append(FlowSource(spec, modem, dst_addr, self.clock, random_stream(self.seed, "flow", str(index)), stats))
+        return flows
 
     def add_modem(self, link: LinkSpec) -> SimModem:
         modem = SimModem(
@@ -56,6 +66,46 @@ class World:
         self.modems[link.id] = modem
         return modem
 
+    def remove_modem(self, link_id: str) -> None:
+        modem = self.modems.pop(link_id, None)
+        if modem is not None:
+            modem.close()
+
     def start(self) -> None:
+        now = self.clock.now()
         for flow in self.flows:
-            flow.start()
+            flow.start(now)
+
+    def reconfigure(self, scene: Scene) -> None:
+        """Apply ``scene`` in place: channels, vehicles, simulated modems and flows."""
+        old = self.scene
+        self.medium.channels.clear()
+        self.medium.channels.update({c.name: c for c in scene.channels.values()})
+        for name, vehicle in scene.vehicles.items():
+            if name not in self.poses or old.vehicles.get(name) != vehicle:
+                self.poses[name] = build_pose(vehicle.pose)
+        for name in [n for n in self.poses if n not in scene.vehicles]:
+            del self.poses[name]
+        for link_id in [i for i in self.modems if i not in scene.links or scene.links[i].backend != "sim"]:
+            self.remove_modem(link_id)
+        for link in scene.links.values():
+            if link.backend != "sim":
+                continue
+            modem = self.modems.get(link.id)
+            if modem is None:
+                self.add_modem(link)
+                continue
+            before = old.links.get(link.id)
+            if before is None or before.params != link.params:
+                modem.configure(link.params)
+            if before is None or before.mac != link.mac:
+                modem.set_mac(link.mac.build())
+            modem.vehicle = link.vehicle
+            modem.set_pose(self.poses[link.vehicle])
+        reuse = {flow.spec: flow.stats for flow in self.flows}
+        for flow in self.flows:
+            flow.stop()
+        self.scene = scene
+        self.flows = self._make_flows(scene, reuse)
+        self.start()
+        self.medium.topology_changed()

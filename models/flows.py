@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import random
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -47,10 +48,16 @@ class FlowSource:
         self._count = 0
         self._handle = None
 
-    def start(self) -> None:
-        first = self.spec.start_s
-        if self.spec.poisson:
-            first += self.rng.expovariate(1.0 / self.spec.interval_s)
+    def start(self, now: float = 0.0) -> None:
+        """Begin at ``start_s``, or, when started later (a reload), at the first send after ``now``."""
+        spec = self.spec
+        if spec.poisson:
+            first = max(spec.start_s, now) + self.rng.expovariate(1.0 / spec.interval_s)
+        elif now > spec.start_s:
+            self._count = math.ceil((now - spec.start_s) / spec.interval_s)
+            first = spec.start_s + self._count * spec.interval_s
+        else:
+            first = spec.start_s
         self._schedule(first)
 
     def stop(self) -> None:

@@ -81,6 +81,7 @@ class SimModem:
         self.observer: Observer = observer or NullObserver()
         self.stats = LinkStats()
         self.upper: Callable[["Frame"], Any] | None = None
+        self.on_idle: Callable[[], Any] | None = None  # FIFO empty and PHY free again (GLI READY)
         self.fifo: deque[Frame] = deque()
         self.queued_bytes = 0
         self.phy_busy = False
@@ -89,6 +90,7 @@ class SimModem:
         self.rx_pending: list[Arrival] = []  # judged arrivals that may still be on air
         self.rx_noise: list[tuple[float, float]] = []  # (start, end) of arrivals that only interfere
         self.neighbours: list = []
+        self.closed = False
         self.configure(params)
         self.set_mac(mac or NoMac())
         medium.attach(self)
@@ -182,7 +184,24 @@ class SimModem:
 
     # -- inside the modem ---------------------------------------------------------------------
 
+    def close(self) -> None:
+        """Leave the medium (the link was removed or given a real modem); queued frames are dropped
+        and reported with cause ``closed``, frames already on air finish as the physics says."""
+        if self.closed:
+            return
+        self.closed = True
+        self.upper = None
+        self.on_idle = None
+        t = self.clock.now()
+        while self.fifo:
+            frame = self.fifo_pop()
+            self.stats.fifo_drops += 1
+            self.observer.drop(t, self, frame, "closed")
+        self.medium.detach(self)
+
     def _on_air(self, frame: "Frame") -> None:
+        if self.closed:
+            return
         t = self.clock.now()
         duration = frame.size * 8.0 / self.bitrate
         end = t + duration
@@ -200,9 +219,21 @@ class SimModem:
     def _off_air(self, frame: "Frame") -> None:
         self.phy_busy = False
         self.mac.on_tx_done(frame)
+        if self.on_idle is not None and not self.phy_busy and not self.fifo:
+            self.on_idle()
+
+    @property
+    def idle(self) -> bool:
+        return not self.phy_busy and not self.fifo
+
+    def set_pose(self, pose: "PoseSource") -> None:
+        self.pose = pose
+        self.medium.topology_changed()
 
     def arrival_end(self, arrival: "Arrival") -> None:
         """The medium's call at the end of an arrival this modem must judge."""
+        if self.closed:
+            return
         frame = arrival.frame
         if arrival.error:
             cause = "mult" if arrival.collided else "prop"

@@ -1,0 +1,112 @@
+"""What a link id is routed to: one interface for simulated modems and real modem drivers.
+
+The router talks to a backend only through :class:`Backend`; adding a modem type means adding a
+class here (or in ``drivers/``) and a line in :data:`REGISTRY`, not touching the router.  A backend
+outlives nothing: on a reload that changes the backend kind, the router closes the old one and opens
+the new one behind the same GLI endpoints.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Any, Callable
+
+from .models.frame import BROADCAST, Frame
+from .models.modem import SimModem
+from .packets import PacketClass
+
+
+@dataclass
+class AppFrame:
+    """A frame from an application, on its way to another: the real packet of the sender's class
+    (its length is the size on air) plus what the receivers need to rebuild theirs."""
+
+    real: bytes
+    payload: bytes
+    packet: PacketClass
+    seq: int
+    src: int
+    dst: int
+    t0: float = 0.0
+
+
+class Backend(ABC):
+    kind = "?"
+
+    def __init__(self) -> None:
+        self.on_receive: Callable[[AppFrame], Any] | None = None
+        self.on_idle: Callable[[], Any] | None = None
+        self.on_state: Callable[[str], Any] | None = None
+
+    @property
+    @abstractmethod
+    def state(self) -> str:
+        """``up``, ``down`` or ``starting``."""
+
+    @property
+    @abstractmethod
+    def idle(self) -> bool:
+        """Nothing queued or on air: the GLI says READY."""
+
+    @abstractmethod
+    def send(self, frame: AppFrame) -> bool:
+        """Queue a frame for transmission; False if it was refused (and counted as dropped)."""
+
+    @abstractmethod
+    def status(self) -> dict[str, Any]:
+        """``tx_packets``, ``rx_packets``, ``drops``, ``fifo_bytes`` for ``hilgate status``."""
+
+    def close(self) -> None:
+        """Release the modem; queued frames are reported dropped."""
+
+
+class SimBackend(Backend):
+    """A link on the simulated medium: its :class:`SimModem` does the work."""
+
+    kind = "sim"
+
+    def __init__(self, modem: SimModem, link_names: Callable[[str, int], str]):
+        super().__init__()
+        self.modem = modem
+        self._link_names = link_names
+        modem.upper = self._deliver
+        modem.on_idle = self._idle
+
+    def rebind(self, modem: SimModem) -> None:
+        self.modem = modem
+        modem.upper = self._deliver
+        modem.on_idle = self._idle
+
+    @property
+    def state(self) -> str:
+        return "up"
+
+    @property
+    def idle(self) -> bool:
+        return self.modem.idle
+
+    def send(self, frame: AppFrame) -> bool:
+        modem = self.modem
+        dst_name = "*" if frame.dst == BROADCAST else self._link_names(modem.tx_channel, frame.dst)
+        sim_frame = Frame(modem.medium.new_frame_id(), modem.id, dst_name, frame.dst, len(frame.real),
+                          modem.clock.now(), None, frame)
+        return modem.send(sim_frame)
+
+    def _deliver(self, frame: Frame) -> None:
+        # Frames of built-in flows carry no application payload: they are background traffic.
+        if isinstance(frame.payload, AppFrame) and self.on_receive is not None:
+            self.on_receive(frame.payload)
+
+    def _idle(self) -> None:
+        if self.on_idle is not None:
+            self.on_idle()
+
+    def status(self) -> dict[str, Any]:
+        stats = self.modem.stats
+        return {"tx_packets": stats.tx_packets, "rx_packets": stats.rx_packets, "drops": stats.fifo_drops,
+                "fifo_bytes": self.modem.queued_bytes}
+
+    def close(self) -> None:
+        self.modem.upper = None
+        self.modem.on_idle = None

@@ -1,0 +1,163 @@
+"""``hilgate run``: the daemon.  Loads the scene, opens every endpoint, tells systemd it is ready,
+runs the model in real time, reloads on SIGHUP and stops cleanly (trace complete) on SIGTERM/SIGINT."""
+
+from __future__ import annotations
+
+import gc
+import logging
+import os
+import signal
+import socket
+import sys
+import time
+from typing import Any
+
+from . import __version__
+from .control import ControlServer
+from .gli_mq import raise_queue_budget
+from .gli_socket import GliClient
+from .realtime import RealtimeScheduler
+from .recorder import Recorder
+from .router import Router
+from .scene import Scene, SceneError, load_scene
+from .sdnotify import notify, watchdog_interval
+from .simulate import write_summary
+from .streams import Listener
+
+log = logging.getLogger(__name__)
+
+
+def parse_tcp(value: str) -> tuple[str, int]:
+    """``PORT`` or ``HOST:PORT``; loopback unless a host is given."""
+    host, _, port = value.rpartition(":")
+    return (host or "127.0.0.1"), int(port)
+
+
+class Daemon:
+    def __init__(self, scene_path: str, overrides: list[str] | tuple[str, ...] = (), runtime_dir: str = "",
+                 speed: float = 1.0, tcp: str | None = None, trace_path: str | None = None,
+                 summary_path: str | None = None, until: float | None = None, status_line: bool = False):
+        self.scene_path = scene_path
+        self.overrides = list(overrides)
+        self.runtime_dir = runtime_dir
+        self.speed = speed
+        self.tcp = tcp
+        self.trace_path = trace_path
+        self.summary_path = summary_path
+        self.until = until
+        self.status_line = status_line
+        self.scene: Scene | None = None
+        self.trace = None
+        self.stopping = False
+
+    def run(self) -> int:
+        scene = load_scene(self.scene_path, self.overrides)  # a bad scene never half-starts
+        self.scene = scene
+        trace_path = self.trace_path or scene.trace_file
+        self.trace = open(trace_path, "a", encoding="utf-8", buffering=1 << 16) if trace_path else None
+        self.scheduler = scheduler = RealtimeScheduler(self.speed)
+        self.recorder = Recorder(self.trace)
+        os.makedirs(self.runtime_dir, exist_ok=True)
+        raise_queue_budget()
+        self.router = Router(scheduler, self.recorder, os.path.join(self.runtime_dir, "gli"))
+        self.tcp_listener = None
+        self.control = None
+        try:
+            self.router.apply(scene)
+            if self.tcp:
+                host, port = parse_tcp(self.tcp)
+                sock = socket.create_server((host, port), reuse_port=False)
+                sock.setblocking(False)
+                self.tcp_listener = Listener(sock, scheduler, lambda s: GliClient(s, scheduler, self.router))
+                log.info("GLI over TCP on %s:%d", host, port)
+            self.control = ControlServer(os.path.join(self.runtime_dir, "control.sock"), scheduler,
+                                         self.router.status, self.reload)
+            scheduler.on_signal(signal.SIGHUP, lambda s: self.reload())
+            scheduler.on_signal(signal.SIGTERM, self.stop)
+            scheduler.on_signal(signal.SIGINT, self.stop)
+            self._periodic()
+            gc.collect()
+            gc.freeze()  # everything built so far is long-lived: keep it out of the collector's walks
+            log.info("hilgate %s running scene %r: %d links, runtime directory %s",
+                     __version__, scene.name, len(scene.links), self.runtime_dir)
+            notify("READY=1", f"STATUS=running {scene.name!r}: {len(scene.links)} links",
+                   f"MAINPID={os.getpid()}")
+            scheduler.run(self.until if self.until is not None else float("inf"))
+        finally:
+            self.shutdown()
+        return 0
+
+    def _periodic(self) -> None:
+        scheduler = self.scheduler
+        every = 0.5 * self.speed
+
+        def flush() -> None:
+            if self.trace is not None:
+                self.trace.flush()
+            if self.status_line:
+                sys.stderr.write("\r" + self.status_text() + "   ")
+                sys.stderr.flush()
+            scheduler.at(scheduler.now() + every, flush)
+
+        scheduler.at(every, flush)
+        interval = watchdog_interval()
+        if interval:
+            def ping() -> None:
+                notify("WATCHDOG=1")
+                scheduler.at(scheduler.now() + interval * self.speed, ping)
+
+            ping()
+
+    def status_text(self) -> str:
+        status = self.router.status()
+        links = status["links"]
+        up = sum(1 for link in links if link["state"] == "up")
+        tx = sum(link["tx_packets"] for link in links)
+        rx = sum(link["rx_packets"] for link in links)
+        drops = sum(link["drops"] for link in links)
+        clients = sum(len(link.clients) for link in self.router.links.values())
+        return (f"hilgate t={self.scheduler.now():8.1f} s | {up}/{len(links)} links up | tx {tx} rx {rx} "
+                f"drops {drops} | {clients} socket clients")
+
+    def reload(self) -> tuple[bool, str]:
+        notify("RELOADING=1", f"MONOTONIC_USEC={time.monotonic_ns() // 1000}", "STATUS=reloading")
+        try:
+            scene = load_scene(self.scene_path, self.overrides)
+        except SceneError as exc:
+            log.error("reload refused, the running scene stays: %s", exc)
+            notify("READY=1", f"STATUS=reload refused: {exc}")
+            return False, str(exc)
+        self.router.apply(scene)
+        self.scene = scene
+        log.info("reloaded %s", self.scene_path)
+        notify("READY=1", f"STATUS=running {scene.name!r}: {len(scene.links)} links")
+        return True, ""
+
+    def stop(self, signum: int | None = None) -> None:
+        log.info("stopping (%s)", signal.Signals(signum).name if signum else "request")
+        self.scheduler.stop()
+
+    def shutdown(self) -> None:
+        if self.stopping:
+            return
+        self.stopping = True
+        notify("STOPPING=1")
+        if self.status_line:
+            sys.stderr.write("\n")
+        router = getattr(self, "router", None)
+        if self.summary_path and router is not None and router.world is not None:
+            summary = self.recorder.summary(self.scene, router.world.seed, self.scheduler.now(), 0.0,
+                                            router.world.modems.values())
+            write_summary(summary, self.summary_path)
+        for closer in (self.control, self.tcp_listener, router):
+            if closer is not None:
+                try:
+                    closer.close()
+                except Exception:
+                    log.exception("while closing %r", closer)
+        if self.trace is not None:
+            self.recorder.close()
+            self.trace.close()
+        scheduler: Any = getattr(self, "scheduler", None)
+        if scheduler is not None:
+            scheduler.close()

@@ -1,0 +1,249 @@
+"""Link id → backend, with the GLI endpoints in front.
+
+A :class:`Link` owns its endpoints (the dccomms POSIX queues, its Unix socket, the socket clients
+attached to it) and one backend.  Endpoints live as long as the link id is in the scene; the backend
+behind them may be reconfigured or replaced by a reload, which applications do not notice except
+for the new behaviour.  The :class:`Router` applies scenes: the first one builds everything, a
+reload changes only what differs.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections import Counter
+from typing import Any, Callable
+
+from .backends import AppFrame, Backend, SimBackend
+from .gli_mq import MqEndpoint
+from .gli_socket import GliClient
+from .models.frame import BROADCAST
+from .packets import Decoded, PacketClass, PacketError, packet_class
+from .recorder import Recorder
+from .scene import LinkSpec, Scene
+from .streams import Listener, listen_unix
+from .world import World
+
+log = logging.getLogger(__name__)
+
+
+class Link:
+    def __init__(self, spec: LinkSpec, router: "Router"):
+        self.router = router
+        self.spec = spec
+        self.id = spec.id
+        self.packet: PacketClass = packet_class(spec.packet)
+        self.backend: Backend | None = None
+        self.clients: set[GliClient] = set()
+        self.gli_drops: Counter[str] = Counter()
+        self.seq = 0
+        self.mq: MqEndpoint | None = None
+        self.listener: Listener | None = None
+
+    # -- set-up ----------------------------------------------------------------------------------
+
+    def open_endpoints(self, scheduler: Any, socket_dir: str | None) -> None:
+        self.mq = MqEndpoint(self.id, self.packet, scheduler, self.from_mq, self.bad_frame, lambda: self.ready)
+        if socket_dir is not None:
+            path = os.path.join(socket_dir, f"{self.id}.sock")
+            self.listener = Listener(listen_unix(path), scheduler,
+                                     lambda sock: GliClient(sock, scheduler, self.router, self.id), path)
+
+    def set_backend(self, backend: Backend) -> None:
+        if self.backend is not None and self.backend is not backend:
+            self.backend.close()
+        self.backend = backend
+        backend.on_receive = self.to_apps
+        backend.on_idle = self.state_changed
+        backend.on_state = lambda state: self.state_changed()
+        self.state_changed()
+
+    def update(self, spec: LinkSpec) -> None:
+        self.spec = spec
+        if spec.packet != self.packet.name:
+            self.packet = packet_class(spec.packet)
+            if self.mq is not None:
+                self.mq.packet = self.packet
+
+    @property
+    def address(self) -> int:
+        return self.spec.params.address
+
+    @property
+    def ready(self) -> bool:
+        backend = self.backend
+        return backend is not None and backend.state == "up" and backend.idle
+
+    def welcome(self) -> dict[str, Any]:
+        from .gli_wire import VERSION
+
+        return {"link": self.id, "address": self.address, "packet": self.packet.name,
+                "max_payload": self.packet.max_payload, "version": VERSION}
+
+    # -- application → medium --------------------------------------------------------------------
+
+    def from_mq(self, decoded: Decoded) -> None:
+        self._send(decoded.real, decoded.payload, decoded.seq, decoded.dst)
+
+    def from_client(self, payload: bytes, dst: int) -> None:
+        real = self.packet.encode(payload, src=self.address, dst=dst)
+        self.seq = (self.seq + 1) & 0xFFFFFFFF
+        self._send(real, payload, self.seq, dst)
+
+    def _send(self, real: bytes, payload: bytes, seq: int, dst: int) -> None:
+        backend = self.backend
+        frame = AppFrame(real, payload, self.packet, seq, self.address, dst, self.router.scheduler.now())
+        if backend is None:
+            self.bad_frame("no_backend", len(real))
+            return
+        backend.send(frame)
+        self.state_changed()
+
+    def bad_frame(self, reason: str, size: int) -> None:
+        """A frame from an application that could not be accepted: counted and traced, then dropped."""
+        self.gli_drops[reason] += 1
+        log.debug("link %s: dropped a frame from an application (%s, %d bytes)", self.id, reason, size)
+        self.router.recorder.event({"t": round(self.router.scheduler.now(), 9), "ev": "drop", "link": self.id,
+                                    "src": "app", "size": size, "cause": reason})
+
+    # -- medium → applications -------------------------------------------------------------------
+
+    def to_apps(self, frame: AppFrame) -> None:
+        t = self.router.scheduler.now()
+        if self.mq is not None:
+            real = frame.real
+            if frame.packet.name != self.packet.name:
+                try:
+                    real = self.packet.encode(frame.payload, src=frame.src, dst=frame.dst)
+                except PacketError:
+                    real = None
+                    self.gli_drops["size"] += 1
+            if real is not None and not self.mq.deliver(real, frame.seq, frame.src, frame.dst):
+                self.gli_drops["app_full"] += 1
+                self.router.recorder.event({"t": round(t, 9), "ev": "drop", "link": self.id, "src": "medium",
+                                            "size": len(frame.real), "cause": "app_full"})
+        for client in list(self.clients):
+            if not client.deliver(frame.src, frame.dst, t, frame.payload):
+                self.gli_drops["client_slow"] += 1
+
+    def state_changed(self) -> None:
+        ready = self.ready
+        if self.mq is not None:
+            self.mq.state_changed()
+        for client in list(self.clients):
+            client.state(ready)
+
+    def attach_client(self, client: GliClient) -> None:
+        self.clients.add(client)
+
+    def detach_client(self, client: GliClient) -> None:
+        self.clients.discard(client)
+
+    # -- operations ------------------------------------------------------------------------------
+
+    def status(self) -> dict[str, Any]:
+        backend = self.backend
+        figures = backend.status() if backend else {"tx_packets": 0, "rx_packets": 0, "drops": 0, "fifo_bytes": 0}
+        return {
+            "id": self.id,
+            "backend": self.spec.backend,
+            "state": backend.state if backend else "down",
+            "tx_packets": figures["tx_packets"],
+            "rx_packets": figures["rx_packets"],
+            "drops": figures["drops"] + sum(self.gli_drops.values()),
+            "fifo_bytes": figures["fifo_bytes"],
+        }
+
+    def close(self) -> None:
+        for client in list(self.clients):
+            client.close()
+        if self.listener is not None:
+            self.listener.close()
+        if self.mq is not None:
+            self.mq.close()
+        if self.backend is not None:
+            self.backend.close()
+
+
+class Router:
+    def __init__(self, scheduler: Any, recorder: Recorder, socket_dir: str | None = None):
+        self.scheduler = scheduler
+        self.recorder = recorder
+        self.socket_dir = socket_dir
+        self.links: dict[str, Link] = {}
+        self.world: World | None = None
+        self.scene: Scene | None = None
+        self._names: dict[tuple[str, int], str] = {}
+        self.backend_factories: dict[str, Callable[[LinkSpec], Backend]] = {"sim": self._sim_backend}
+        if socket_dir is not None:
+            os.makedirs(socket_dir, exist_ok=True)
+
+    def link_name(self, channel: str, address: int) -> str:
+        return self._names.get((channel, address), f"addr:{address}")
+
+    def _sim_backend(self, spec: LinkSpec) -> Backend:
+        assert self.world is not None
+        return SimBackend(self.world.modems[spec.id], self.link_name)
+
+    def apply(self, scene: Scene) -> None:
+        """Build the first scene, or change the running one into ``scene`` (already validated)."""
+        self._names = {(l.params.rx_channel, l.params.address): l.id for l in scene.links.values()}
+        self._names.update({(l.params.rx_channel, BROADCAST): "*" for l in scene.links.values()})
+        first = self.world is None
+        if first:
+            self.world = World(scene, self.scheduler, self.recorder)
+        else:
+            self.world.reconfigure(scene)
+        old = self.scene
+        self.scene = scene
+        for link_id in [i for i in self.links if i not in scene.links]:
+            log.info("link %s removed", link_id)
+            self.links.pop(link_id).close()
+        for spec in scene.links.values():
+            link = self.links.get(spec.id)
+            if link is None:
+                link = self.links[spec.id] = Link(spec, self)
+                link.open_endpoints(self.scheduler, self.socket_dir)
+                link.set_backend(self.backend_factories[spec.backend](spec))
+                if link.mq is not None:
+                    link.mq.start()
+                if not first:
+                    log.info("link %s added (%s)", spec.id, spec.backend)
+                continue
+            before = old.links[spec.id] if old else None
+            link.update(spec)
+            if before is not None and before.backend != spec.backend:
+                log.info("link %s: backend %s -> %s", spec.id, before.backend, spec.backend)
+                link.set_backend(self.backend_factories[spec.backend](spec))
+            elif isinstance(link.backend, SimBackend):
+                link.backend.rebind(self.world.modems[spec.id])
+                if before != spec:
+                    log.info("link %s reconfigured", spec.id)
+            link.state_changed()
+        if first:
+            self.world.start()
+
+    def command(self, link: Link, request: Any) -> dict[str, Any]:
+        """A client's request about its link or vehicle (extended by the pose sources)."""
+        if isinstance(request, dict) and request.get("class") == "STATUS":
+            return {"class": "STATUS", "link": link.status()}
+        return {"class": "ERROR", "error": f"unknown request {request!r}"}
+
+    def status(self) -> dict[str, Any]:
+        assert self.world is not None and self.scene is not None
+        now = self.scheduler.now()
+        vehicles = []
+        for name, pose in self.world.poses.items():
+            position = pose.position(now)
+            vehicles.append({
+                "name": name,
+                "source": self.scene.vehicles[name].pose.kind,
+                "position": None if position is None else [round(v, 4) for v in position],
+                "age_s": getattr(pose, "age", lambda t: 0.0)(now),
+            })
+        return {"links": [link.status() for link in self.links.values()], "vehicles": vehicles}
+
+    def close(self) -> None:
+        for link in self.links.values():
+            link.close()
+        self.links.clear()

@@ -1,0 +1,152 @@
+"""A non-blocking stream socket in the real-time loop: read callback in, bounded output buffer out.
+
+A client that stops reading must not stall the loop or grow the daemon's memory: output beyond
+``max_buffer`` bytes is refused (the caller counts it as dropped) until the client catches up.
+A client may send its last frames and close at once; a failed write (EPIPE) therefore only stops
+output, and the connection closes when reading ends, after everything it sent has been handled.
+"""
+
+from __future__ import annotations
+
+import logging
+import socket
+from typing import Any, Callable
+
+log = logging.getLogger(__name__)
+
+
+class Connection:
+    def __init__(self, sock: socket.socket, scheduler: Any, on_data: Callable[[bytes], Any],
+                 on_close: Callable[[], Any], max_buffer: int = 1 << 20):
+        sock.setblocking(False)
+        self.sock = sock
+        self.fd = sock.fileno()
+        self.scheduler = scheduler
+        self.on_data = on_data
+        self.on_close = on_close
+        self.max_buffer = max_buffer
+        self._out = bytearray()
+        self.closed = False
+        self.write_failed = False
+        scheduler.add_reader(self.fd, self._readable)
+
+    def _readable(self) -> None:
+        try:
+            data = self.sock.recv(65536)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError as exc:
+            log.debug("connection %d: %s", self.fd, exc)
+            self.close()
+            return
+        if not data:
+            self.close()
+            return
+        self.on_data(data)
+
+    def write(self, data: bytes) -> bool:
+        """Queue ``data``; False (nothing queued) if the connection is closed or its buffer is full."""
+        if self.closed or self.write_failed:
+            return False
+        if self._out:
+            if len(self._out) + len(data) > self.max_buffer:
+                return False
+            self._out += data
+            return True
+        try:
+            sent = self.sock.send(data)
+        except (BlockingIOError, InterruptedError):
+            sent = 0
+        except OSError as exc:
+            self._stop_writing(exc)
+            return False
+        if sent < len(data):
+            self._out += data[sent:]
+            self.scheduler.set_writer(self.fd, self._writable)
+        return True
+
+    def _writable(self) -> None:
+        try:
+            sent = self.sock.send(self._out)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError as exc:
+            self._stop_writing(exc)
+            return
+        del self._out[:sent]
+        if not self._out:
+            self.scheduler.set_writer(self.fd, None)
+
+    def _stop_writing(self, exc: OSError) -> None:
+        log.debug("connection %d: cannot write any more: %s", self.fd, exc)
+        self.write_failed = True
+        self._out.clear()
+        self.scheduler.set_writer(self.fd, None)
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        self.scheduler.set_writer(self.fd, None)
+        self.scheduler.remove_reader(self.fd)
+        try:
+            self.sock.close()
+        except OSError:
+            pass
+        self.on_close()
+
+
+def listen_unix(path: str, backlog: int = 16) -> socket.socket:
+    """Bind a Unix stream socket at ``path``, replacing a stale file but never a live server."""
+    import os
+
+    if os.path.exists(path):
+        probe = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            probe.connect(path)
+        except OSError:
+            os.unlink(path)  # nobody answers: left over from a crash
+        else:
+            raise OSError(f"{path} is in use by a running hilgate")
+        finally:
+            probe.close()
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    sock.bind(path)
+    os.chmod(path, 0o666)
+    sock.listen(backlog)
+    sock.setblocking(False)
+    return sock
+
+
+class Listener:
+    """Accepts connections on a listening socket and hands each to ``on_accept``."""
+
+    def __init__(self, sock: socket.socket, scheduler: Any, on_accept: Callable[[socket.socket], Any],
+                 path: str | None = None):
+        self.sock = sock
+        self.scheduler = scheduler
+        self.on_accept = on_accept
+        self.path = path
+        scheduler.add_reader(sock.fileno(), self._accept)
+
+    def _accept(self) -> None:
+        while True:
+            try:
+                conn, _ = self.sock.accept()
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError as exc:
+                log.warning("accept failed: %s", exc)
+                return
+            self.on_accept(conn)
+
+    def close(self) -> None:
+        import os
+
+        self.scheduler.remove_reader(self.sock.fileno())
+        self.sock.close()
+        if self.path:
+            try:
+                os.unlink(self.path)
+            except OSError:
+                pass

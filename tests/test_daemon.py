@@ -1,0 +1,282 @@
+"""The daemon end to end: separate application processes, real POSIX queues and sockets.
+
+Timing assertions use the model's own arithmetic (exact, from the trace) and, for what the
+applications see on the wall clock, a window that CI noise cannot break: never earlier than the
+model minus 2 ms (the frame cannot arrive before it was sent plus its delay), at most 150 ms late.
+"""
+
+import json
+import os
+import posix_ipc
+import socket
+import subprocess
+import sys
+import time
+
+import pytest
+
+from daemon_kit import Daemon, peer_events, unique
+from hilgate import gli_wire as wire
+from hilgate.client import GliError, Link
+
+# a and b are 150 m apart on a 1500 m/s channel (tau = 0.1 s), 1000 bit/s, tx delay 0.05 s:
+# a 10-byte payload is a 15-byte VariableLength2BPacket on air (T = 0.12 s), so 0.27 s end to end.
+EXPECTED = 0.05 + 0.12 + 0.1
+
+
+def scene(a: str, b: str, *, bitrate: float = 1000, tx_delay: float = 0.05, extra: str = "") -> str:
+    return f"""\
+name: daemon-test
+channels: {{ac: {{speed_mps: 1500}}}}
+vehicles:
+  va: {{pose: {{static: [0, 0, 0]}}}}
+  vb: {{pose: {{static: [150, 0, 0]}}}}
+links:
+  {a}: {{vehicle: va, address: 1, bitrate_bps: {bitrate}, tx_delay_s: {tx_delay}, packet: vl2b}}
+  {b}: {{vehicle: vb, address: 2, bitrate_bps: 1000, tx_delay_s: 0.05, packet: vl2b}}
+{extra}"""
+
+
+@pytest.fixture
+def pair(tmp_path):
+    a, b = unique("a"), unique("b")
+    daemon = Daemon(tmp_path, scene(a, b), [a, b])
+    try:
+        daemon.wait_for("READY=1")
+        yield daemon, a, b
+    finally:
+        daemon.close()
+
+
+def test_ready_only_once_every_endpoint_is_up(pair):
+    daemon, a, b = pair
+    # READY=1 has been received: every queue, socket and the control socket must exist already
+    for link in (a, b):
+        for direction in ("tx", "rx"):
+            posix_ipc.MessageQueue(f"/{link}_{direction}_dlnk_phy").close()  # no O_CREAT: must exist
+        assert os.path.exists(os.path.join(daemon.runtime, "gli", f"{link}.sock"))
+    assert os.path.exists(os.path.join(daemon.runtime, "control.sock"))
+    ready = next(n for n in daemon.notifications if "READY=1" in n.split("\n"))
+    assert any(line.startswith("STATUS=") for line in ready.split("\n"))
+    assert any(line == f"MAINPID={daemon.process.pid}" for line in ready.split("\n"))
+
+
+def test_dccomms_peers_exchange_frames_through_the_queues(pair):
+    daemon, a, b = pair
+    receiver = daemon.peer(b, "--receive", "5", "--timeout", "15")
+    time.sleep(0.3)
+    sender = daemon.peer(a, "--send", "5", "--dst", "2", "--interval", "0.4", "--receive", "0", "--timeout", "3")
+    sent = [e for e in peer_events(sender) if e["ev"] == "sent"]
+    received = [e for e in peer_events(receiver) if e["ev"] == "frame"]
+    assert [e["payload"] for e in received] == [e["payload"] for e in sent]
+    for s, r in zip(sent, received):
+        assert r["crc_ok"] and r["body_len"] == 2065
+        assert (r["seq"], r["src"], r["dst"]) == (s["seq"], 1, 2)
+        seen = r["mono"] - s["mono"]
+        assert EXPECTED - 0.002 <= seen <= EXPECTED + 0.15, seen
+    # the model's arithmetic in real time is exact
+    events = daemon.trace_events()
+    for pkt in {e["pkt"] for e in events if e.get("ev") == "rx"}:
+        enq = next(e["t"] for e in events if e.get("pkt") == pkt and e["ev"] == "enq")
+        rx = next(e["t"] for e in events if e.get("pkt") == pkt and e["ev"] == "rx")
+        assert rx - enq == pytest.approx(EXPECTED, abs=1e-6)
+
+
+def test_ready_busy_and_req_state_as_dccomms_does(pair):
+    daemon, a, b = pair
+    sender = daemon.peer(a, "--send", "1", "--dst", "2", "--receive", "50", "--timeout", "1.5")
+    states = [e["ready"] for e in peer_events(sender) if e["ev"] == "state"]
+    # the start-up BUSY then READY, the answer to REQ_STATE, then BUSY while the frame is sent, READY after
+    assert states[:2] == [False, True]
+    assert states[-2:] == [False, True]
+
+
+def test_socket_clients_over_unix_and_tcp(tmp_path):
+    a, b = unique("a"), unique("b")
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    daemon = Daemon(tmp_path, scene(a, b), [a, b], "--tcp", str(port))
+    try:
+        daemon.wait_for("READY=1")
+        with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, tcp=("127.0.0.1", port)) as lb:
+            assert (la.address, lb.address) == (1, 2)
+            assert la.info["packet"] == "vl2b" and la.max_payload == 2048
+            sent_at = time.monotonic()
+            la.send(b"over unix", dst=2)
+            message = lb.recv(timeout=5)
+            seen = time.monotonic() - sent_at
+            assert (message.src, message.dst, message.data) == (1, 2, b"over unix")
+            expected = 0.05 + 14 * 8 / 1000 + 0.1  # a 9-byte payload is 14 bytes on air
+            assert expected - 0.002 <= seen <= expected + 0.15
+            lb.send(b"broadcast back")
+            message = la.recv(timeout=5)
+            assert (message.src, message.dst, message.data) == (2, 255, b"broadcast back")
+            assert la.recv(timeout=0.3) is None
+            with pytest.raises(GliError, match="do not fit"):
+                la.send(b"x" * 3000, dst=2)
+                la.recv(timeout=2)
+        with pytest.raises(GliError, match="no link"):
+            Link.open("nosuchlink", tcp=("127.0.0.1", port))
+    finally:
+        daemon.close()
+
+
+def test_bad_frames_are_counted_traced_and_dropped(pair):
+    daemon, a, b = pair
+    bad_crc = "00" + ("55" + "0002" + "6869" + "0000").ljust(2053 * 2, "0") + "00" * 12
+    wrong_size = "00" + "55" * 100
+    unknown_type = "07" + "00" * 4
+    empty = ""
+    sender = daemon.peer(a, "--send", "0", "--raw", ",".join([bad_crc, wrong_size, unknown_type]))
+    peer_events(sender)
+    queue = posix_ipc.MessageQueue(f"/{a}_tx_dlnk_phy")
+    queue.send(empty)
+    queue.close()
+    receiver = daemon.peer(b, "--receive", "1", "--timeout", "10")
+    time.sleep(0.3)
+    after = daemon.peer(a, "--send", "1", "--dst", "2", "--timeout", "1")
+    peer_events(after)
+    assert [e["payload"] for e in peer_events(receiver) if e["ev"] == "frame"] == [f"{a}#0000".ljust(10, ".")[:10]]
+    assert daemon.link_status(a)["drops"] == 4
+    causes = sorted(e["cause"] for e in daemon.trace_events() if e["ev"] == "drop" and e.get("src") == "app")
+    assert causes == ["crc", "size", "size", "type"]
+    assert daemon.process.poll() is None
+
+
+def test_a_client_that_vanishes_mid_frame_or_speaks_garbage_changes_nothing(pair):
+    daemon, a, b = pair
+    path = os.path.join(daemon.runtime, "gli", f"{a}.sock")
+    for junk in (wire.encode_send(2, b"complete frame")[:7], b"\xff\xff\xff\xff\x03garbage", b"\x00"):
+        with socket.socket(socket.AF_UNIX) as raw:
+            raw.connect(path)
+            raw.sendall(junk)
+    with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
+        la.send(b"still fine", dst=2)
+        assert lb.recv(timeout=5).data == b"still fine"
+    assert daemon.status()["links"][0]["state"] == "up"
+
+
+def test_an_application_that_does_not_read_fills_its_queue_and_frames_are_counted(pair):
+    daemon, a, b = pair
+    # b's application opened its queues and never reads them
+    quiet = daemon.peer(b, "--receive", "0", "--timeout", "0")
+    peer_events(quiet)
+    with Link.open(a, runtime_dir=daemon.runtime) as la:
+        for i in range(15):
+            la.send(b"%d" % i, dst=2)
+        deadline = time.monotonic() + 15
+        while daemon.link_status(b)["rx_packets"] < 15 and time.monotonic() < deadline:
+            time.sleep(0.2)
+    status = daemon.link_status(b)
+    assert status["rx_packets"] == 15
+    # 10 messages fit in the queue (READY/BUSY included), the rest are dropped and counted
+    assert status["drops"] >= 5
+    assert any(e.get("cause") == "app_full" for e in daemon.trace_events())
+    assert daemon.process.poll() is None
+
+
+def test_sighup_swaps_a_link_while_an_application_keeps_sending(pair):
+    daemon, a, b = pair
+    with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
+        def exchange(tag: bytes) -> None:
+            la.send(tag, dst=2)
+            assert lb.recv(timeout=5).data == tag
+
+        exchange(b"before")  # 6 bytes: 11 on air, 0.05 + 0.088 + 0.1 s
+        # 10x slower modem and no intrinsic delay: 11 bytes at 100 bit/s = 0.88 s, + 0.1 s
+        daemon.reload(scene(a, b, bitrate=100, tx_delay=0.0))
+        exchange(b"after!")
+        assert la.info and lb.info  # the same connections, never re-opened
+        assert daemon.status()["links"][0]["tx_packets"] == 2  # statistics survive the swap
+    daemon.stop()  # the trace is complete once the daemon has stopped
+    events = daemon.trace_events()
+    delays = {}
+    for e in events:
+        if e.get("ev") == "enq":
+            delays[e["pkt"]] = -e["t"]
+        elif e.get("ev") == "rx":
+            delays[e["pkt"]] += e["t"]
+    assert sorted(round(d, 6) for d in delays.values()) == [0.238, 0.98]
+
+
+def test_an_invalid_reload_is_refused_and_the_old_scene_keeps_running(pair):
+    daemon, a, b = pair
+    daemon.scene.write_text(scene(a, b).replace("bitrate_bps: 1000,", "bitrate_bsp: 1000,", 1))
+    reply = daemon.control({"class": "RELOAD"})
+    assert reply["ok"] is False and "bitrate_bsp" in reply["error"] and "did you mean" in reply["error"]
+    with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
+        la.send(b"old scene", dst=2)
+        assert lb.recv(timeout=5).data == b"old scene"
+    assert "reload refused" in daemon.output()
+
+
+def test_status_command_prints_the_documented_json(pair):
+    daemon, a, b = pair
+    result = subprocess.run([sys.executable, "-m", "hilgate", "status", "--json", "--runtime-dir", daemon.runtime],
+                            capture_output=True, text=True, timeout=20)
+    assert result.returncode == 0, result.stderr
+    status = json.loads(result.stdout)
+    assert list(status) == ["links", "vehicles"]
+    assert [list(link) for link in status["links"]] == [
+        ["id", "backend", "state", "tx_packets", "rx_packets", "drops", "fifo_bytes"]] * 2
+    assert status["vehicles"][1] == {"name": "vb", "source": "static", "position": [150.0, 0.0, 0.0], "age_s": 0.0}
+    table = subprocess.run([sys.executable, "-m", "hilgate", "status", "--runtime-dir", daemon.runtime],
+                           capture_output=True, text=True, timeout=20)
+    assert a in table.stdout and "vehicle" in table.stdout
+
+
+def test_send_and_listen_tools(pair):
+    daemon, a, b = pair
+    listener = subprocess.Popen([sys.executable, "-m", "hilgate", "listen", b, "--count", "2", "--timeout", "10",
+                                 "--runtime-dir", daemon.runtime], stdout=subprocess.PIPE, text=True)
+    time.sleep(1.0)
+    subprocess.run([sys.executable, "-m", "hilgate", "send", a, "--to", "2", "--runtime-dir", daemon.runtime],
+                   input="first line\nsecond line\n", text=True, check=True, timeout=20)
+    out, _ = listener.communicate(timeout=30)
+    assert [line.split(": ", 1)[1] for line in out.splitlines()] == ["first line", "second line"]
+    assert all(" 1 -> 2: " in line for line in out.splitlines())
+
+
+def test_sigterm_leaves_a_complete_trace_and_summary(pair):
+    daemon, a, b = pair
+    with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
+        for i in range(3):
+            la.send(b"m%d" % i, dst=2)
+        for _ in range(3):
+            lb.recv(timeout=5)
+    assert daemon.stop() == 0
+    lines = daemon.trace.read_text().splitlines()
+    events = [json.loads(line) for line in lines]  # every line is complete JSON
+    assert [e["ev"] for e in events].count("rx") == 3
+    summary = json.loads(daemon.summary.read_text())
+    assert [l["tx_packets"] for l in summary["links"]] == [3, 0]
+    assert "STOPPING=1" in daemon.notifications[-1].split("\n") or daemon.wait_for("STOPPING=1", 5)
+
+
+def test_speed_paces_the_model(tmp_path):
+    a, b = unique("a"), unique("b")
+    daemon = Daemon(tmp_path, scene(a, b, bitrate=100, tx_delay=0.0), [a, b], "--speed", "4")
+    try:
+        daemon.wait_for("READY=1")
+        with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
+            start = time.monotonic()
+            la.send(b"fast forward", dst=2)  # 17 B at 100 bit/s + 0.1 s = 1.46 model s
+            message = lb.recv(timeout=5)
+            seen = time.monotonic() - start
+        assert message.data == b"fast forward"
+        assert 1.46 / 4 - 0.002 <= seen <= 1.46 / 4 + 0.15
+    finally:
+        daemon.close()
+
+
+def test_a_bad_scene_does_not_start(tmp_path):
+    a, b = unique("a"), unique("b")
+    daemon = Daemon(tmp_path, scene(a, b).replace("speed_mps: 1500", "speed_mps: sound"), [a, b])
+    try:
+        assert daemon.process.wait(20) == 2
+        assert "channels.ac.speed_mps: must be a number" in daemon.output()
+        with pytest.raises(posix_ipc.ExistentialError):
+            posix_ipc.MessageQueue(f"/{a}_tx_dlnk_phy")
+    finally:
+        daemon.close()
