@@ -67,8 +67,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.speed <= 0:
         raise SceneError("--speed", 0, "", f"must be positive, not {args.speed:g}")
     status_line = args.status_line if args.status_line is not None else sys.stderr.isatty()
+    if args.realtime_priority:
+        from .realtime import make_realtime
+
+        log.info("real-time set-up: %s", make_realtime(args.realtime_priority))
     daemon = Daemon(scene, args.overrides, daemon_runtime_dir(args.runtime_dir), args.speed, args.tcp,
-                    args.trace, args.summary, args.until, status_line)
+                    args.trace, args.summary, args.until, status_line, args.gli_backlog)
     return daemon.run()
 
 
@@ -162,7 +166,36 @@ def cmd_listen(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_queues(args: argparse.Namespace) -> int:
+    """dccomms never unlinks its queues, and Linux charges them to their creator until someone does."""
+    import posix_ipc
+
+    from .gli_mq import queue_names
+    from .scene import load_scene
+
+    scene = load_scene(args.scene, args.overrides)
+    for link_id in scene.links:
+        for name in queue_names(link_id):
+            try:
+                queue = posix_ipc.MessageQueue(name)
+            except posix_ipc.ExistentialError:
+                print(f"{name}: absent")
+                continue
+            except posix_ipc.Error as exc:
+                print(f"{name}: {exc}")
+                continue
+            line = (f"{name}: {queue.current_messages} waiting, {queue.max_messages} x "
+                    f"{queue.max_message_size} bytes")
+            queue.close()
+            if args.unlink:
+                posix_ipc.unlink_message_queue(name)
+                line += ", unlinked"
+            print(line)
+    return 0
+
+
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "queues": cmd_queues,
     "check": cmd_check,
     "sim": cmd_sim,
     "run": cmd_run,
@@ -205,6 +238,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--until", type=float, help="stop after this many model seconds")
     p.add_argument("--status-line", action=argparse.BooleanOptionalAction, default=None,
                    help="a live status line on stderr (default: when it is a terminal)")
+    p.add_argument("--realtime-priority", type=int, default=0, metavar="N",
+                   help="run with SCHED_FIFO priority N and locked memory (needs CAP_SYS_NICE; the systemd "
+                        "unit sets it); keeps the worst delivery lateness under a millisecond on a busy host")
+
+    p.add_argument("--gli-backlog", type=int, default=1000, metavar="N",
+                   help="frames kept per link while an application's receive queue is full (default 1000); "
+                        "beyond that they are dropped and counted")
+
+    p = sub.add_parser("queues", help="list (or --unlink) the dccomms POSIX queues of a scene's links")
+    _add_scene_args(p)
+    p.add_argument("--unlink", action="store_true", help="remove them (applications must reopen)")
 
     for name, text in (("status", "show the running daemon's links and vehicles"),):
         p = sub.add_parser(name, help=text)

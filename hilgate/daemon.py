@@ -36,7 +36,8 @@ def parse_tcp(value: str) -> tuple[str, int]:
 class Daemon:
     def __init__(self, scene_path: str, overrides: list[str] | tuple[str, ...] = (), runtime_dir: str = "",
                  speed: float = 1.0, tcp: str | None = None, trace_path: str | None = None,
-                 summary_path: str | None = None, until: float | None = None, status_line: bool = False):
+                 summary_path: str | None = None, until: float | None = None, status_line: bool = False,
+                 gli_backlog: int = 1000):
         self.scene_path = scene_path
         self.overrides = list(overrides)
         self.runtime_dir = runtime_dir
@@ -46,6 +47,7 @@ class Daemon:
         self.summary_path = summary_path
         self.until = until
         self.status_line = status_line
+        self.gli_backlog = gli_backlog
         self.scene: Scene | None = None
         self.trace = None
         self.stopping = False
@@ -59,7 +61,7 @@ class Daemon:
         self.recorder = Recorder(self.trace)
         os.makedirs(self.runtime_dir, exist_ok=True)
         raise_queue_budget()
-        self.router = Router(scheduler, self.recorder, os.path.join(self.runtime_dir, "gli"))
+        self.router = Router(scheduler, self.recorder, os.path.join(self.runtime_dir, "gli"), self.gli_backlog)
         self.tcp_listener = None
         self.control = None
         try:

@@ -8,7 +8,18 @@ threads and signals).  Three details give sub-millisecond lateness without burni
   ``select()`` on the epoll descriptor itself, which takes microseconds;
 - the thread's timer slack is lowered from the default 50 µs with ``prctl(PR_SET_TIMERSLACK)``;
 - the sleep ends ``spin_s`` before the next event and the loop polls the rest of the way.  It only
-  spins in those last few hundred microseconds, so an idle daemon sleeps.
+  spins in those last few hundred microseconds, so an idle daemon sleeps;
+- after handling input it keeps polling for ``linger_s`` before it sleeps: an application that
+  just sent usually sends again (or answers) within that time, and waking a sleeping process costs
+  tens of microseconds on a virtual machine.  Only traffic makes it spin;
+- Python's automatic garbage collection is off while the loop runs (a collection takes up to a
+  millisecond at an arbitrary moment); the loop collects the young generations itself when the
+  next event is at least ``gc_gap_s`` away.  The models make no reference cycles per event, so
+  reference counting frees nearly everything anyway.
+
+What remains is the kernel: on a shared 2-core machine a normal process is sometimes preempted
+for milliseconds.  :func:`make_realtime` (``hilgate run --realtime-priority``, or
+``CPUSchedulingPolicy=fifo`` in the systemd unit) removes most of that.
 
 Timers fire with the model clock set to their exact scheduled time (lateness is visible as the
 difference with :meth:`model_time`), so the models compute the same times as in virtual time.  Input
@@ -19,6 +30,7 @@ backwards.  ``speed`` K runs the model at K times real time.
 from __future__ import annotations
 
 import ctypes
+import gc
 import logging
 import os
 import select
@@ -44,13 +56,37 @@ def lower_timer_slack(nanoseconds: int = 1000) -> bool:
         return False
 
 
+def make_realtime(priority: int) -> str:
+    """SCHED_FIFO at ``priority`` and all memory locked (no page faults in the loop); returns what
+    could be done, for the log.  Needs CAP_SYS_NICE and RLIMIT_MEMLOCK (or root)."""
+    done = []
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+        done.append(f"SCHED_FIFO priority {priority}")
+    except (OSError, AttributeError) as exc:
+        done.append(f"no SCHED_FIFO ({exc})")
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        if libc.mlockall(1 | 2) == 0:  # MCL_CURRENT | MCL_FUTURE
+            done.append("memory locked")
+        else:
+            done.append(f"memory not locked ({os.strerror(ctypes.get_errno())})")
+    except (OSError, AttributeError):
+        done.append("memory not locked")
+    return ", ".join(done)
+
+
 class RealtimeScheduler(VirtualScheduler):
-    def __init__(self, speed: float = 1.0, spin_s: float = 0.0003):
+    def __init__(self, speed: float = 1.0, spin_s: float = 0.0003, gc_gap_s: float = 0.002,
+                 linger_s: float = 0.00015):
         super().__init__()
         if speed <= 0:
             raise ValueError("speed must be positive")
         self.speed = speed
         self.spin_s = spin_s
+        self.gc_gap_s = gc_gap_s
+        self.linger_s = linger_s
+        self._last_input = -1.0
         self._origin: float | None = None
         self._epoll = select.epoll()
         self._readers: dict[int, Callable[[], Any]] = {}
@@ -61,6 +97,7 @@ class RealtimeScheduler(VirtualScheduler):
         self.add_reader(self._wake_r, self._drain_wakeups)
         self._running = False
         self._signals: dict[int, Callable[[int], Any]] = {}
+        self._deferred: list[Callable[[], Any]] = []
 
     # -- time ---------------------------------------------------------------------------------
 
@@ -118,6 +155,22 @@ class RealtimeScheduler(VirtualScheduler):
         except BlockingIOError:
             pass  # the pipe is full of wake-ups already
 
+    def defer(self, fn: Callable[[], Any]) -> None:
+        """Call ``fn()`` once the events due now have all fired, before the loop waits again.
+        Used to coalesce notifications (READY/BUSY) that would otherwise flip within microseconds."""
+        self._deferred.append(fn)
+
+    def _run_deferred(self) -> None:
+        deferred = self._deferred
+        while deferred:
+            batch, self._deferred = deferred, []
+            for fn in batch:
+                try:
+                    fn()
+                except Exception:
+                    log.exception("deferred call %r failed", fn)
+            deferred = self._deferred
+
     def on_signal(self, signum: int, handler: Callable[[int], Any]) -> None:
         """Handle ``signum`` in the loop (not in the interrupted frame)."""
         self._signals[signum] = handler
@@ -164,7 +217,10 @@ class RealtimeScheduler(VirtualScheduler):
                 ready = True
             if not ready:
                 return
-        for fd, events in self._epoll.poll(0):
+        events_ready = self._epoll.poll(0)
+        if events_ready or self._posted:
+            self._last_input = time.perf_counter()
+        for fd, events in events_ready:
             if events & select.EPOLLOUT:
                 writer = self._writers.get(fd)
                 if writer is not None:
@@ -194,9 +250,33 @@ class RealtimeScheduler(VirtualScheduler):
         lower_timer_slack()
         self.start_clock()
         self._running = True
+        spin = self.spin_s
+        gc_was_enabled = gc.isenabled()
+        gc.disable()
+        try:
+            fired = self._loop(until, spin)
+        finally:
+            if gc_was_enabled:
+                gc.enable()
+        self.events += fired
+        return fired
+
+    def _collect_if_idle(self, wait: float) -> None:
+        """Collect garbage now if the next event is far enough away and there is garbage to look at."""
+        if wait < self.gc_gap_s:
+            return
+        young, middle, old = gc.get_count()
+        threshold0, threshold1, threshold2 = gc.get_threshold()
+        if old > threshold2 and wait > 10 * self.gc_gap_s:
+            gc.collect(2)
+        elif middle > threshold1:
+            gc.collect(1)
+        elif young > threshold0:
+            gc.collect(0)
+
+    def _loop(self, until: float, spin: float) -> int:
         heap = self._heap
         fired = 0
-        spin = self.spin_s
         while self._running:
             now = self.model_time()
             while heap and heap[0][0] <= now:
@@ -211,6 +291,8 @@ class RealtimeScheduler(VirtualScheduler):
                     log.exception("timer callback %r failed", fn)
                 fired += 1
                 now = self.model_time()
+            if self._deferred:
+                self._run_deferred()
             if now >= until:
                 self._now = max(self._now, until)
                 break
@@ -218,10 +300,11 @@ class RealtimeScheduler(VirtualScheduler):
                 heappop(heap)
             next_t = heap[0][0] if heap else float("inf")
             wait = (min(next_t, until) - now) / self.speed
-            if wait > spin:
-                self._handle_inputs(min(wait - spin, 0.5))
+            if wait > spin and time.perf_counter() - self._last_input > self.linger_s:
+                self._collect_if_idle(wait)
+                wait = (min(next_t, until) - self.model_time()) / self.speed
+                self._handle_inputs(min(max(0.0, wait - spin), 0.5))
             else:
                 self._handle_inputs(0.0)
-        self.events += fired
         return fired
 

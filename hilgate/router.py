@@ -15,7 +15,7 @@ from collections import Counter
 from typing import Any, Callable
 
 from .backends import AppFrame, Backend, SimBackend
-from .gli_mq import MqEndpoint
+from .gli_mq import MqEndpoint, plan_message_size
 from .gli_socket import GliClient
 from .models.frame import BROADCAST
 from .packets import Decoded, PacketClass, PacketError, packet_class
@@ -39,11 +39,13 @@ class Link:
         self.seq = 0
         self.mq: MqEndpoint | None = None
         self.listener: Listener | None = None
+        self._state_pending = False
 
     # -- set-up ----------------------------------------------------------------------------------
 
-    def open_endpoints(self, scheduler: Any, socket_dir: str | None) -> None:
-        self.mq = MqEndpoint(self.id, self.packet, scheduler, self.from_mq, self.bad_frame, lambda: self.ready)
+    def open_endpoints(self, scheduler: Any, socket_dir: str | None, full_size_queues: bool = True) -> None:
+        self.mq = MqEndpoint(self.id, self.packet, scheduler, self.from_mq, self.bad_frame, lambda: self.ready,
+                             full_size_queues, self.router.gli_backlog)
         if socket_dir is not None:
             path = os.path.join(socket_dir, f"{self.id}.sock")
             self.listener = Listener(listen_unix(path), scheduler,
@@ -127,6 +129,14 @@ class Link:
                 self.gli_drops["client_slow"] += 1
 
     def state_changed(self) -> None:
+        """READY/BUSY may have changed: tell the applications once the events due now have fired, so
+        a frame that is sent at once goes out before a BUSY that would already be stale."""
+        if not self._state_pending:
+            self._state_pending = True
+            self.router.scheduler.defer(self._announce_state)
+
+    def _announce_state(self) -> None:
+        self._state_pending = False
         ready = self.ready
         if self.mq is not None:
             self.mq.state_changed()
@@ -166,8 +176,9 @@ class Link:
 
 
 class Router:
-    def __init__(self, scheduler: Any, recorder: Recorder, socket_dir: str | None = None):
+    def __init__(self, scheduler: Any, recorder: Recorder, socket_dir: str | None = None, gli_backlog: int = 1000):
         self.scheduler = scheduler
+        self.gli_backlog = gli_backlog
         self.recorder = recorder
         self.socket_dir = socket_dir
         self.links: dict[str, Link] = {}
@@ -175,6 +186,7 @@ class Router:
         self.scene: Scene | None = None
         self._names: dict[tuple[str, int], str] = {}
         self.backend_factories: dict[str, Callable[[LinkSpec], Backend]] = {"sim": self._sim_backend}
+        self.full_size_queues: bool | None = None
         if socket_dir is not None:
             os.makedirs(socket_dir, exist_ok=True)
 
@@ -191,6 +203,8 @@ class Router:
         self._names.update({(l.params.rx_channel, BROADCAST): "*" for l in scene.links.values()})
         first = self.world is None
         if first:
+            self.full_size_queues = plan_message_size(
+                len(scene.links), [1 + packet_class(l.packet).body_size for l in scene.links.values()])
             self.world = World(scene, self.scheduler, self.recorder)
         else:
             self.world.reconfigure(scene)
@@ -203,7 +217,7 @@ class Router:
             link = self.links.get(spec.id)
             if link is None:
                 link = self.links[spec.id] = Link(spec, self)
-                link.open_endpoints(self.scheduler, self.socket_dir)
+                link.open_endpoints(self.scheduler, self.socket_dir, bool(self.full_size_queues))
                 link.set_backend(self.backend_factories[spec.backend](spec))
                 if link.mq is not None:
                     link.mq.start()

@@ -42,6 +42,10 @@ class VirtualScheduler:
         if handle is not None:
             handle[2] = None
 
+    def defer(self, fn: Callable[..., Any]) -> None:
+        """Run ``fn()`` after the events due now (in virtual time: at once, nothing waits)."""
+        fn()
+
     def next_time(self) -> float | None:
         """Time of the next live event, or None when nothing is scheduled."""
         heap = self._heap

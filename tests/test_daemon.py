@@ -157,23 +157,31 @@ def test_a_client_that_vanishes_mid_frame_or_speaks_garbage_changes_nothing(pair
     assert daemon.status()["links"][0]["state"] == "up"
 
 
-def test_an_application_that_does_not_read_fills_its_queue_and_frames_are_counted(pair):
-    daemon, a, b = pair
-    # b's application opened its queues and never reads them
-    quiet = daemon.peer(b, "--receive", "0", "--timeout", "0")
-    peer_events(quiet)
-    with Link.open(a, runtime_dir=daemon.runtime) as la:
-        for i in range(15):
-            la.send(b"%d" % i, dst=2)
-        deadline = time.monotonic() + 15
-        while daemon.link_status(b)["rx_packets"] < 15 and time.monotonic() < deadline:
-            time.sleep(0.2)
-    status = daemon.link_status(b)
-    assert status["rx_packets"] == 15
-    # 10 messages fit in the queue (READY/BUSY included), the rest are dropped and counted
-    assert status["drops"] >= 5
-    assert any(e.get("cause") == "app_full" for e in daemon.trace_events())
-    assert daemon.process.poll() is None
+def test_a_slow_application_loses_nothing_within_the_backlog_and_the_rest_is_counted(tmp_path):
+    a, b = unique("a"), unique("b")
+    daemon = Daemon(tmp_path, scene(a, b, bitrate=1e6, tx_delay=0.0), [a, b], "--gli-backlog", "5")
+    try:
+        daemon.wait_for("READY=1")
+        quiet = daemon.peer(b, "--receive", "0", "--timeout", "0")  # opens b's queues, then reads nothing
+        peer_events(quiet)
+        with Link.open(a, runtime_dir=daemon.runtime) as la:
+            for i in range(30):
+                la.send(b"%02d" % i, dst=2)
+            deadline = time.monotonic() + 15
+            while daemon.link_status(b)["rx_packets"] < 30 and time.monotonic() < deadline:
+                time.sleep(0.1)
+        # b's queue holds 10 messages: BUSY and READY from start-up, READY answering the peer's REQ_STATE,
+        # then 7 frames; 5 more wait in the backlog; the other 18 are dropped and counted
+        assert daemon.link_status(b)["drops"] == 18
+        # now b's application wakes up and reads: it gets the 12 frames in order, none twice
+        reader = daemon.peer(b, "--receive", "30", "--timeout", "2")
+        frames = [e for e in peer_events(reader) if e["ev"] == "frame"]
+        assert [f["payload"] for f in frames] == ["%02d" % i for i in range(12)]
+        assert daemon.process.poll() is None
+        daemon.stop()
+        assert sum(e.get("cause") == "app_full" for e in daemon.trace_events()) == 18
+    finally:
+        daemon.close()
 
 
 def test_sighup_swaps_a_link_while_an_application_keeps_sending(pair):

@@ -1,0 +1,235 @@
+#!/usr/bin/env python3
+"""GLI round trip and throughput through the daemon, against a bare POSIX-queue ping-pong.
+
+1. Bare: two processes bounce a 2066-byte message over two queues (two hops per round trip).
+2. hilgate: the daemon (a subprocess) with two links on an ideal channel (same place, 1e12 bit/s,
+   no delays); a dccomms-layout application on link a sends a VariableLength2BPacket to link b, an
+   echo application on b sends it back: app → hilgate → app → hilgate → app, four queue hops.
+   Target: p50 ≤ 2.5 × the bare round trip (2× is the floor: twice the hops).
+3. Throughput: the application on a sends frames as fast as the queue takes them, the one on b
+   counts them; frames per second and the number lost (target ≥ 5 000 frames/s, zero loss).
+
+    python benchmarks/gli_roundtrip.py [--round-trips 3000] [--frames 20000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import binascii
+import json
+import multiprocessing as mp
+import os
+import socket
+import struct
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+
+import posix_ipc
+
+MESSAGE = 2066
+MAX_REAL = 2053
+
+
+def frame(payload: bytes, seq: int, dst: int) -> bytes:
+    real = b"\x55" + len(payload).to_bytes(2, "big") + payload + binascii.crc_hqx(payload, 0).to_bytes(2, "big")
+    return b"\x00" + real.ljust(MAX_REAL, b"\0") + struct.pack("<III", seq, 0, dst)
+
+
+def open_queue(name: str) -> posix_ipc.MessageQueue:
+    return posix_ipc.MessageQueue(name, posix_ipc.O_CREAT, 0o666, 10, 8192)
+
+
+def percentiles(samples: list[float]) -> tuple[float, float]:
+    ordered = sorted(samples)
+    return ordered[len(ordered) // 2], ordered[int(0.99 * (len(ordered) - 1))]
+
+
+# -- 1. bare ping-pong ---------------------------------------------------------------------------
+
+
+def _pong(ping_name: str, pong_name: str, count: int) -> None:
+    ping, pong = open_queue(ping_name), open_queue(pong_name)
+    for _ in range(count):
+        message, _ = ping.receive()
+        pong.send(message)
+
+
+def bare(count: int) -> list[float]:
+    tag = f"/hgbench{os.getpid()}"
+    ping, pong = open_queue(tag + "_ping"), open_queue(tag + "_pong")
+    process = mp.Process(target=_pong, args=(tag + "_ping", tag + "_pong", count))
+    process.start()
+    message = b"\x00" * MESSAGE
+    samples = []
+    for _ in range(count):
+        start = time.perf_counter()
+        ping.send(message)
+        pong.receive()
+        samples.append(time.perf_counter() - start)
+    process.join()
+    for queue in (ping, pong):
+        queue.close()
+        queue.unlink()
+    return samples[100:]
+
+
+# -- 2. and 3. through the daemon ------------------------------------------------------------------
+
+
+SCENE = """\
+name: gli-bench
+channels: {{ideal: {{speed_mps: 3.0e8}}}}
+vehicles: {{v: {{pose: {{static: [0, 0, 0]}}}}}}
+links:
+  {a}: {{vehicle: v, address: 1, bitrate_bps: 1.0e12, fifo_bytes: 10000000, packet: vl2b}}
+  {b}: {{vehicle: v, address: 2, bitrate_bps: 1.0e12, fifo_bytes: 10000000, packet: vl2b}}
+"""
+
+
+def _echo(link: str, count: int, mode: str, result) -> None:
+    """On link b: echo every frame back to address 1, or only count them."""
+    tx, rx = open_queue(f"/{link}_tx_dlnk_phy"), open_queue(f"/{link}_rx_dlnk_phy")
+    received = 0
+    first = last = 0.0
+    while received < count:
+        try:
+            message, _ = rx.receive(5.0)
+        except posix_ipc.BusyError:
+            break
+        if message[0] != 0:
+            continue  # READY/BUSY
+        received += 1
+        last = time.perf_counter()
+        if received == 1:
+            first = last
+        if mode == "echo":
+            tx.send(message[:-4] + struct.pack("<I", 1))
+    result.put((received, first, last))
+
+
+class Daemon:
+    def __init__(self, a: str, b: str):
+        self.dir = tempfile.mkdtemp(prefix="hilgate-gli-bench-")
+        scene = os.path.join(self.dir, "scene.yaml")
+        with open(scene, "w") as handle:
+            handle.write(SCENE.format(a=a, b=b))
+        notify_path = os.path.join(self.dir, "notify")
+        self.notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        self.notify.bind(notify_path)
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "hilgate", "run", scene, "--runtime-dir", os.path.join(self.dir, "rt"),
+             "--no-status-line"], env=dict(os.environ, NOTIFY_SOCKET=notify_path))
+        self.notify.settimeout(30)
+        while b"READY=1" not in self.notify.recv(4096):
+            pass
+        self.links = (a, b)
+
+    def status(self) -> dict:
+        with socket.socket(socket.AF_UNIX) as sock:
+            sock.connect(os.path.join(self.dir, "rt", "control.sock"))
+            reader = sock.makefile("r")
+            reader.readline()
+            sock.sendall(b'{"class": "STATUS"}\n')
+            return json.loads(reader.readline())
+
+    def close(self) -> None:
+        self.process.terminate()
+        self.process.wait()
+        for link in self.links:
+            for direction in ("tx", "rx"):
+                try:
+                    posix_ipc.unlink_message_queue(f"/{link}_{direction}_dlnk_phy")
+                except posix_ipc.ExistentialError:
+                    pass
+
+
+def through_hilgate(count: int) -> list[float]:
+    a, b = f"bga{os.getpid()}", f"bgb{os.getpid()}"
+    daemon = Daemon(a, b)
+    try:
+        result = mp.Queue()
+        echo = mp.Process(target=_echo, args=(b, count, "echo", result))
+        echo.start()
+        tx, rx = open_queue(f"/{a}_tx_dlnk_phy"), open_queue(f"/{a}_rx_dlnk_phy")
+        message = frame(b"ping" * 5, 0, 2)
+        samples = []
+        for _ in range(count):
+            start = time.perf_counter()
+            tx.send(message)
+            while True:
+                reply, _ = rx.receive(5.0)
+                if reply[0] == 0:
+                    break
+            samples.append(time.perf_counter() - start)
+        echo.join()
+        return samples[100:]
+    finally:
+        daemon.close()
+
+
+def throughput(count: int, size: int, rate: float | None) -> tuple[float, int, int]:
+    """Frames per second seen by the receiver, frames lost, frames the daemon counted as dropped.
+    ``rate`` paces the sender (None: as fast as its queue takes them)."""
+    a, b = f"bta{os.getpid()}", f"btb{os.getpid()}"
+    daemon = Daemon(a, b)
+    try:
+        result = mp.Queue()
+        counter = mp.Process(target=_echo, args=(b, count, "count", result))
+        counter.start()
+        tx, rx = open_queue(f"/{a}_tx_dlnk_phy"), open_queue(f"/{a}_rx_dlnk_phy")
+        stop = threading.Event()
+
+        def drain_states() -> None:  # a dccomms application's service thread reads READY/BUSY
+            while not stop.is_set():
+                try:
+                    rx.receive(0.1)
+                except posix_ipc.BusyError:
+                    pass
+
+        reader = threading.Thread(target=drain_states, daemon=True)
+        reader.start()
+        payload = b"x" * size
+        messages = [frame(payload, i, 2) for i in range(count)]
+        start = time.perf_counter()
+        gap = 1.0 / rate if rate else 0.0
+        for i, message in enumerate(messages):
+            if gap:
+                due = start + i * gap
+                while time.perf_counter() < due:
+                    pass
+            tx.send(message)  # blocks when the queue is full, as dccomms' WritePacket does by default
+        received, first, last = result.get(timeout=60)
+        counter.join()
+        stop.set()
+        elapsed = last - start
+        drops = sum(link["drops"] for link in daemon.status()["links"])
+        return received / elapsed, count - received, drops
+    finally:
+        daemon.close()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--round-trips", type=int, default=3000)
+    parser.add_argument("--frames", type=int, default=20000)
+    parser.add_argument("--size", type=int, default=20, help="payload bytes per frame in the throughput test")
+    args = parser.parse_args()
+    bare_p50, bare_p99 = percentiles(bare(args.round_trips))
+    print(f"bare POSIX-queue ping-pong, {MESSAGE}-byte messages, 2 hops: p50 {bare_p50 * 1e6:.0f} µs, "
+          f"p99 {bare_p99 * 1e6:.0f} µs, {1 / bare_p50:,.0f} round trips/s")
+    hil_p50, hil_p99 = percentiles(through_hilgate(args.round_trips))
+    print(f"through hilgate, ideal link, 4 hops:                     p50 {hil_p50 * 1e6:.0f} µs, "
+          f"p99 {hil_p99 * 1e6:.0f} µs  -> {hil_p50 / bare_p50:.2f} x bare (target <= 2.5 x; floor 2 x)")
+    for offered in (5000, 10000, 20000, None):
+        rate, lost, drops = throughput(args.frames, args.size, offered)
+        label = f"{offered:,} offered" if offered else "flat out"
+        print(f"throughput through one link, {args.size}-byte payloads, {label:>14}: {rate:,.0f} frames/s received, "
+              f"{lost} lost, {drops} dropped by the daemon")
+    print("(target >= 5,000 frames/s with zero loss)")
+
+
+if __name__ == "__main__":
+    main()
