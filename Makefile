@@ -21,6 +21,9 @@ $(VENV)/.installed-test: pyproject.toml $(VENV)/.installed
 	touch $@
 
 run: $(VENV)/.installed
+	$(BIN)/hilgate run $(SCENE)
+
+sim: $(VENV)/.installed
 	$(BIN)/hilgate sim $(SCENE)
 
 test: $(VENV)/.installed-test
@@ -28,6 +31,8 @@ test: $(VENV)/.installed-test
 
 bench: $(VENV)/.installed
 	$(BIN)/python benchmarks/ring_aloha.py
+	$(BIN)/python benchmarks/realtime_lateness.py
+	$(BIN)/python benchmarks/gli_roundtrip.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache

@@ -1,0 +1,109 @@
+"""The real-time scheduler: the same model semantics as virtual time, inputs from descriptors,
+other threads and signals.  Nothing here asserts speed; order and model times are exact."""
+
+import os
+import signal
+import socket
+import threading
+
+from hilgate.realtime import RealtimeScheduler
+from hilgate.sdnotify import notify
+
+
+def test_timers_fire_in_order_with_their_exact_model_times():
+    clock = RealtimeScheduler()
+    seen = []
+    for t in (0.03, 0.01, 0.02, 0.02):
+        clock.at(t, lambda t=t: seen.append((t, clock.now())))
+    clock.run(0.05)
+    assert [t for t, _ in seen] == [0.01, 0.02, 0.02, 0.03]
+    assert all(t == now for t, now in seen)  # model time is the scheduled time, not the late wall time
+    assert clock.now() == 0.05
+    clock.close()
+
+
+def test_readers_posts_from_threads_and_stop():
+    clock = RealtimeScheduler()
+    left, right = socket.socketpair()
+    got = []
+    clock.add_reader(left.fileno(), lambda: got.append(left.recv(10)))
+    clock.at(0.01, lambda: right.send(b"ping"))
+    threading.Timer(0.05, lambda: clock.post(got.append, "posted")).start()
+    clock.at(0.2, clock.stop)
+    clock.run()
+    assert got == [b"ping", "posted"]
+    assert 0.2 <= clock.now() < 1.0
+    clock.close()
+    left.close()
+    right.close()
+
+
+def test_model_time_never_goes_back_for_inputs():
+    clock = RealtimeScheduler()
+    times = []
+    left, right = socket.socketpair()
+    clock.add_reader(left.fileno(), lambda: (left.recv(10), times.append(clock.now())))
+    for i in range(20):
+        clock.at(0.002 * i, lambda: (right.send(b"x"), times.append(clock.now())))
+    clock.run(0.06)
+    assert times == sorted(times)
+    clock.close()
+
+
+def test_speed_scales_model_time():
+    clock = RealtimeScheduler(speed=10.0)
+    clock.at(1.0, clock.stop)
+    import time
+
+    start = time.perf_counter()
+    clock.run()
+    assert time.perf_counter() - start < 1.0  # 1 model second is 0.1 s of wall clock
+    clock.close()
+
+
+def test_defer_runs_after_the_events_due_now():
+    clock = RealtimeScheduler()
+    order = []
+    clock.at(0.01, lambda: (order.append("a"), clock.defer(lambda: order.append("deferred"))))
+    clock.at(0.01, lambda: order.append("b"))
+    clock.run(0.02)
+    assert order == ["a", "b", "deferred"]
+    clock.close()
+
+
+def test_signals_are_handled_in_the_loop():
+    clock = RealtimeScheduler()
+    got = []
+    clock.on_signal(signal.SIGUSR1, lambda signum: (got.append(signum), clock.stop()))
+    clock.at(0.01, lambda: os.kill(os.getpid(), signal.SIGUSR1))
+    clock.run(5.0)
+    assert got == [signal.SIGUSR1]
+    signal.signal(signal.SIGUSR1, signal.SIG_DFL)
+    clock.close()
+
+
+def test_sd_notify_datagram(tmp_path, monkeypatch):
+    path = str(tmp_path / "notify")
+    server = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    server.bind(path)
+    monkeypatch.setenv("NOTIFY_SOCKET", path)
+    assert notify("READY=1", "STATUS=ok")
+    assert server.recv(100) == b"READY=1\nSTATUS=ok"
+    monkeypatch.delenv("NOTIFY_SOCKET")
+    assert not notify("READY=1")
+    server.close()
+
+
+def test_systemd_unit_has_what_operations_need():
+    unit = open(os.path.join(os.path.dirname(__file__), "..", "systemd", "hilgate.service")).read()
+    lines = {line.split("=", 1)[0]: line.split("=", 1)[1] for line in unit.splitlines()
+             if "=" in line and not line.startswith("#")}
+    assert lines["Type"] == "notify"
+    assert lines["ExecReload"] == "/bin/kill -HUP $MAINPID"
+    assert lines["Restart"] == "on-failure"
+    assert lines["User"] == "hilgate" and lines["SupplementaryGroups"] == "dialout"
+    assert lines["LimitMSGQUEUE"] == "infinity"
+    for option in ("NoNewPrivileges", "ProtectSystem", "PrivateTmp", "ProtectHome", "RestrictAddressFamilies"):
+        assert option in lines
+    env = open(os.path.join(os.path.dirname(__file__), "..", "systemd", "hilgate.env")).read()
+    assert "HILGATE_SCENE=" in env and "HILGATE_ARGS=" in env
