@@ -275,7 +275,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:
+        # `hilgate send LINK --to 2 hello world`: argparse cannot give a '*' positional what follows
+        # an option, so the words after it arrive here; anything else unknown is still an error.
+        if args.command == "send" and not any(word.startswith("-") for word in extra):
+            args.text = [*args.text, *extra]
+        else:
+            parser.error(f"unrecognized arguments: {' '.join(extra)}")
     level = logging.WARNING - 10 * min(args.verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     try:
