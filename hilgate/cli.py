@@ -22,7 +22,7 @@ def _add_scene_args(parser: argparse.ArgumentParser, optional: bool = False) -> 
         parser.add_argument("scene", help="scene file (YAML)")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY.PATH=VALUE",
                         help="override a scene value, '*' matches every key at its level "
-                             "(e.g. --set 'links.*.mac.protocol=s-fama'); repeatable")
+                             "(e.g. --set 'links.*.mac.protocol=s-fama'); VALUE null removes the key; repeatable")
 
 
 def cmd_check(args: argparse.Namespace) -> int:

@@ -23,8 +23,8 @@ from .models.errormodel import UNITS, ErrorModel
 from .models.expr import ExprError, compile_expression
 from .models.flows import FlowSpec
 from .models.frame import BROADCAST
-from .models.mac import REGISTRY as MAC_REGISTRY
 from .models.mac import Mac, Param
+from .models.macs import REGISTRY as MAC_REGISTRY
 from .models.medium import Channel
 from .models.modem import ModemParams
 
@@ -142,7 +142,8 @@ def _merge(base: Node, override: Node) -> Node:
 
 
 def apply_override(root: Node, assignment: str) -> None:
-    """``links.*.mac.protocol=s-fama``: set a value, ``*`` matching every key at that level."""
+    """``links.*.mac.protocol=s-fama``: set a value, ``*`` matching every key at that level; a value of
+    ``null`` removes the key (``links.*.mac.backoff_s=null`` when switching to a MAC without it)."""
     if "=" not in assignment:
         raise SceneError("--set", 0, assignment, "expected KEY.PATH=VALUE")
     path, raw = assignment.split("=", 1)
@@ -166,8 +167,11 @@ def apply_override(root: Node, assignment: str) -> None:
         done = 0
         for name in targets:
             if index == len(parts) - 1:
-                node.value[name] = to_node(value)
-                done += 1
+                if value is None:
+                    done += node.value.pop(name, None) is not None or key == "*"
+                else:
+                    node.value[name] = to_node(value)
+                    done += 1
             else:
                 child = node.value.get(name)
                 if child is None:
@@ -401,6 +405,9 @@ def _link(link_id: str, node: Node, path: str, scene: dict[str, Any], scene_dir:
         promiscuous=f.get("promiscuous", boolean, False),
     )
     mac = f.get("mac", _mac_spec, MacSpec("none"))
+    problem = mac_class(mac.protocol).check(params, dict(mac.params))
+    if problem:
+        raise (f.child("mac") or f.node).error(f.sub("mac"), problem)
     packet = f.get("packet", _packet_class, "vl2b")
     model = None if model_node is None else str(model_node.value)
     return LinkSpec(link_id, vehicle, backend, model, params, mac, packet, node.file, node.line)

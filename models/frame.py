@@ -8,6 +8,7 @@ BROADCAST = 255
 """The broadcast address, as DataLinkFrame and the EvoLogics modems use it."""
 
 DATA = "data"
+ACK, RTS, CTS = "ack", "rts", "cts"
 
 
 class Frame:
@@ -20,7 +21,7 @@ class Frame:
     own control frames with another ``kind`` and may hang the data frame they serve on ``ref``.
     """
 
-    __slots__ = ("id", "src", "dst", "dst_addr", "size", "t0", "flow", "payload", "kind", "ref", "seq")
+    __slots__ = ("id", "src", "dst", "dst_addr", "size", "t0", "flow", "payload", "kind", "ref", "seq", "src_addr")
 
     def __init__(
         self,
@@ -47,6 +48,7 @@ class Frame:
         self.kind = kind
         self.ref = ref
         self.seq = seq
+        self.src_addr = -1  # set by the sending modem
 
     def __repr__(self) -> str:
         return f"Frame(#{self.id} {self.kind} {self.src}->{self.dst} {self.size}B)"

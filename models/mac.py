@@ -12,6 +12,9 @@ A MAC sits between the modem's transmit FIFO and its PHY.  It is *told*:
 
 It *may*, through the modem (see :class:`hilgate.models.modem.SimModem`):
 
+- ``modem.control_frame(kind, size, dst_addr, dst, ref)``: make an ACK/RTS/CTS that serves ``ref``;
+  ``modem.consume(frame)``: trace a good control frame as received (it is not delivered up);
+
 - ``modem.fifo`` / ``modem.fifo_pop()``: look at and take frames from the FIFO;
 - ``modem.transmit(frame)``: put a frame on air (after the modem's intrinsic delay and jitter);
   ``modem.phy_busy`` is true from then until ``on_tx_done``;
@@ -53,6 +56,9 @@ class Mac:
     name = "none"
     hears_all = False
     PARAMETERS: ClassVar[dict[str, Param]] = {}
+    holding = False
+    """True while the MAC has taken a frame from the FIFO and is not done with it (awaiting its ACK,
+    backing off…): the GLI says BUSY until it lets go (and calls ``modem.check_idle()``)."""
 
     def __init__(self, **params: Any):
         if params:
@@ -80,13 +86,12 @@ class Mac:
     def describe(self) -> dict[str, Any]:
         return {"protocol": self.name}
 
+    @classmethod
+    def check(cls, modem: Any, params: dict[str, Any]) -> str | None:
+        """Whether these parameters work for a modem with these ``ModemParams`` (checked when the scene
+        loads, so a problem is reported with its file and line); None if they do, else why not."""
+        return None
+
 
 class NoMac(Mac):
     """Transmit the head of the FIFO as soon as the PHY is free: the timing rule of DESIGN.md exactly."""
-
-
-REGISTRY: dict[str, type[Mac]] = {"none": NoMac}
-
-
-def register(name: str, cls: type[Mac]) -> None:
-    REGISTRY[name] = cls

@@ -17,14 +17,13 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Callable
 
 from .errormodel import NO_ERRORS, ErrorModel
-from .frame import BROADCAST
+from .frame import BROADCAST, Frame
 from .mac import Mac, NoMac
 from .medium import OVERLAP_EPS
 from .observer import NullObserver, Observer
 
 if TYPE_CHECKING:
     from .clock import Clock
-    from .frame import Frame
     from .medium import Arrival, Medium
     from .trajectories import PoseSource
 
@@ -130,6 +129,7 @@ class SimModem:
             self.stats.fifo_drops += 1
             self.observer.drop(t, self, frame, "fifo")
             return False
+        frame.src_addr = self.address
         self.fifo.append(frame)
         self.queued_bytes += frame.size
         if self.queued_bytes > self.stats.fifo_peak_bytes:
@@ -219,12 +219,28 @@ class SimModem:
     def _off_air(self, frame: "Frame") -> None:
         self.phy_busy = False
         self.mac.on_tx_done(frame)
-        if self.on_idle is not None and not self.phy_busy and not self.fifo:
-            self.on_idle()
+        self.check_idle()
 
     @property
     def idle(self) -> bool:
-        return not self.phy_busy and not self.fifo
+        """Nothing to send: FIFO empty, PHY free, and the MAC holds no frame (e.g. awaiting its ACK)."""
+        return not self.phy_busy and not self.fifo and not self.mac.holding
+
+    def check_idle(self) -> None:
+        """Tell the GLI (READY) if the modem just became idle; MACs call it when they let go of a frame."""
+        if self.on_idle is not None and self.idle:
+            self.on_idle()
+
+    def control_frame(self, kind: str, size: int, dst_addr: int, dst: str, ref: "Frame") -> "Frame":
+        """A MAC frame (ack, rts, cts…) serving ``ref``: its bytes count as ``ref``'s flow's on-air bytes."""
+        frame = Frame(self.medium.new_frame_id(), self.id, dst, dst_addr, size, self.clock.now(), ref.flow,
+                      kind=kind, ref=ref)
+        frame.src_addr = self.address
+        return frame
+
+    def consume(self, frame: "Frame") -> None:
+        """A good MAC frame for this modem, used by the MAC itself: traced as ``rx``, not delivered."""
+        self.observer.rx(self.clock.now(), self, frame)
 
     def set_pose(self, pose: "PoseSource") -> None:
         self.pose = pose

@@ -50,9 +50,12 @@ class EventList:
 
     def __init__(self) -> None:
         self.events: list[tuple[float, str, str, int, str | None]] = []
+        self.kinds: dict[int, str] = {}
+        self.fields: list[tuple[float, str, str, dict]] = []  # MAC events with their extra fields
 
     def _add(self, t, ev, modem, frame, cause=None):
         self.events.append((t, ev, modem.id, frame.id, cause))
+        self.kinds[frame.id] = frame.kind
 
     def enq(self, t, modem, frame):
         self._add(t, "enq", modem, frame)
@@ -71,6 +74,7 @@ class EventList:
 
     def mac(self, t, modem, frame, ev, **fields):
         self._add(t, ev, modem, frame, fields.get("cause"))
+        self.fields.append((t, ev, modem.id, fields))
 
     def of(self, ev: str) -> list[tuple[float, str, str, int, str | None]]:
         return [e for e in self.events if e[1] == ev]

@@ -1,0 +1,9 @@
+"""The MAC protocols a scene can name; user-defined ones are loaded by ``package.module:ClassName``."""
+
+from __future__ import annotations
+
+from .csaloha import CsAloha
+from .mac import Mac, NoMac
+from .sfama import SFama
+
+REGISTRY: dict[str, type[Mac]] = {"none": NoMac, "cs-aloha": CsAloha, "s-fama": SFama}
