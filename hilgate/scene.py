@@ -486,6 +486,8 @@ def _flow(node: Node, path: str, links: dict[str, LinkSpec], duration: float) ->
 def _validate(root: Node | None, file: str) -> Scene:
     if root is None:
         raise SceneError(file, 0, "", "the scene is empty")
+    if root.is_map:  # top-level x-… keys hold YAML anchors for reuse (as in docker-compose): ignored
+        root = Node({k: v for k, v in root.items() if not k.startswith("x-")}, root.file, root.line)
     f = Fields(root, "", TOP_KEYS)
     scene_dir = os.path.dirname(os.path.abspath(file)) if not file.startswith("<") else os.getcwd()
     name = f.get("name", text, os.path.splitext(os.path.basename(file))[0])

@@ -13,7 +13,8 @@ The exchange, with the RTS sent at the start of slot k:
 - k+2+n: ACK from the receiver; the sender expects it by the end of that slot.
 
 A node that overhears an RTS or a CTS meant for someone else stays silent until the end of the ACK
-slot of the exchange it announces (the control frames carry the data length).  No CTS by the start
+slot of the exchange it announces (the control frames carry the data length); so does the receiver
+that granted the exchange with its CTS.  No CTS by the start
 of slot k+2, or no ACK ⇒ back off 1..``max_backoff_slots`` slots (uniform) and start again with an
 RTS; after ``max_retries`` retries the frame is given up.  Broadcast data goes out at a slot start
 without RTS/CTS or ACK.  Frames go on air ``tx_delay`` after the slot start (the modem's intrinsic
@@ -226,7 +227,11 @@ class SFama(Mac):
             cts = modem.control_frame(CTS, self.cts_bytes, frame.src_addr, frame.src, frame.ref)
             # the slot is sized so that an RTS from up to max_range has fully arrived by the next
             # boundary, possibly exactly on it: the CTS goes at that boundary
-            self._answer(self.next_boundary(now), cts)
+            at = self.next_boundary(now)
+            self._answer(at, cts)
+            # having granted the exchange, keep quiet until its ACK slot is over
+            j = self.slot_index(at)
+            self.silent_until = max(self.silent_until, self.boundary(j + 2 + self.data_slots(frame.ref.size)))
         elif frame.kind == CTS:
             modem.consume(frame)
             if self.state == WAIT_CTS and frame.ref is self.current:
