@@ -1,7 +1,8 @@
 """What a link id is routed to: one interface for simulated modems and real modem drivers.
 
 The router talks to a backend only through :class:`Backend`; adding a modem type means adding a
-class here (or in ``drivers/``) and a line in :data:`REGISTRY`, not touching the router.  A backend
+class here (or in ``drivers/``) and a line in the router's ``backend_factories``, not touching the
+rest of the router.  A backend
 outlives nothing: on a reload that changes the backend kind, the router closes the old one and opens
 the new one behind the same GLI endpoints.
 """
@@ -9,7 +10,7 @@ the new one behind the same GLI endpoints.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from .models.frame import BROADCAST, Frame
@@ -29,6 +30,8 @@ class AppFrame:
     src: int
     dst: int
     t0: float = 0.0
+    meta: dict[str, Any] | None = None  # what an emulated modem needs to print it (IM, burst, ack…)
+    on_delivered: Callable[["AppFrame", Any], Any] | None = field(default=None, repr=False)
 
 
 class Backend(ABC):

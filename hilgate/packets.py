@@ -83,6 +83,13 @@ class PacketClass(ABC):
     def real_length(self, payload_length: int) -> int:
         """Bytes on air for a payload of this length."""
 
+    @abstractmethod
+    def frame_length(self, data: bytes) -> int | None:
+        """How long the frame starting at ``data`` is, from its header (for hunting frames in a byte
+        stream); None if the header is not complete yet.  PacketError if it cannot be a frame."""
+
+    preamble = b"\x55"
+
     def decode_body(self, body: bytes) -> Decoded:
         if len(body) != self.body_size:
             raise PacketError("size", f"{self.name} frames are {self.body_size} bytes on the queue, got {len(body)}")
@@ -118,6 +125,16 @@ class VariableLength(PacketClass):
         length = len(payload).to_bytes(self.length_bytes, "big")
         return bytes([PREAMBLE]) + length + payload + crc16(payload).to_bytes(2, "big")
 
+    def frame_length(self, data: bytes) -> int | None:
+        if len(data) < 1 + self.length_bytes:
+            return None
+        if data[0] != PREAMBLE:
+            raise PacketError("preamble", f"{self.name} starts with 0x55")
+        length = int.from_bytes(data[1 : 1 + self.length_bytes], "big")
+        if length > self.max_payload:
+            raise PacketError("length", f"{self.name} payload length {length} > {self.max_payload}")
+        return self.real_length(length)
+
     def parse_real(self, data: bytes):
         if len(data) < 1 + self.length_bytes + 2 or data[0] != PREAMBLE:
             raise PacketError("preamble", f"{self.name} starts with 0x55")
@@ -151,6 +168,18 @@ class DataLinkFrame(PacketClass):
         payload = self.fit_payload(payload)
         covered = bytes([dst & 0xFF, src & 0xFF]) + len(payload).to_bytes(2, "big") + payload
         return b"\x55\x55" + covered + self._crc(covered).to_bytes(self.fcs_bytes, "big")
+
+    preamble = b"\x55\x55"
+
+    def frame_length(self, data: bytes) -> int | None:
+        if len(data) < 6:
+            return None
+        if data[0] != PREAMBLE or data[1] != PREAMBLE:
+            raise PacketError("preamble", f"{self.name} starts with 0x55 0x55")
+        length = int.from_bytes(data[4:6], "big")
+        if length > self.max_payload:
+            raise PacketError("length", f"{self.name} payload length {length} > {self.max_payload}")
+        return self.real_length(length)
 
     def parse_real(self, data: bytes):
         if len(data) < 6 + self.fcs_bytes or data[0] != PREAMBLE or data[1] != PREAMBLE:
@@ -188,6 +217,13 @@ class SimplePacket(PacketClass):
         payload = self.fit_payload(payload)
         return bytes([PREAMBLE]) + payload + crc16(payload).to_bytes(2, "big")
 
+    def frame_length(self, data: bytes) -> int | None:
+        if not data:
+            return None
+        if data[0] != PREAMBLE:
+            raise PacketError("preamble", f"{self.name} starts with 0x55")
+        return self.max_real
+
     def parse_real(self, data: bytes):
         if len(data) < self.max_real or data[0] != PREAMBLE:
             raise PacketError("preamble", f"{self.name} starts with 0x55")
@@ -210,6 +246,11 @@ class Raw(PacketClass):
     def encode(self, payload: bytes, src: int = 0, dst: int = BROADCAST) -> bytes:
         return self.fit_payload(payload)
 
+    preamble = b""
+
+    def frame_length(self, data: bytes) -> int | None:
+        raise PacketError("framing", "raw frames have no framing of their own (see HilgateFrame)")
+
     def parse_real(self, data: bytes):
         return bytes(data), bytes(data), None, None
 
@@ -222,6 +263,46 @@ class Raw(PacketClass):
 
     def encode_body(self, real: bytes, seq: int, src: int, dst: int) -> bytes:
         return real + struct.pack("<III", seq & 0xFFFFFFFF, src & 0xFFFFFFFF, dst & 0xFFFFFFFF)
+
+
+class HilgateFrame(VariableLength):
+    """hilgate's own framing for ``raw`` links on byte-stream modems (S100): ``A5 5A | len u16 BE |
+    payload | CRC16(len..payload)``.  Raw payloads have no preamble or CRC, so on a serial line they
+    get this one; the size on air grows by 6 bytes."""
+
+    preamble = b"\xa5\x5a"
+
+    def __init__(self) -> None:
+        super().__init__(2)
+        self.name = "hilgate-frame"
+        self.max_payload = 4096
+        self.max_real = 2 + 2 + self.max_payload + 2
+
+    def real_length(self, payload_length: int) -> int:
+        return 4 + payload_length + 2
+
+    def encode(self, payload: bytes, src: int = 0, dst: int = BROADCAST) -> bytes:
+        payload = self.fit_payload(payload)
+        covered = len(payload).to_bytes(2, "big") + payload
+        return self.preamble + covered + crc16(covered).to_bytes(2, "big")
+
+    def frame_length(self, data: bytes) -> int | None:
+        if len(data) < 4:
+            return None
+        if bytes(data[:2]) != self.preamble:
+            raise PacketError("preamble", "hilgate frames start with A5 5A")
+        length = int.from_bytes(data[2:4], "big")
+        if length > self.max_payload:
+            raise PacketError("length", f"hilgate frame length {length} > {self.max_payload}")
+        return self.real_length(length)
+
+    def parse_real(self, data: bytes):
+        total = self.frame_length(data)
+        if total is None or len(data) < total:
+            raise PacketError("length", "hilgate frame truncated")
+        if crc16(bytes(data[2:total])) != 0:
+            raise PacketError("crc", "hilgate frame CRC-16 mismatch")
+        return bytes(data[:total]), bytes(data[4 : total - 2]), None, None
 
 
 def packet_class(name: str) -> PacketClass:

@@ -39,6 +39,7 @@ class Link:
         self.seq = 0
         self.mq: MqEndpoint | None = None
         self.listener: Listener | None = None
+        self.emulator: Any = None
         self._state_pending = False
 
     # -- set-up ----------------------------------------------------------------------------------
@@ -50,6 +51,23 @@ class Link:
             path = os.path.join(socket_dir, f"{self.id}.sock")
             self.listener = Listener(listen_unix(path), scheduler,
                                      lambda sock: GliClient(sock, scheduler, self.router, self.id), path)
+        self.open_emulator(scheduler)
+
+    def open_emulator(self, scheduler: Any) -> None:
+        """An emulated EvoLogics/S100 device in front of this (simulated) link, if the scene asks."""
+        if self.emulator is not None:
+            self.emulator.close()
+            self.emulator = None
+        if self.spec.emulate:
+            from .drivers.emulators import EMULATORS
+
+            options = dict(self.spec.emulate)
+            self.emulator = EMULATORS[options["protocol"]](self, options, scheduler)
+
+    def sim_modem(self) -> Any:
+        """The simulated modem behind this link, or None when a real modem drives it."""
+        backend = self.backend
+        return getattr(backend, "modem", None)
 
     def set_backend(self, backend: Backend) -> None:
         if self.backend is not None and self.backend is not backend:
@@ -61,7 +79,10 @@ class Link:
         self.state_changed()
 
     def update(self, spec: LinkSpec) -> None:
+        emulate_changed = spec.emulate != self.spec.emulate
         self.spec = spec
+        if emulate_changed:
+            self.open_emulator(self.router.scheduler)
         if spec.packet != self.packet.name:
             self.packet = packet_class(spec.packet)
             if self.mq is not None:
@@ -74,7 +95,8 @@ class Link:
     @property
     def ready(self) -> bool:
         backend = self.backend
-        return backend is not None and backend.state == "up" and backend.idle
+        return (backend is not None and backend.state == "up" and backend.idle
+                and not (self.emulator is not None and self.emulator.busy))
 
     def welcome(self) -> dict[str, Any]:
         from .gli_wire import VERSION
@@ -85,7 +107,11 @@ class Link:
     # -- application → medium --------------------------------------------------------------------
 
     def from_mq(self, decoded: Decoded) -> None:
-        self._send(decoded.real, decoded.payload, decoded.seq, decoded.dst)
+        try:
+            self._send(decoded.real, decoded.payload, decoded.seq, decoded.dst)
+        except PacketError as exc:
+            log.warning("link %s: %s", self.id, exc)
+            self.bad_frame(exc.reason, len(decoded.real))
 
     def from_client(self, payload: bytes, dst: int) -> None:
         real = self.packet.encode(payload, src=self.address, dst=dst)
@@ -93,10 +119,14 @@ class Link:
         self._send(real, payload, self.seq, dst)
 
     def _send(self, real: bytes, payload: bytes, seq: int, dst: int) -> None:
+        self.send_frame(AppFrame(real, payload, self.packet, seq, self.address, dst, self.router.scheduler.now()))
+
+    def send_frame(self, frame: AppFrame) -> None:
+        """Hand a frame to the backend. A frame it cannot carry (too large for the modem) raises
+        PacketError, which socket clients receive as an ERROR and queues count as a bad frame."""
         backend = self.backend
-        frame = AppFrame(real, payload, self.packet, seq, self.address, dst, self.router.scheduler.now())
         if backend is None:
-            self.bad_frame("no_backend", len(real))
+            self.bad_frame("no_backend", len(frame.real))
             return
         backend.send(frame)
         self.state_changed()
@@ -127,6 +157,10 @@ class Link:
         for client in list(self.clients):
             if not client.deliver(frame.src, frame.dst, t, frame.payload):
                 self.gli_drops["client_slow"] += 1
+        if self.emulator is not None:
+            self.emulator.deliver(frame, t)
+        if frame.on_delivered is not None and frame.dst == self.address:
+            frame.on_delivered(frame, self)
 
     def state_changed(self) -> None:
         """READY/BUSY may have changed: tell the applications once the events due now have fired, so
@@ -167,6 +201,8 @@ class Link:
     def close(self) -> None:
         for client in list(self.clients):
             client.close()
+        if self.emulator is not None:
+            self.emulator.close()
         if self.listener is not None:
             self.listener.close()
         if self.mq is not None:
@@ -185,7 +221,8 @@ class Router:
         self.world: World | None = None
         self.scene: Scene | None = None
         self._names: dict[tuple[str, int], str] = {}
-        self.backend_factories: dict[str, Callable[[LinkSpec], Backend]] = {"sim": self._sim_backend}
+        self.backend_factories: dict[str, Callable[[LinkSpec], Backend]] = {
+            "sim": self._sim_backend, "evologics": self._driver_backend, "s100": self._driver_backend}
         self.full_size_queues: bool | None = None
         if socket_dir is not None:
             os.makedirs(socket_dir, exist_ok=True)
@@ -196,6 +233,19 @@ class Router:
     def _sim_backend(self, spec: LinkSpec) -> Backend:
         assert self.world is not None
         return SimBackend(self.world.modems[spec.id], self.link_name)
+
+    def _driver_backend(self, spec: LinkSpec) -> Backend:
+        from .drivers.evologics import EvologicsBackend, EvologicsOptions
+        from .drivers.s100 import S100Backend, S100Options
+
+        options = dict(spec.options)
+        packet = packet_class(spec.packet)
+        if spec.backend == "evologics":
+            return EvologicsBackend(spec.id, spec.params.address, packet, EvologicsOptions(**options),
+                                    self.scheduler, self.recorder.event)
+        options.setdefault("air_bitrate_bps", spec.params.bitrate_bps)
+        return S100Backend(spec.id, spec.params.address, packet, S100Options(**options), self.scheduler,
+                           self.recorder.event)
 
     def apply(self, scene: Scene) -> None:
         """Build the first scene, or change the running one into ``scene`` (already validated)."""
@@ -226,7 +276,8 @@ class Router:
                 continue
             before = old.links[spec.id] if old else None
             link.update(spec)
-            if before is not None and before.backend != spec.backend:
+            if before is not None and (before.backend != spec.backend or
+                                       (spec.backend != "sim" and before.options != spec.options)):
                 log.info("link %s: backend %s -> %s", spec.id, before.backend, spec.backend)
                 link.set_backend(self.backend_factories[spec.backend](spec))
             elif isinstance(link.backend, SimBackend):

@@ -40,9 +40,16 @@ MODEM_KEYS = (
     "bitrate_bps", "tx_delay_s", "rx_delay_s", "tx_jitter_s", "rx_jitter_s", "fifo_bytes", "range_m",
     "error", "mac", "packet", "duplex", "promiscuous",
 )
-LINK_KEYS = ("vehicle", "backend", "model", "address", "channel", "tx_channel", "rx_channel") + MODEM_KEYS
+DRIVER_KEYS = {
+    "evologics": ("port", "baud", "im", "ack", "source_level", "gain", "extended", "im_retries", "command_timeout_s",
+                  "delivery_timeout_s", "queue_frames", "eol"),
+    "s100": ("port", "baud", "rtscts", "queue_frames"),
+}
+ALL_DRIVER_KEYS = tuple(dict.fromkeys(k for keys in DRIVER_KEYS.values() for k in keys))
+LINK_KEYS = ("vehicle", "backend", "model", "address", "channel", "tx_channel", "rx_channel") + MODEM_KEYS + \
+    ALL_DRIVER_KEYS + ("emulate",)
 FLOW_KEYS = ("from", "to", "size_bytes", "interval_s", "rate_hz", "poisson", "start_s", "stop_s")
-BACKENDS = ("sim",)
+BACKENDS = ("sim", "evologics", "s100")
 PACKET_CLASSES = ("raw", "vl1b", "vl2b", "dlf16", "dlf32", "simple:N")
 LINK_ID = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,200}$")
 
@@ -82,6 +89,8 @@ class LinkSpec:
     packet: str
     file: str = field(default="", compare=False)
     line: int = field(default=0, compare=False)
+    options: tuple[tuple[str, Any], ...] = ()  # the driver's keys (port, baud…) for real backends
+    emulate: tuple[tuple[str, Any], ...] = ()  # emulated modem in front of a sim link
 
 
 @dataclass
@@ -410,12 +419,61 @@ def _link(link_id: str, node: Node, path: str, scene: dict[str, Any], scene_dir:
         raise (f.child("mac") or f.node).error(f.sub("mac"), problem)
     packet = f.get("packet", _packet_class, "vl2b")
     model = None if model_node is None else str(model_node.value)
-    return LinkSpec(link_id, vehicle, backend, model, params, mac, packet, node.file, node.line)
+    options = _driver_options(f, backend)
+    emulate = ()
+    if "emulate" in f:
+        if backend != "sim":
+            raise f.child("emulate").error(f.sub("emulate"), "only a backend: sim link can emulate a modem")
+        emulate = f.get("emulate", _emulate)
+    return LinkSpec(link_id, vehicle, backend, model, params, mac, packet, node.file, node.line, options, emulate)
+
+
+_DRIVER_CHECKS: dict[str, Callable[[Node, str], Any]] = {
+    "port": text,
+    "baud": integer(50, 4_000_000),
+    "im": boolean,
+    "ack": boolean,
+    "extended": boolean,
+    "rtscts": boolean,
+    "source_level": integer(0, 3),
+    "gain": integer(0, 1),
+    "im_retries": integer(0, 255),
+    "command_timeout_s": number(above=0),
+    "delivery_timeout_s": number(above=0),
+    "queue_frames": integer(0, 100_000),
+    "eol": choice("auto", "cr", "lf", "crlf"),
+}
+
+
+def _driver_options(f: Fields, backend: str) -> tuple[tuple[str, Any], ...]:
+    allowed = DRIVER_KEYS.get(backend, ())
+    for key in ALL_DRIVER_KEYS:
+        if key in f and key not in allowed:
+            users = [b for b, keys in DRIVER_KEYS.items() if key in keys]
+            raise f.child(key).error(f.sub(key), f"only for backend {' or '.join(users)} (this link is {backend})")
+    if not allowed:
+        return ()
+    if "port" not in f:
+        raise f.error(f"backend {backend} needs 'port' (a device such as /dev/ttyUSB0"
+                      + (", or socket://HOST:9200)" if backend == "evologics" else ")"))
+    return tuple((key, f.get(key, _DRIVER_CHECKS[key])) for key in allowed if key in f)
+
+
+def _emulate(node: Node, path: str) -> tuple[tuple[str, Any], ...]:
+    f = Fields(node, path, ("protocol", "pty", "tcp"))
+    protocol = f.get("protocol", choice("evologics", "s100"))
+    if ("pty" in f) == ("tcp" in f):
+        raise f.error("give exactly one of pty (a path for the device link) or tcp (a loopback port)")
+    if "tcp" in f:
+        if protocol != "evologics":
+            raise f.child("tcp").error(f.sub("tcp"), "only the EvoLogics modem speaks TCP; the S100 is serial")
+        return (("protocol", protocol), ("tcp", f.get("tcp", integer(1, 65535))))
+    return (("protocol", protocol), ("pty", f.get("pty", text)))
 
 
 def _assign_addresses(links: dict[str, LinkSpec], nodes: dict[str, Node]) -> dict[str, LinkSpec]:
-    """Links without ``address`` get the smallest free one; two links that listen on one channel
-    must not share an address."""
+    """Links without ``address`` get the smallest free one; two simulated links that listen on one
+    channel must not share an address."""
     used = {link.params.address for link in links.values() if link.params.address >= 0}
     next_free = 1
     result: dict[str, LinkSpec] = {}
@@ -429,6 +487,9 @@ def _assign_addresses(links: dict[str, LinkSpec], nodes: dict[str, Node]) -> dic
             used.add(next_free)
             link = _replace_params(link, address=next_free)
         key = (link.params.rx_channel, link.params.address)
+        if link.backend != "sim":
+            result[link_id] = link  # a real modem's address is the modem's own, not on the medium
+            continue
         if key in owners:
             raise nodes[link_id].error(
                 f"links.{link_id}.address",

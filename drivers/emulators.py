@@ -1,0 +1,380 @@
+"""Simulated modems that look real: an EvoLogics S2C or a Seatooth S100 on a pseudo-terminal or TCP.
+
+``emulate: {protocol: evologics, pty: /tmp/evo0}`` on a ``backend: sim`` link creates a pty whose
+slave is linked at that path (or ``tcp: 9200``, a loopback listener), and answers there like the
+modem would, with the link's simulated modem behind it.  Software written for the real modem runs
+unchanged against the simulation: ``AT*SENDIM,5,2,ack,hello`` gets ``OK``; the other vehicle's
+emulated modem prints ``RECVIM,5,1,2,ack,…`` when the model delivers the frame; the sender gets
+``DELIVEREDIM,2`` one propagation time later, or ``FAILEDIM,2`` if the model loses the frame;
+``AT?T`` answers the model's propagation time; settings answer as a modem does.  Like a modem just
+powered on, it starts in command mode (``ATO`` enters data mode, ``+++AT`` escapes work there).
+
+The S100 emulator is the byte pipe the real one is: frames of the link's packet class followed by
+CR LF in, the same bytes out on the other side.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import socket
+import tty
+from typing import TYPE_CHECKING, Any
+
+from hilgate.backends import AppFrame
+from hilgate.packets import Raw
+from hilgate.streams import Connection, Listener
+
+from .evologics_codec import BadCommand, Command, Data, ModemCodec
+from .s100_codec import CRLF, FrameHunter, Notice, Skipped, wire_class
+
+if TYPE_CHECKING:
+    from hilgate.router import Link
+
+log = logging.getLogger(__name__)
+
+VERSION = "hilgate EvoLogics S2C emulator"
+IM_MAX = 64
+BURST_MAX = 1024
+
+
+class PtyHost:
+    """The modem side of a pseudo-terminal; the slave end is linked at ``path`` for the application."""
+
+    def __init__(self, path: str, scheduler: Any, on_data, name: str):
+        self.path = path
+        self.scheduler = scheduler
+        self.on_data = on_data
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)  # no echo, no line discipline: a serial line carries bytes
+        os.set_blocking(self.master, False)
+        if os.path.islink(path):
+            os.unlink(path)
+        elif os.path.exists(path):
+            raise OSError(f"{path} exists and is not a link: will not replace it")
+        os.symlink(os.ttyname(self.slave), path)
+        scheduler.add_reader(self.master, self._readable)
+        log.info("%s: emulated modem at %s (%s)", name, path, os.ttyname(self.slave))
+
+    def _readable(self) -> None:
+        try:
+            data = os.read(self.master, 4096)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError:
+            return  # nobody has the slave open: nothing to read
+        if data:
+            self.on_data(self, data)
+
+    def write(self, data: bytes) -> None:
+        try:
+            os.write(self.master, data)
+        except (BlockingIOError, OSError) as exc:
+            log.debug("pty %s: %s", self.path, exc)
+
+    def close(self) -> None:
+        self.scheduler.remove_reader(self.master)
+        for fd in (self.master, self.slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+        try:
+            if os.path.islink(self.path):
+                os.unlink(self.path)
+        except OSError:
+            pass
+
+
+class TcpHosts:
+    """A loopback listener; each client is a host with its own protocol state."""
+
+    def __init__(self, port: int, scheduler: Any, on_data, on_connect, name: str, host: str = "127.0.0.1"):
+        self.scheduler = scheduler
+        self.on_data = on_data
+        self.on_connect = on_connect
+        self.clients: set[_TcpClient] = set()
+        sock = socket.create_server((host, port))
+        sock.setblocking(False)
+        self.listener = Listener(sock, scheduler, self._accept)
+        log.info("%s: emulated modem on tcp://%s:%d", name, host, port)
+
+    def _accept(self, sock: socket.socket) -> None:
+        client = _TcpClient(self, sock)
+        self.clients.add(client)
+        self.on_connect(client)
+
+    def close(self) -> None:
+        for client in list(self.clients):
+            client.connection.close()
+        self.listener.close()
+
+
+class _TcpClient:
+    def __init__(self, hosts: TcpHosts, sock: socket.socket):
+        self.hosts = hosts
+        self.connection = Connection(sock, hosts.scheduler, lambda data: hosts.on_data(self, data),
+                                     lambda: hosts.clients.discard(self))
+
+    def write(self, data: bytes) -> None:
+        self.connection.write(data)
+
+    def close(self) -> None:
+        self.connection.close()
+
+
+def _open_hosts(spec: dict, scheduler: Any, on_data, on_connect, name: str):
+    if "pty" in spec:
+        host = PtyHost(spec["pty"], scheduler, on_data, name)
+        on_connect(host)
+        return host
+    return TcpHosts(int(spec["tcp"]), scheduler, on_data, on_connect, name)
+
+
+class EvologicsEmulator:
+    """An EvoLogics S2C modem in front of a simulated link."""
+
+    def __init__(self, link: "Link", spec: dict, scheduler: Any):
+        self.link = link
+        self.scheduler = scheduler
+        self.codecs: dict[Any, ModemCodec] = {}
+        self.settings = {"AL": str(link.address), "AR": "0", "AM": "254", "L": "3", "LC": "0", "G": "0", "C": "0",
+                         "ZC": "1", "ZP": "500", "RC": "3", "RT": "1000", "KO": "0", "ZI": "120", "ZH": "30",
+                         "ZS": "0", "CA": "1500", "RI": "3", "RP": "0", "ZL": "16384", "ZX": "0", "ZF": "0", "ZU": "0"}
+        self.pending_ack: AppFrame | None = None
+        self.fail_timer = None
+        self.last_ptime_us = 0
+        self.last_rssi = -50
+        self.last_integrity = 150
+        self.hosts = _open_hosts(spec, scheduler, self._on_data, self._on_connect, link.id)
+
+    def _on_connect(self, host: Any) -> None:
+        self.codecs[host] = ModemCodec()
+
+    def close(self) -> None:
+        self.scheduler.cancel(self.fail_timer)
+        self.hosts.close()
+
+    # -- host → modem -------------------------------------------------------------------------------
+
+    def _on_data(self, host: Any, data: bytes) -> None:
+        codec = self.codecs.setdefault(host, ModemCodec())
+        for event in codec.receive_data(data):
+            if isinstance(event, Command):
+                self._command(host, codec, event)
+            elif isinstance(event, BadCommand):
+                host.write(codec.error(None, event.reason))
+            elif isinstance(event, Data):
+                self._send(event.payload, int(self.settings["AR"]), "burst", False)
+
+    def _command(self, host: Any, codec: ModemCodec, command: Command) -> None:
+        name = command.name
+        reply = lambda text: host.write(codec.reply(command, text))  # noqa: E731
+        if name in ("*SENDIM", "*SENDIMS", "*SENDPBM", "*SEND"):
+            self._send_command(command, reply)
+        elif name == "O":
+            return  # data mode, no answer
+        elif name == "C" or name == "":
+            reply("OK")
+        elif name == "?T":
+            reply(str(self.last_ptime_us))
+        elif name == "?E":
+            reply(str(self.last_rssi))
+        elif name == "?I":
+            reply(str(self.last_integrity))
+        elif name == "?V":
+            reply("0.00")
+        elif name == "?MODE":
+            reply("AT")
+        elif name == "?PID":
+            reply(self.settings["ZS"])
+        elif name == "?S":
+            reply("ONLINE NORMAL" if self.pending_ack is None else "ONLINE DELIVERING")
+        elif name == "?DI":
+            reply("EMPTY" if self.pending_ack is None else "DELIVERING")
+        elif name == "&V":
+            lines = [f"{key}: {value}" for key, value in sorted(self.settings.items())]
+            host.write(codec.reply(command, "\r\n".join(lines) + "\r\n") if codec.data_mode else
+                       ("\r\n".join(lines) + "\r\n\r\n").encode())
+        elif name == "I":
+            reply({"0": "1.9 (" + VERSION + ")", "1": "phy: emulated, mac: hilgate", "7": "EvoLogics GmbH (emulated)"}
+                  .get(command.args, VERSION))
+        elif name == "Z":
+            if command.args == "0":  # reboot: no answer; a TCP host loses its connection
+                if isinstance(host, _TcpClient):
+                    host.close()
+                return
+            reply("OK")
+        elif name in ("H", "D", "A", "N", "S", "P", "&W", "&F", "@CTRL"):
+            reply("OK")
+        elif name[0] in "!@" and name[1:] in self.settings:
+            value = command.args.strip()
+            if not value.lstrip("-").isdigit():
+                reply("ERROR WRONG FORMAT")
+                return
+            self.settings[name[1:]] = value
+            reply("OK")
+        elif name[0] == "?" and name[1:] in self.settings:
+            reply(self.settings[name[1:]])
+        else:
+            reply("ERROR UNKNOWN COMMAND")
+
+    def _send_command(self, command: Command, reply) -> None:
+        fields = command.fields
+        payload = command.payload or b""
+        try:
+            dst = int(fields[1])
+        except (IndexError, ValueError):
+            reply("ERROR WRONG FORMAT")
+            return
+        if not 0 <= dst <= 255:
+            reply("ERROR WRONG DESTINATION ADDRESS")
+            return
+        if command.name == "*SEND":
+            if len(payload) > BURST_MAX:
+                reply("ERROR OUT OF RANGE")
+                return
+            reply("OK")
+            self._send(payload, dst, "burst", False)
+            return
+        if len(payload) > IM_MAX:
+            reply("ERROR OUT OF RANGE")
+            return
+        ack = command.name == "*SENDIM" and fields[2] == "ack"
+        if command.name == "*SENDIM" and fields[2] not in ("ack", "noack", "force"):
+            reply("ERROR WRONG FORMAT")
+            return
+        if ack and self.pending_ack is not None:
+            reply("BUSY DELIVERING")
+            return
+        reply("OK")
+        self._send(payload, dst, {"*SENDIMS": "ims", "*SENDPBM": "pbm"}.get(command.name, "im"), ack)
+
+    def _send(self, payload: bytes, dst: int, kind: str, ack: bool) -> None:
+        frame = AppFrame(payload, payload, Raw(), 0, self.link.address, dst, self.scheduler.now())
+        frame.meta = {"kind": kind, "ack": ack}
+        if ack and dst != 255:
+            self.pending_ack = frame
+            frame.on_delivered = self._delivered
+            modem = self.link.sim_modem()
+            airtime = modem.airtime(len(payload)) if modem else 1.0
+            self.fail_timer = self.scheduler.at(self.scheduler.now() + 2 * airtime + 3.0, self._failed, frame)
+        self.link.send_frame(frame)
+
+    # -- delivery reports -------------------------------------------------------------------------------
+
+    def _delivered(self, frame: AppFrame, receiver: "Link") -> None:
+        if frame is not self.pending_ack:
+            return
+        mine, theirs = self.link.sim_modem(), receiver.sim_modem()
+        tau = None
+        if mine is not None and theirs is not None:
+            tau = mine.medium.propagation_delay(theirs, mine, self.scheduler.now())
+        if tau is None:
+            return  # the acknowledgement cannot come back: FAILEDIM when the timer fires
+        self.last_ptime_us = round(tau * 1e6)
+        self.scheduler.cancel(self.fail_timer)
+        self.scheduler.at(self.scheduler.now() + tau, self._report, frame, "DELIVEREDIM")
+
+    def _failed(self, frame: AppFrame) -> None:
+        if frame is self.pending_ack:
+            self._report(frame, "FAILEDIM")
+
+    def _report(self, frame: AppFrame, what: str) -> None:
+        if frame is not self.pending_ack:
+            return
+        self.pending_ack = None
+        self._notify(f"{what},{frame.dst}")
+        self.link.state_changed()
+
+    def _notify(self, text: str, payload: bytes | None = None) -> None:
+        for host, codec in list(self.codecs.items()):
+            host.write(codec.notify_line(text, payload))
+
+    # -- medium → host ----------------------------------------------------------------------------------
+
+    def deliver(self, frame: AppFrame, t: float) -> None:
+        meta = getattr(frame, "meta", None) or {}
+        kind = meta.get("kind", "im")
+        payload = frame.real
+        modem = self.link.sim_modem()
+        d = 0.0
+        if modem is not None:
+            sender = modem.medium.modem_by_address(modem.rx_channel, frame.src)
+            if sender is not None:
+                a, b = sender.pose.position(t), modem.pose.position(t)
+                if a is not None and b is not None:
+                    d = math.dist(a, b)
+        self.last_rssi = int(-20 - 20 * math.log10(max(d, 1.0)))
+        self.last_integrity = 150
+        duration_us = round((modem.airtime(len(payload)) if modem else 0.0) * 1e6)
+        for host, codec in list(self.codecs.items()):
+            if kind == "burst":
+                if codec.data_mode:
+                    host.write(payload)
+                    continue
+                text, body = ModemCodec.recv_burst(frame.src, frame.dst, payload, int(modem.bitrate if modem else 0),
+                                                   self.last_rssi, self.last_integrity, round(d / 1500 * 1e6), 0.0)
+            elif kind == "ims":
+                text = (f"RECVIMS,{len(payload)},{frame.src},{frame.dst},{round(t * 1e6)},{duration_us},"
+                        f"{self.last_rssi},{self.last_integrity},0.00,")
+                body = payload
+            elif kind == "pbm":
+                text = (f"RECVPBM,{len(payload)},{frame.src},{frame.dst},{duration_us},{self.last_rssi},"
+                        f"{self.last_integrity},0.00,")
+                body = payload
+            else:
+                text, body = ModemCodec.recvim(frame.src, frame.dst, payload, bool(meta.get("ack")), duration_us,
+                                               self.last_rssi, self.last_integrity, 0.0)
+            host.write(codec.notify_line(text, body))
+
+    @property
+    def busy(self) -> bool:
+        return self.pending_ack is not None
+
+
+class S100Emulator:
+    """A Seatooth S100 in front of a simulated link: frames of the link's packet class + CR LF."""
+
+    def __init__(self, link: "Link", spec: dict, scheduler: Any):
+        self.link = link
+        self.scheduler = scheduler
+        self.hunters: dict[Any, FrameHunter] = {}
+        self.hosts = _open_hosts(spec, scheduler, self._on_data, self._on_connect, link.id)
+
+    def _on_connect(self, host: Any) -> None:
+        self.hunters[host] = FrameHunter(self.link.packet)
+
+    def _on_data(self, host: Any, data: bytes) -> None:
+        hunter = self.hunters.setdefault(host, FrameHunter(self.link.packet))
+        for event in hunter.receive_data(data):
+            if isinstance(event, Skipped) and event.reason == "crc":
+                self.link.bad_frame("crc", event.count)
+            elif isinstance(event, Notice):
+                continue
+            elif not isinstance(event, Skipped):
+                packet = self.link.packet
+                real = event.real if not isinstance(packet, Raw) else event.payload
+                # S100 frames carry no address of their own (a DataLinkFrame's header does): broadcast
+                frame = AppFrame(real, event.payload, packet, 0, self.link.address, event.dst, self.scheduler.now())
+                self.link.send_frame(frame)
+
+    def deliver(self, frame: AppFrame, t: float) -> None:
+        wire = wire_class(self.link.packet)
+        if isinstance(self.link.packet, Raw):
+            data = wire.encode(frame.payload)
+        elif frame.packet.name == self.link.packet.name:
+            data = frame.real
+        else:
+            data = self.link.packet.encode(frame.payload, src=frame.src, dst=frame.dst)
+        for host in list(self.hunters):
+            host.write(data + CRLF)
+
+    busy = False
+
+    def close(self) -> None:
+        self.hosts.close()
+
+
+EMULATORS = {"evologics": EvologicsEmulator, "s100": S100Emulator}

@@ -1,0 +1,142 @@
+"""``backend: s100``: a real WFS Seatooth S100 RF modem behind a link id, on a serial port.
+
+It writes each frame as dccomms' S100 bridge does: the link's packet bytes and CR LF, whole with
+RTS/CTS flow control, else in 45-byte pieces paced at the air bitrate.  It receives by hunting the
+packet class's frames in the byte stream (:mod:`hilgate.drivers.s100_codec`).  The S100 carries no
+addresses: frames are broadcast on air, and the packet class (DataLinkFrame) or the application
+decides who they are for.  The port reconnects by itself (:mod:`hilgate.drivers.port`); frames wait
+(at most ``queue_frames``) while it is down.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from dataclasses import dataclass
+from typing import Any, Callable
+
+from hilgate.backends import AppFrame, Backend
+from hilgate.packets import Decoded, PacketClass, Raw
+
+from .port import Port
+from .s100_codec import FrameHunter, Notice, Skipped, pieces, wire_class
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class S100Options:
+    port: str
+    baud: int = 9600
+    rtscts: bool = False
+    air_bitrate_bps: float = 1800.0
+    queue_frames: int = 50
+
+
+class S100Backend(Backend):
+    kind = "s100"
+
+    def __init__(self, link_id: str, address: int, packet: PacketClass, options: S100Options, scheduler: Any,
+                 trace: Callable[[dict], Any]):
+        super().__init__()
+        self.link_id = link_id
+        self.address = address
+        self.packet = packet
+        self.wire = wire_class(packet)
+        self.options = options
+        self.scheduler = scheduler
+        self.trace = trace
+        self.hunter = FrameHunter(packet)
+        self.queue: deque[AppFrame] = deque()
+        self.pieces: deque[bytes] = deque()
+        self.piece_timer = None
+        self.tx_packets = self.rx_packets = self.drops = 0
+        self._state = "starting"
+        self.port = Port(options.port, scheduler, self._on_data, self._on_port, baud=options.baud,
+                         rtscts=options.rtscts, name=link_id)
+        self.port.open()
+
+    @property
+    def state(self) -> str:
+        return self._state
+
+    @property
+    def idle(self) -> bool:
+        return not self.queue and not self.pieces
+
+    def send(self, frame: AppFrame) -> bool:
+        if len(self.queue) >= self.options.queue_frames:
+            self._drop(frame, "queue_full" if self._state == "up" else "down")
+            return False
+        self.queue.append(frame)
+        self._pump()
+        return True
+
+    def status(self) -> dict[str, Any]:
+        return {"tx_packets": self.tx_packets, "rx_packets": self.rx_packets, "drops": self.drops,
+                "fifo_bytes": sum(len(f.real) for f in self.queue)}
+
+    def close(self) -> None:
+        self.scheduler.cancel(self.piece_timer)
+        self.port.close()
+        while self.queue:
+            self._drop(self.queue.popleft(), "closed")
+
+    def _drop(self, frame: AppFrame, cause: str) -> None:
+        self.drops += 1
+        self.trace({"t": round(self.scheduler.now(), 9), "ev": "drop", "link": self.link_id,
+                    "size": len(frame.real), "cause": cause})
+
+    def _on_port(self, up: bool) -> None:
+        self.hunter = FrameHunter(self.packet)
+        self.scheduler.cancel(self.piece_timer)
+        self.piece_timer = None
+        self.pieces.clear()  # a frame half written is lost with the adapter; the rest wait
+        state = "up" if up else "down"
+        if state != self._state:
+            self._state = state
+            self.trace({"t": round(self.scheduler.now(), 9), "ev": "link", "link": self.link_id, "state": state})
+            if self.on_state is not None:
+                self.on_state(state)
+        if up:
+            self._pump()
+
+    def _pump(self) -> None:
+        if self._state != "up" or self.pieces or not self.queue:
+            return
+        frame = self.queue.popleft()
+        real = frame.real if not isinstance(self.packet, Raw) else self.wire.encode(frame.payload)
+        self.pieces.extend(pieces(real, self.options.rtscts))
+        self.tx_packets += 1
+        self.trace({"t": round(self.scheduler.now(), 9), "ev": "tx", "link": self.link_id, "size": len(real)})
+        self._write_piece()
+
+    def _write_piece(self) -> None:
+        self.piece_timer = None
+        if not self.pieces:
+            if self.idle and self.on_idle is not None:
+                self.on_idle()
+            self._pump()
+            return
+        piece = self.pieces.popleft()
+        if not self.port.write(piece):
+            return  # the port went down; _on_port has cleared the pieces
+        pace = 0.0 if self.options.rtscts else len(piece) * 8 / self.options.air_bitrate_bps
+        speed = getattr(self.scheduler, "speed", 1.0)
+        self.piece_timer = self.scheduler.at(self.scheduler.now() + pace * speed, self._write_piece)
+
+    def _on_data(self, data: bytes) -> None:
+        now = round(self.scheduler.now(), 9)
+        for event in self.hunter.receive_data(data):
+            if isinstance(event, Decoded):
+                self.rx_packets += 1
+                self.trace({"t": now, "ev": "rx", "link": self.link_id, "size": len(event.real)})
+                if self.on_receive is not None:
+                    real = event.payload if isinstance(self.packet, Raw) else event.real
+                    self.on_receive(AppFrame(real, event.payload, self.packet, 0, event.src, event.dst,
+                                             self.scheduler.now()))
+            elif isinstance(event, Skipped) and event.reason == "crc":
+                self.drops += 1
+                self.trace({"t": now, "ev": "err", "link": self.link_id, "cause": "crc"})
+            elif isinstance(event, Notice):
+                log.info("%s: modem notice %r", self.link_id, event.text)

@@ -1,0 +1,112 @@
+"""WFS Seatooth S100 framing, without I/O: the bytes dccomms' S100 bridge writes, and a frame hunter.
+
+The S100 is a transparent byte pipe with no command set (``shared/protocols/s100-mavlink-aruco.md``):
+a packet is the link's packet bytes followed by CR LF.  Without RTS/CTS flow control the modem takes
+at most 45 bytes at a time, so the bridge writes 45-byte pieces paced at the air bitrate, then the
+CR LF.  The receiver hunts frames in the byte stream by the packet class's preamble, length and CRC,
+skipping stray CR LF and ``+++…\\r\\n`` modem notices.  ``raw`` links, which have no framing of their
+own, get :class:`hilgate.packets.HilgateFrame`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from hilgate.packets import Decoded, HilgateFrame, PacketClass, PacketError, Raw
+
+CRLF = b"\r\n"
+PIECE = 45
+MAX_NOTICE = 200
+
+
+def wire_class(packet: PacketClass) -> PacketClass:
+    """The framing used on the serial line for a link's packet class."""
+    return HilgateFrame() if isinstance(packet, Raw) else packet
+
+
+def pieces(real: bytes, rtscts: bool) -> list[bytes]:
+    """What to write, in order: the whole packet then CR LF with RTS/CTS; else 45-byte pieces, the
+    last one followed by CR LF (each piece is to be paced at the air bitrate)."""
+    if rtscts:
+        return [real + CRLF]
+    chunks = [real[i : i + PIECE] for i in range(0, len(real), PIECE)] or [b""]
+    chunks.append(CRLF)
+    return chunks
+
+
+@dataclass(frozen=True)
+class Notice:
+    """A ``+++…`` line from the modem itself (content undocumented): skipped, logged."""
+
+    text: bytes
+
+
+@dataclass(frozen=True)
+class Skipped:
+    """Bytes that were no frame (line noise, a frame with a bad CRC…), with why."""
+
+    count: int
+    reason: str
+
+
+@dataclass
+class FrameHunter:
+    packet: PacketClass
+    _buffer: bytearray = field(default_factory=bytearray)
+
+    def __post_init__(self) -> None:
+        self.packet = wire_class(self.packet)
+
+    def receive_data(self, data: bytes) -> list[object]:
+        self._buffer += data
+        events: list[object] = []
+        while True:
+            event = self._next()
+            if event is None:
+                break
+            events.append(event)
+        return events
+
+    def _skip(self, count: int, reason: str) -> Skipped:
+        del self._buffer[:count]
+        return Skipped(count, reason)
+
+    def _next(self) -> object | None:
+        buffer = self._buffer
+        packet = self.packet
+        preamble = packet.preamble
+        while buffer[:1] in (b"\r", b"\n"):
+            del buffer[:1]
+        if not buffer:
+            return None
+        if buffer[:3] == b"+++":
+            end = buffer.find(CRLF, 0, MAX_NOTICE)
+            if end >= 0:
+                text = bytes(buffer[:end])
+                del buffer[: end + 2]
+                return Notice(text)
+            if len(buffer) < MAX_NOTICE:
+                return None
+            return self._skip(3, "notice without end")
+        start = buffer.find(preamble)
+        if start < 0:
+            keep = len(preamble) - 1 if buffer.endswith(preamble[:1]) else 0
+            if len(buffer) > keep:
+                return self._skip(len(buffer) - keep, "no preamble")
+            return None
+        if start > 0:
+            # a notice may begin inside the junk: stop there to give it its own chance
+            notice = buffer.find(b"+++", 0, start)
+            return self._skip(notice if notice > 0 else start, "no preamble")
+        try:
+            total = packet.frame_length(bytes(buffer[:8]))
+        except PacketError as exc:
+            return self._skip(1, exc.reason)
+        if total is None or len(buffer) < total:
+            return None
+        try:
+            real, payload, src, dst = packet.parse_real(bytes(buffer[:total]))
+        except PacketError as exc:
+            return self._skip(1, exc.reason)
+        del buffer[:total]
+        return Decoded(real, payload, 0, 255 if src is None else src, 255 if dst is None else dst)
