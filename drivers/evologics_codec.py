@@ -267,6 +267,7 @@ class HostCodec:
     def command(self, name: str, args: str = "", payload: bytes | None = None, fields: tuple = ()) -> bytes:
         """Bytes for ``AT<name><args>`` (SEND commands: ``fields`` then the payload with its length)."""
         body = self._body(name, args, payload, fields)
+        prefix = b"+++AT" if self.data_mode else b"AT"
         self.pending = name
         self._lines = []
         if name == "O" and not self.data_mode:
@@ -274,7 +275,6 @@ class HostCodec:
             self.pending = None  # ATO has no reply
         elif name == "C" and self.data_mode:
             self.data_mode = False
-        prefix = b"+++AT" if self.data_mode and name != "O" else b"AT"
         return prefix + body + self.eol
 
     @staticmethod

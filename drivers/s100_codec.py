@@ -67,6 +67,22 @@ class FrameHunter:
             events.append(event)
         return events
 
+    def _frame_at(self, position: int) -> str:
+        """``frame`` if a whole valid frame starts at ``position``, ``more`` if it may once more bytes
+        arrive, ``no`` otherwise."""
+        buffer = self._buffer
+        try:
+            total = self.packet.frame_length(bytes(buffer[position:position + 8]))
+        except PacketError:
+            return "no"
+        if total is None or len(buffer) < position + total:
+            return "more"
+        try:
+            self.packet.parse_real(bytes(buffer[position:position + total]))
+        except PacketError:
+            return "no"
+        return "frame"
+
     def _skip(self, count: int, reason: str) -> Skipped:
         del self._buffer[:count]
         return Skipped(count, reason)
@@ -81,6 +97,16 @@ class FrameHunter:
             return None
         if buffer[:3] == b"+++":
             end = buffer.find(CRLF, 0, MAX_NOTICE)
+            limit = end if end >= 0 else min(len(buffer), MAX_NOTICE)
+            # a notice ends at its CR LF, or where a whole valid frame starts inside it (line noise
+            # that merely begins with "+++" must not swallow the frame behind it)
+            position = buffer.find(preamble, 3, limit)
+            while position >= 0:
+                if self._frame_at(position) == "frame":
+                    text = bytes(buffer[:position])
+                    del buffer[:position]
+                    return Notice(text)
+                position = buffer.find(preamble, position + 1, limit)
             if end >= 0:
                 text = bytes(buffer[:end])
                 del buffer[: end + 2]
@@ -103,6 +129,13 @@ class FrameHunter:
         except PacketError as exc:
             return self._skip(1, exc.reason)
         if total is None or len(buffer) < total:
+            # waiting for a long frame; but if a whole valid frame already follows, this preamble was a
+            # stray byte whose "length" would hold good frames back for nothing
+            position = buffer.find(preamble, 1)
+            while position >= 0:
+                if self._frame_at(position) == "frame":
+                    return self._skip(position, "false preamble")
+                position = buffer.find(preamble, position + 1)
             return None
         try:
             real, payload, src, dst = packet.parse_real(bytes(buffer[:total]))
