@@ -194,7 +194,23 @@ def cmd_queues(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_emulate(args: argparse.Namespace) -> int:
+    """The daemon on a scene, with one of its simulated links shown as a modem device."""
+    import json
+
+    where = {"pty": args.pty} if args.pty else {"tcp": args.tcp}
+    if not args.pty and args.tcp is None:
+        raise SceneError("hilgate emulate", 0, "", "give --pty PATH or --tcp PORT")
+    args.overrides = [*args.overrides, f"links.{args.link}.emulate={json.dumps({'protocol': args.protocol, **where})}"]
+    args.tcp = None  # here --tcp is the emulated modem's port, not a GLI listener
+    from .paths import default_scene
+
+    args.scene = args.scene or default_scene()
+    return cmd_run(args)
+
+
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "emulate": cmd_emulate,
     "queues": cmd_queues,
     "check": cmd_check,
     "sim": cmd_sim,
@@ -245,6 +261,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--gli-backlog", type=int, default=1000, metavar="N",
                    help="frames kept per link while an application's receive queue is full (default 1000); "
                         "beyond that they are dropped and counted")
+
+    e = sub.add_parser("emulate", help="run a scene with one simulated link shown as an EvoLogics or S100 device")
+    e.add_argument("protocol", choices=["evologics", "s100"])
+    _add_scene_args(e, optional=True)
+    e.add_argument("--link", required=True, help="the simulated link to expose")
+    e.add_argument("--pty", help="link the emulated device's pseudo-terminal here (e.g. /tmp/ttyEVO0)")
+    e.add_argument("--tcp", type=int, help="listen on this loopback port instead (EvoLogics only)")
+    for action in p._actions:  # the daemon's own options (speed, runtime dir, trace…), not its --tcp
+        if action.dest not in ("help", "scene", "overrides", "tcp") and action.option_strings:
+            e._add_action(action)
 
     p = sub.add_parser("queues", help="list (or --unlink) the dccomms POSIX queues of a scene's links")
     _add_scene_args(p)
