@@ -132,7 +132,34 @@ def _print_status(status: dict, as_json: bool) -> None:
     print()
     print(_render(["vehicle", "source", "x", "y", "z", "age s"],
                   [[v["name"], v["source"], *(f"{c:.3f}" for c in (v["position"] or [float("nan")] * 3)),
-                    f"{v['age_s']:.2f}"] for v in status["vehicles"]]), flush=True)
+                    "-" if v["age_s"] is None else f"{v['age_s']:.2f}"] for v in status["vehicles"]]), flush=True)
+    if status.get("cameras"):
+        print()
+        print(_render(["camera", "frames/s", "frames", "problem"],
+                      [[c["name"], f"{c['fps']:.1f}", str(c["frames"]), c["error"] or ""] for c in status["cameras"]]),
+              flush=True)
+
+
+def cmd_pose(args: argparse.Namespace) -> int:
+    """Follow the vehicles' poses live, one line per vehicle per update."""
+    import json
+
+    sock, reader, _, _ = _control(args)
+    sock.settimeout(None)
+    sock.sendall((json.dumps({"class": "WATCH", "interval_s": args.interval}) + "\n").encode())
+    try:
+        for line in reader:
+            status = json.loads(line)
+            for v in status.get("vehicles", []):
+                if args.vehicle and v["name"] not in args.vehicle:
+                    continue
+                position = v["position"]
+                where = "no pose" if position is None else "  ".join(f"{c:8.3f}" for c in position)
+                age = "-" if v["age_s"] is None else f"{v['age_s']:.2f} s old"
+                print(f"{status.get('time', 0):10.3f}  {v['name']:<12} {where}  {v['source']} {age}", flush=True)
+    finally:
+        sock.close()
+    return 0
 
 
 def _open_link(args: argparse.Namespace):
@@ -216,6 +243,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "sim": cmd_sim,
     "run": cmd_run,
     "status": cmd_status,
+    "pose": lambda args: cmd_pose(args),
     "send": cmd_send,
     "listen": cmd_listen,
 }
@@ -281,6 +309,11 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--json", action="store_true", help='one JSON object: {"links": [...], "vehicles": [...]}')
         p.add_argument("--watch", type=float, metavar="S", help="print again every S seconds")
         p.add_argument("--runtime-dir")
+
+    p = sub.add_parser("pose", help="follow the vehicles' poses live")
+    p.add_argument("vehicle", nargs="*", help="only these vehicles")
+    p.add_argument("--interval", type=float, default=0.5, help="seconds between updates (default 0.5)")
+    p.add_argument("--runtime-dir")
 
     p = sub.add_parser("send", help="send text to a link (arguments, or one frame per stdin line)")
     p.add_argument("link")

@@ -16,6 +16,7 @@ from . import __version__
 from .control import ControlServer
 from .gli_mq import raise_queue_budget
 from .gli_socket import GliClient
+from .live import LiveSources
 from .realtime import RealtimeScheduler
 from .recorder import Recorder
 from .router import Router
@@ -64,8 +65,10 @@ class Daemon:
         self.router = Router(scheduler, self.recorder, os.path.join(self.runtime_dir, "gli"), self.gli_backlog)
         self.tcp_listener = None
         self.control = None
+        self.live = LiveSources(scheduler)
         try:
             self.router.apply(scene)
+            self.live.apply(scene, self.router.world.poses)
             if self.tcp:
                 host, port = parse_tcp(self.tcp)
                 sock = socket.create_server((host, port), reuse_port=False)
@@ -73,7 +76,7 @@ class Daemon:
                 self.tcp_listener = Listener(sock, scheduler, lambda s: GliClient(s, scheduler, self.router))
                 log.info("GLI over TCP on %s:%d", host, port)
             self.control = ControlServer(os.path.join(self.runtime_dir, "control.sock"), scheduler,
-                                         self.router.status, self.reload)
+                                         self.status, self.reload)
             scheduler.on_signal(signal.SIGHUP, lambda s: self.reload())
             scheduler.on_signal(signal.SIGTERM, self.stop)
             scheduler.on_signal(signal.SIGINT, self.stop)
@@ -110,6 +113,9 @@ class Daemon:
 
             ping()
 
+    def status(self) -> dict[str, Any]:
+        return {**self.router.status(), "cameras": self.live.status()}
+
     def status_text(self) -> str:
         status = self.router.status()
         links = status["links"]
@@ -130,6 +136,7 @@ class Daemon:
             notify("READY=1", f"STATUS=reload refused: {exc}")
             return False, str(exc)
         self.router.apply(scene)
+        self.live.apply(scene, self.router.world.poses)
         self.scene = scene
         log.info("reloaded %s", self.scene_path)
         notify("READY=1", f"STATUS=running {scene.name!r}: {len(scene.links)} links")
@@ -151,7 +158,7 @@ class Daemon:
             summary = self.recorder.summary(self.scene, router.world.seed, self.scheduler.now(), 0.0,
                                             router.world.modems.values())
             write_summary(summary, self.summary_path)
-        for closer in (self.control, self.tcp_listener, router):
+        for closer in (getattr(self, "live", None), self.control, self.tcp_listener, router):
             if closer is not None:
                 try:
                     closer.close()

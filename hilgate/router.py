@@ -10,6 +10,7 @@ reload changes only what differs.
 from __future__ import annotations
 
 import logging
+import math
 import os
 from collections import Counter
 from typing import Any, Callable
@@ -289,10 +290,43 @@ class Router:
             self.world.start()
 
     def command(self, link: Link, request: Any) -> dict[str, Any]:
-        """A client's request about its link or vehicle (extended by the pose sources)."""
-        if isinstance(request, dict) and request.get("class") == "STATUS":
+        """A client's request about its link or its vehicle:
+
+        - ``{"class": "STATUS"}``: the link's status;
+        - ``{"class": "POSE"}``: the vehicle's position now;
+        - ``{"class": "GOTO", "position": [x, y, z]}``, ``{"class": "VELOCITY", "velocity": [vx, vy, vz]}``,
+          ``{"class": "STOP"}``: steer a ``controlled`` vehicle (at most at its maximum speed)."""
+        from .models.controlled import Controlled
+
+        if not isinstance(request, dict):
+            return {"class": "ERROR", "error": "a request is a JSON object with a class"}
+        kind = request.get("class")
+        now = self.scheduler.now()
+        if kind == "STATUS":
             return {"class": "STATUS", "link": link.status()}
-        return {"class": "ERROR", "error": f"unknown request {request!r}"}
+        pose = self.world.poses.get(link.spec.vehicle) if self.world else None
+        if kind == "POSE":
+            position = pose.position(now) if pose is not None else None
+            return {"class": "POSE", "vehicle": link.spec.vehicle, "t": round(now, 6),
+                    "position": None if position is None else [round(v, 6) for v in position]}
+        if kind in ("GOTO", "VELOCITY", "STOP"):
+            if not isinstance(pose, Controlled):
+                return {"class": "ERROR", "error": f"vehicle {link.spec.vehicle!r} is not controlled by applications"}
+            try:
+                if kind == "STOP":
+                    pose.stop(now)
+                else:
+                    key = "position" if kind == "GOTO" else "velocity"
+                    values = tuple(float(v) for v in request[key])
+                    if len(values) != 3 or not all(map(math.isfinite, values)):
+                        raise ValueError
+                    (pose.go_to if kind == "GOTO" else pose.set_velocity)(now, values)
+            except (KeyError, TypeError, ValueError):
+                return {"class": "ERROR", "error": f"{kind} needs {'position' if kind == 'GOTO' else 'velocity'}: "
+                                                   "a list of three numbers"}
+            self.world.medium.topology_changed()
+            return {"class": kind, "ok": True, "t": round(now, 6)}
+        return {"class": "ERROR", "error": f"unknown request {kind!r}"}
 
     def status(self) -> dict[str, Any]:
         assert self.world is not None and self.scene is not None
@@ -300,11 +334,12 @@ class Router:
         vehicles = []
         for name, pose in self.world.poses.items():
             position = pose.position(now)
+            age = getattr(pose, "age", lambda t: 0.0)(now)
             vehicles.append({
                 "name": name,
-                "source": self.scene.vehicles[name].pose.kind,
+                "source": self.scene.vehicles[name].pose.source_name,
                 "position": None if position is None else [round(v, 4) for v in position],
-                "age_s": getattr(pose, "age", lambda t: 0.0)(now),
+                "age_s": None if age is None else round(age, 3),
             })
         return {"links": [link.status() for link in self.links.values()], "vehicles": vehicles}
 

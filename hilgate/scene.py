@@ -33,9 +33,11 @@ __all__ = [
     "preset_names", "POSE_KINDS", "BACKENDS",
 ]
 
-TOP_KEYS = ("name", "seed", "duration_s", "channels", "vehicles", "links", "flows", "trace")
+TOP_KEYS = ("name", "seed", "duration_s", "channels", "vehicles", "links", "flows", "trace", "cameras")
 CHANNEL_KEYS = ("speed_mps", "min_delay_s")
-VEHICLE_KEYS = ("pose",)
+VEHICLE_KEYS = ("pose", "stale_after_s", "stale", "extrapolate_s", "initial", "feedback")
+LIVE_KINDS = ("mavlink", "aruco")
+CAMERA_KEYS = ("source", "calibration", "dictionary", "marker_length_m", "fixed", "onboard", "map", "fps")
 MODEM_KEYS = (
     "bitrate_bps", "tx_delay_s", "rx_delay_s", "tx_jitter_s", "rx_jitter_s", "fifo_bytes", "range_m",
     "error", "mac", "packet", "duplex", "promiscuous",
@@ -56,10 +58,19 @@ LINK_ID = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,200}$")
 
 @dataclass(frozen=True)
 class PoseSpec:
-    """``kind`` names the pose source; ``params`` is what its checker returned (hashable)."""
+    """``kind`` names the pose source; ``params`` is what its checker returned (hashable).  For live
+    vehicles ``kind`` is ``live`` and ``params`` holds ``((kind, params), …)`` of every source, with
+    ``merge`` saying which source gives which axis when there are several."""
 
     kind: str
     params: Any
+    merge: tuple[tuple[str, str], ...] = ()
+
+    @property
+    def source_name(self) -> str:
+        if self.kind == "live":
+            return "+".join(kind for kind, _ in self.params)
+        return self.kind
 
 
 @dataclass(frozen=True)
@@ -67,6 +78,24 @@ class VehicleSpec:
     name: str
     pose: PoseSpec
     line: int = field(default=0, compare=False)
+    stale_after_s: float = 2.0
+    stale: str = "hold"
+    extrapolate_s: float = 0.0
+    initial: tuple[float, float, float] | None = None
+    feedback: tuple[tuple[str, Any], ...] = ()
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    name: str
+    source: int | str
+    calibration: str
+    dictionary: str
+    marker_length_m: float
+    fixed: tuple | None = None       # (position, rpy_deg) of the camera in the scene frame
+    onboard: tuple | None = None     # (vehicle, position, rpy_deg) of the camera on a vehicle
+    map: tuple = ()                  # ((marker id, position, rpy_deg), …) markers fixed in the tank
+    fps: float | None = None
 
 
 @dataclass(frozen=True)
@@ -104,6 +133,7 @@ class Scene:
     flows: list[FlowSpec]
     trace_file: str | None
     path: str
+    cameras: dict[str, CameraSpec] = field(default_factory=dict)
 
     def link_of_address(self, channel: str, address: int) -> LinkSpec | None:
         for link in self.links.values():
@@ -338,10 +368,41 @@ def _waypoints_pose(node: Node, path: str) -> Any:
     return tuple(rows)
 
 
+def _controlled_pose(node: Node, path: str) -> Any:
+    f = Fields(node, path, ("start", "max_speed_mps"))
+    return (f.get("start", vector()), f.get("max_speed_mps", number(above=0)))
+
+
+def _mavlink_pose(node: Node, path: str) -> Any:
+    f = Fields(node, path, ("url", "system_id", "origin", "message_rates", "heartbeat"))
+    url = f.get("url", text)
+    system_id = f.get("system_id", integer(1, 255), None)
+    origin = f.get("origin", vector(3), None)  # latitude, longitude (degrees), altitude (m)
+    rates: tuple = ()
+    rates_node = f.child("message_rates")
+    if rates_node is not None:
+        rates = tuple((name, number(above=0, maximum=1000)(value, join_path(f.sub("message_rates"), name)))
+                      for name, value in mapping(rates_node, f.sub("message_rates")).items())
+    heartbeat = f.get("heartbeat", boolean, True)
+    return (("url", url), ("system_id", system_id), ("origin", origin), ("message_rates", rates),
+            ("heartbeat", heartbeat))
+
+
+def _aruco_pose(node: Node, path: str) -> Any:
+    f = Fields(node, path, ("camera", "marker", "offset"))
+    camera = f.get("camera", text)
+    marker = f.get("marker", integer(0, 100_000), None)
+    offset = f.get("offset", vector(), (0.0, 0.0, 0.0))
+    return (("camera", camera), ("marker", marker), ("offset", offset))
+
+
 POSE_KINDS: dict[str, Callable[[Node, str], Any]] = {
     "static": _static_pose,
     "path": _path_pose,
     "waypoints": _waypoints_pose,
+    "controlled": _controlled_pose,
+    "mavlink": _mavlink_pose,
+    "aruco": _aruco_pose,
 }
 
 
@@ -351,14 +412,94 @@ def _vehicle(name: str, node: Node, path: str) -> VehicleSpec:
     if pose_node is None:
         raise f.error("missing required key 'pose'")
     pose_path = f.sub("pose")
-    kinds = mapping(pose_node, pose_path)
-    if len(kinds) != 1:
-        raise pose_node.error(pose_path, f"give exactly one pose source: {', '.join(POSE_KINDS)}")
-    (kind, params_node), = kinds.items()
-    if kind not in POSE_KINDS:
-        raise params_node.error(join_path(pose_path, kind), unknown_pose(kind))
-    params = POSE_KINDS[kind](params_node, join_path(pose_path, kind))
-    return VehicleSpec(name, PoseSpec(kind, params), node.line)
+    kinds = dict(mapping(pose_node, pose_path))
+    merge_node = kinds.pop("merge", None)
+    for kind, params_node in kinds.items():
+        if kind not in POSE_KINDS:
+            raise params_node.error(join_path(pose_path, kind), unknown_pose(kind))
+    if not kinds:
+        raise pose_node.error(pose_path, f"give a pose source: {', '.join(POSE_KINDS)}")
+    live = [k for k in kinds if k in LIVE_KINDS]
+    if len(kinds) > 1 and len(live) != len(kinds):
+        raise pose_node.error(pose_path, "only live sources (mavlink, aruco) can be combined, with merge")
+    if len(kinds) > 1 and merge_node is None:
+        raise pose_node.error(pose_path, "several sources need 'merge' (e.g. {x: aruco, y: aruco, z: mavlink})")
+    merge: tuple = ()
+    if merge_node is not None:
+        mf = Fields(merge_node, join_path(pose_path, "merge"), ("x", "y", "z"))
+        merge = tuple((axis, mf.get(axis, choice(*live))) for axis in ("x", "y", "z") if axis in mf)
+    if live:
+        sources = tuple((kind, POSE_KINDS[kind](kinds[kind], join_path(pose_path, kind))) for kind in kinds)
+        pose = PoseSpec("live", sources, merge)
+    else:
+        (kind, params_node), = kinds.items()
+        pose = PoseSpec(kind, POSE_KINDS[kind](params_node, join_path(pose_path, kind)))
+    if not live:
+        for key in ("stale_after_s", "stale", "extrapolate_s", "initial"):
+            if key in f:
+                raise f.child(key).error(f.sub(key), "only for vehicles with a live pose (mavlink, aruco)")
+    feedback: tuple = ()
+    if "feedback" in f:
+        ff = Fields(f.child("feedback"), f.sub("feedback"), ("url", "message", "rate_hz", "origin", "system_id"))
+        message = ff.get("message", choice("vision_position_estimate", "gps_input"), "vision_position_estimate")
+        origin = ff.get("origin", vector(3), None)
+        if message == "gps_input" and origin is None:
+            raise ff.error("gps_input needs origin: [latitude, longitude, altitude]")
+        feedback = (("url", ff.get("url", text)), ("message", message), ("rate_hz", ff.get("rate_hz", number(above=0,
+                    maximum=100), 4.0)), ("origin", origin), ("system_id", ff.get("system_id", integer(1, 255), 1)))
+    return VehicleSpec(
+        name, pose, node.line,
+        stale_after_s=f.get("stale_after_s", number(above=0), 2.0),
+        stale=f.get("stale", choice("hold", "drop"), "hold"),
+        extrapolate_s=f.get("extrapolate_s", number(0), 0.0),
+        initial=f.get("initial", vector(), None),
+        feedback=feedback,
+    )
+
+
+def _placement(node: Node, path: str) -> tuple:
+    f = Fields(node, path, ("position", "rpy_deg"))
+    return (f.get("position", vector()), f.get("rpy_deg", vector(), (0.0, 0.0, 0.0)))
+
+
+def _camera(name: str, node: Node, path: str, vehicles: dict[str, VehicleSpec]) -> CameraSpec:
+    f = Fields(node, path, CAMERA_KEYS)
+    source_node = f.child("source")
+    if source_node is None:
+        raise f.error("missing required key 'source' (a device index, a video file or a stream URL)")
+    source = source_node.value
+    if isinstance(source, bool) or not isinstance(source, (int, str)) or source == "":
+        raise source_node.error(f.sub("source"), f"must be a device index or a text, not {describe(source_node)}")
+    from .drivers.aruco import DICTIONARIES
+
+    dictionary = f.get("dictionary", choice(*DICTIONARIES), "DICT_4X4_50")
+    if ("fixed" in f) == ("onboard" in f):
+        raise f.error("give exactly one of fixed (the camera's place in the tank) or onboard (on a vehicle)")
+    fixed = onboard = None
+    markers: tuple = ()
+    if "fixed" in f:
+        fixed = f.get("fixed", _placement)
+        if "map" in f:
+            raise f.child("map").error(f.sub("map"), "a map of markers is for an onboard camera")
+    else:
+        of = Fields(f.child("onboard"), f.sub("onboard"), ("vehicle", "position", "rpy_deg"))
+        vehicle = of.get("vehicle", text)
+        if vehicle not in vehicles:
+            raise of.child("vehicle").error(of.sub("vehicle"), f"no vehicle {vehicle!r}")
+        onboard = (vehicle, of.get("position", vector(), (0.0, 0.0, 0.0)), of.get("rpy_deg", vector(), (0.0, 0.0, 0.0)))
+        map_node = f.child("map")
+        if map_node is None:
+            raise f.error("an onboard camera needs a map of markers fixed in the tank")
+        entries = []
+        for marker_id, marker_node in mapping(map_node, f.sub("map")).items():
+            where = join_path(f.sub("map"), marker_id)
+            if not str(marker_id).isdigit():
+                raise marker_node.error(where, "map keys are marker ids (whole numbers)")
+            entries.append((int(marker_id), *_placement(marker_node, where)))
+        markers = tuple(entries)
+    return CameraSpec(name, source, f.get("calibration", text), dictionary, f.get("marker_length_m", number(above=0)),
+                      fixed, onboard, markers, f.get("fps", number(above=0), None))
+
 
 
 def unknown_pose(kind: str) -> str:
@@ -572,6 +713,25 @@ def _validate(root: Node | None, file: str) -> Scene:
     for vname, vnode in mapping(vehicles_node, "vehicles").items():
         vehicles[vname] = _vehicle(vname, vnode, join_path("vehicles", vname))
 
+    cameras: dict[str, CameraSpec] = {}
+    cameras_node = f.child("cameras")
+    if cameras_node is not None:
+        for cname, cnode in mapping(cameras_node, "cameras").items():
+            cameras[cname] = _camera(cname, cnode, join_path("cameras", cname), vehicles)
+    for vname, vehicle in vehicles.items():
+        for kind, params in (vehicle.pose.params if vehicle.pose.kind == "live" else ()):
+            if kind != "aruco":
+                continue
+            options = dict(params)
+            where = join_path(join_path(join_path("vehicles", vname), "pose"), "aruco")
+            camera = cameras.get(options["camera"])
+            if camera is None:
+                raise vehicles_node.value[vname].error(where, f"no camera {options['camera']!r} under cameras:")
+            if camera.fixed is not None and options["marker"] is None:
+                raise vehicles_node.value[vname].error(where, "a fixed camera needs the vehicle's marker id")
+            if camera.onboard is not None and camera.onboard[0] != vname:
+                raise vehicles_node.value[vname].error(where, f"camera {camera.name!r} is on {camera.onboard[0]!r}")
+
     links_node = f.child("links")
     if links_node is None:
         raise f.error("missing required key 'links'")
@@ -591,7 +751,7 @@ def _validate(root: Node | None, file: str) -> Scene:
     if trace_node is not None:
         tf = Fields(trace_node, "trace", ("file",))
         trace_file = tf.get("file", text, None)
-    return Scene(name, seed, duration, channels, vehicles, links, flows, trace_file, file)
+    return Scene(name, seed, duration, channels, vehicles, links, flows, trace_file, file, cameras)
 
 
 def load_scene(path: str, overrides: list[str] | tuple[str, ...] = ()) -> Scene:

@@ -37,7 +37,7 @@ class World:
         self.observer = observer
         self.seed = scene.seed if seed is None else seed
         self.medium = Medium(clock, scene.channels.values())
-        self.poses: dict[str, PoseSource] = {name: build_pose(v.pose) for name, v in scene.vehicles.items()}
+        self.poses: dict[str, PoseSource] = {name: build_pose(v) for name, v in scene.vehicles.items()}
         self.modems: dict[str, SimModem] = {}
         for link in scene.links.values():
             if link.backend == "sim":
@@ -83,7 +83,7 @@ class World:
         self.medium.channels.update({c.name: c for c in scene.channels.values()})
         for name, vehicle in scene.vehicles.items():
             if name not in self.poses or old.vehicles.get(name) != vehicle:
-                self.poses[name] = build_pose(vehicle.pose)
+                self.poses[name] = build_pose(vehicle)
         for name in [n for n in self.poses if n not in scene.vehicles]:
             del self.poses[name]
         for link_id in [i for i in self.modems if i not in scene.links or scene.links[i].backend != "sim"]:

@@ -12,7 +12,7 @@ EXACT = dict(abs=1e-12)
 
 def vehicle(pose_yaml: str):
     scene = load_scene_text(f"channels: {{ac: {{speed_mps: 1500}}}}\nvehicles:\n  v:\n    pose:\n{pose_yaml}\nlinks: {{}}\n")
-    return build_pose(scene.vehicles["v"].pose)
+    return build_pose(scene.vehicles["v"])
 
 
 def test_static_is_static():

@@ -1,0 +1,109 @@
+"""Starts and stops what feeds the pose board in the daemon: MAVLink links, cameras, feedback.
+
+Each runs in its own thread (or, for feedback, on the loop's timers) and hands measurements to the
+loop with ``scheduler.post``, so the medium reads poses without ever waiting for a device.  A reload
+stops everything and starts it again from the new scene (sockets and cameras must be released
+before they can be opened again).
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from .poseboard import LiveVehicle
+from .scene import Scene
+
+log = logging.getLogger(__name__)
+
+
+class LiveSources:
+    def __init__(self, scheduler: Any):
+        self.scheduler = scheduler
+        self.mavlink: list[Any] = []
+        self.cameras: dict[str, Any] = {}
+        self.feedback: list[Any] = []
+
+    def apply(self, scene: Scene, poses: dict[str, Any]) -> None:
+        self.close()
+        for name, vehicle in scene.vehicles.items():
+            pose = poses.get(name)
+            if vehicle.pose.kind == "live" and isinstance(pose, LiveVehicle):
+                for kind, params in vehicle.pose.params:
+                    if kind == "mavlink":
+                        self._start_mavlink(name, pose, dict(params))
+            if vehicle.feedback:
+                self._start_feedback(name, pose, dict(vehicle.feedback))
+        for camera in scene.cameras.values():
+            self._start_camera(scene, camera, poses)
+
+    def _deliver(self, vehicle: LiveVehicle, source: str):
+        post = self.scheduler.post
+        now = self.scheduler.now
+
+        def deliver(position: dict, velocity: dict | None, attitude: tuple | None) -> None:
+            post(lambda: vehicle.update(source, now(), position, velocity, attitude))
+
+        return deliver
+
+    def _start_mavlink(self, name: str, vehicle: LiveVehicle, params: dict) -> None:
+        from .drivers.mavlink_source import MavlinkSource
+
+        source = MavlinkSource(name, params["url"], self._deliver(vehicle, "mavlink"), params["system_id"],
+                               params["origin"], params["message_rates"], params["heartbeat"])
+        source.start()
+        self.mavlink.append(source)
+
+    def _start_feedback(self, name: str, pose: Any, params: dict) -> None:
+        from .drivers.mavlink_source import Feedback
+
+        now = self.scheduler.now
+        feedback = Feedback(name, params["url"], params["message"], params["rate_hz"], params["origin"],
+                            params["system_id"], lambda: pose.position(now()),
+                            lambda: getattr(pose, "attitude", None), self.scheduler)
+        self.feedback.append(feedback)
+
+    def _start_camera(self, scene: Scene, camera: Any, poses: dict[str, Any]) -> None:
+        from .drivers.aruco import CameraThread, Estimator, FixedCameraTracker, OnboardTracker, load_calibration
+
+        estimator = Estimator(load_calibration(camera.calibration), camera.marker_length_m, camera.dictionary)
+        if camera.fixed is not None:
+            markers = {}
+            for name, vehicle in scene.vehicles.items():
+                for kind, params in (vehicle.pose.params if vehicle.pose.kind == "live" else ()):
+                    options = dict(params)
+                    if kind == "aruco" and options["camera"] == camera.name:
+                        markers[options["marker"]] = (name, options["offset"])
+            tracker = FixedCameraTracker(estimator, camera.fixed[0], camera.fixed[1], markers)
+        else:
+            vehicle, position, rpy = camera.onboard
+            tracker = OnboardTracker(estimator, vehicle, position, rpy,
+                                     {marker: (p, r) for marker, p, r in camera.map})
+        post, now = self.scheduler.post, self.scheduler.now
+
+        def deliver(sightings: list) -> None:
+            def apply() -> None:
+                for sighting in sightings:
+                    pose = poses.get(sighting.vehicle)
+                    if isinstance(pose, LiveVehicle):
+                        x, y, z = sighting.position
+                        pose.update("aruco", now(), {"x": x, "y": y, "z": z}, None, sighting.attitude)
+
+            post(apply)
+
+        thread = CameraThread(camera.name, camera.source, tracker, deliver, camera.fps)
+        thread.start()
+        self.cameras[camera.name] = thread
+
+    def status(self) -> list[dict]:
+        return [{"name": name, "fps": round(thread.fps, 1), "frames": thread.frames, "error": thread.error}
+                for name, thread in self.cameras.items()]
+
+    def close(self) -> None:
+        for source in self.mavlink:
+            source.stop()
+        for thread in self.cameras.values():
+            thread.stop()
+        for feedback in self.feedback:
+            feedback.close()
+        self.mavlink, self.cameras, self.feedback = [], {}, []

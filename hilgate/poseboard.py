@@ -1,0 +1,89 @@
+"""The pose board: the latest pose of every vehicle whose position comes from the world (MAVLink,
+a camera), as the medium sees it.
+
+A :class:`LiveVehicle` is a pose source like the scripted ones.  Sources update it, possibly for only
+some axes (``merge``: x and y from the camera, z, the depth, from MAVLink).  When its pose is older
+than ``stale_after_s`` it is *stale*: ``hold`` keeps the last position, ``drop`` makes the vehicle
+vanish (its modems hear nothing and are heard by nobody).  Over gaps shorter than ``extrapolate_s``
+the position is carried on along the last velocity, when a source gives one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from .models.trajectories import Vec3
+
+AXES = ("x", "y", "z")
+
+
+@dataclass
+class AxisState:
+    value: float
+    velocity: float | None
+    t: float
+    source: str
+
+
+class LiveVehicle:
+    static = False
+
+    def __init__(self, name: str, initial: Vec3 | None = None, stale_after_s: float = 2.0, stale: str = "hold",
+                 extrapolate_s: float = 0.0, merge: dict[str, str] | None = None):
+        self.name = name
+        self.initial = initial
+        self.stale_after_s = stale_after_s
+        self.policy = stale
+        self.extrapolate_s = extrapolate_s
+        self.merge = merge or {}
+        self.axes: dict[str, AxisState] = {}
+        if initial is not None:
+            self.axes = {a: AxisState(float(v), None, float("-inf"), "initial") for a, v in zip(AXES, initial)}
+        self.attitude: tuple[float, float, float] | None = None
+        self.extra: dict[str, Any] = {}
+        self.updates = 0
+
+    def update(self, source: str, t: float, position: dict[str, float], velocity: dict[str, float] | None = None,
+               attitude: tuple[float, float, float] | None = None) -> None:
+        """A measurement from ``source`` at model time ``t`` for some axes (``{"x": …, "z": …}``)."""
+        for axis, value in position.items():
+            owner = self.merge.get(axis)
+            if owner is not None and owner != source:
+                continue  # this axis is another source's
+            speed = None if velocity is None else velocity.get(axis)
+            self.axes[axis] = AxisState(float(value), speed, t, source)
+        if attitude is not None:
+            self.attitude = attitude
+        self.updates += 1
+
+    def age(self, t: float) -> float | None:
+        """Seconds since the oldest measured axis was measured; None before any measurement."""
+        measured = [state.t for state in self.axes.values() if state.source != "initial"]
+        if not measured:
+            return None
+        return max(0.0, t - min(measured))
+
+    def stale(self, t: float) -> bool:
+        age = self.age(t)
+        return age is not None and age > self.stale_after_s
+
+    def position(self, t: float) -> Vec3 | None:
+        """The ``initial`` position until measurements come, then the measured one; None while an
+        axis is unknown, or when the pose is stale and the policy is ``drop``."""
+        if len(self.axes) < 3:
+            return None
+        if self.policy == "drop" and self.stale(t):
+            return None
+        result = []
+        for axis in AXES:
+            state = self.axes[axis]
+            value = state.value
+            gap = t - state.t
+            if state.velocity is not None and 0 < gap <= self.extrapolate_s:
+                value += state.velocity * gap
+            result.append(value)
+        return (result[0], result[1], result[2])
+
+    def sources(self) -> str:
+        return "+".join(sorted({s.source for s in self.axes.values()})) or "none"
