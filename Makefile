@@ -33,6 +33,7 @@ bench: $(VENV)/.installed
 	$(BIN)/python benchmarks/ring_aloha.py
 	$(BIN)/python benchmarks/realtime_lateness.py
 	$(BIN)/python benchmarks/gli_roundtrip.py
+	$(BIN)/python benchmarks/aruco.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache
