@@ -69,6 +69,8 @@ class Daemon:
         try:
             self.router.apply(scene)
             self.live.apply(scene, self.router.world.poses)
+            if self.trace is not None and scene.trace_poses_s:
+                self.router.world.sample_poses(scene.trace_poses_s * self.speed, self.recorder.event)
             if self.tcp:
                 host, port = parse_tcp(self.tcp)
                 sock = socket.create_server((host, port), reuse_port=False)

@@ -134,6 +134,7 @@ class Scene:
     trace_file: str | None
     path: str
     cameras: dict[str, CameraSpec] = field(default_factory=dict)
+    trace_poses_s: float | None = 1.0  # pose samples in the trace every so many seconds (None: none)
 
     def link_of_address(self, channel: str, address: int) -> LinkSpec | None:
         for link in self.links.values():
@@ -747,11 +748,13 @@ def _validate(root: Node | None, file: str) -> Scene:
             flows.append(_flow(fnode, join_path("flows", i), links, duration))
 
     trace_file = None
+    trace_poses = 1.0
     trace_node = f.child("trace")
     if trace_node is not None:
-        tf = Fields(trace_node, "trace", ("file",))
+        tf = Fields(trace_node, "trace", ("file", "poses_s"))
         trace_file = tf.get("file", text, None)
-    return Scene(name, seed, duration, channels, vehicles, links, flows, trace_file, file, cameras)
+        trace_poses = tf.get("poses_s", number(0), 1.0) or None
+    return Scene(name, seed, duration, channels, vehicles, links, flows, trace_file, file, cameras, trace_poses)
 
 
 def load_scene(path: str, overrides: list[str] | tuple[str, ...] = ()) -> Scene:

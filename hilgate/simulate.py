@@ -57,6 +57,8 @@ class Simulation:
         """Run to the end and return the summary of DESIGN.md."""
         clock, until = self.clock, self.until
         self.world.start()
+        if self.recorder.trace is not None and self.scene.trace_poses_s:
+            self.world.sample_poses(self.scene.trace_poses_s, self.recorder.event)
         started = time.perf_counter()
         if progress:
             bar = ProgressBar(until)

@@ -76,6 +76,21 @@ class World:
         for flow in self.flows:
             flow.start(now)
 
+    def sample_poses(self, interval: float, record) -> None:
+        """Put every vehicle's position in the trace every ``interval`` seconds, from now on (for the
+        report's distance plots; live vehicles are only known this way)."""
+        clock = self.clock
+
+        def sample() -> None:
+            t = clock.now()
+            for name, pose in self.poses.items():
+                position = pose.position(t)
+                record({"t": round(t, 9), "ev": "pose", "vehicle": name,
+                        "position": None if position is None else [round(c, 6) for c in position]})
+            clock.at(t + interval, sample)
+
+        clock.at(clock.now(), sample)
+
     def reconfigure(self, scene: Scene) -> None:
         """Apply ``scene`` in place: channels, vehicles, simulated modems and flows."""
         old = self.scene

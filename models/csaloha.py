@@ -4,7 +4,8 @@ A node sends the head of its FIFO only when it hears nothing; if the channel is 
 random time in ``backoff_s`` and listens again.  The addressed receiver answers a good data frame
 with an ACK at once (no carrier sense for ACKs); without an ACK within ``ack_timeout_s`` of the end
 of its transmission the sender backs off and retransmits, up to ``max_retries`` times, then gives up.
-Receivers deliver a retransmitted frame once.  Broadcasts are not acknowledged.
+Receivers deliver a retransmitted frame once.  Broadcasts are not acknowledged.  With ``acks: false``
+it is carrier sense alone (non-persistent CSMA), for modems that have no acknowledgements (S100).
 
 The default ACK timeout covers the worst case: the data frame's end reaches a receiver at the
 maximum range (τ_max), the receiver's intrinsic delay, the ACK's airtime, its way back (τ_max), plus
@@ -35,11 +36,14 @@ class CsAloha(Mac):
         "backoff_s": Param("pair", (0.1, 1.0), minimum=0.0, doc="uniform random backoff [min, max]"),
         "ack_bytes": Param("integer", 5, minimum=1),
         "max_range_m": Param("number", None, minimum=0.0, doc="default: the modem's range"),
+        "acks": Param("boolean", True, doc="false: carrier sense only, no ACK and no retransmission"),
     }
 
     def __init__(self, ack_timeout_s: float | None = None, max_retries: int = 3,
-                 backoff_s: tuple[float, float] = (0.1, 1.0), ack_bytes: int = 5, max_range_m: float | None = None):
+                 backoff_s: tuple[float, float] = (0.1, 1.0), ack_bytes: int = 5, max_range_m: float | None = None,
+                 acks: bool = True):
         super().__init__()
+        self.acks = acks
         self.ack_timeout_param = ack_timeout_s
         self.max_retries = max_retries
         self.backoff_s = backoff_s
@@ -58,10 +62,15 @@ class CsAloha(Mac):
 
     def attach(self, modem: "SimModem") -> None:
         super().attach(modem)
-        self.ack_timeout = self.ack_timeout_param if self.ack_timeout_param is not None else self.default_timeout()
+        if not self.acks:
+            self.ack_timeout = 0.0
+        else:
+            self.ack_timeout = self.ack_timeout_param if self.ack_timeout_param is not None else self.default_timeout()
 
     @classmethod
     def check(cls, modem: Any, params: dict[str, Any]) -> str | None:
+        if params.get("acks") is False:
+            return None
         if params.get("ack_timeout_s") is None and params.get("max_range_m") is None \
                 and modem.range_m[1] == float("inf"):
             return "cs-aloha needs ack_timeout_s or max_range_m when the link's range_m is unlimited"
@@ -114,7 +123,7 @@ class CsAloha(Mac):
     def on_tx_done(self, frame: "Frame") -> None:
         modem = self.modem
         if frame is self.current and self.state == SENDING:
-            if frame.dst_addr == BROADCAST:
+            if frame.dst_addr == BROADCAST or not self.acks:
                 self._done()
                 return
             self.state = WAIT_ACK
@@ -157,7 +166,7 @@ class CsAloha(Mac):
             return
         if frame.kind != DATA:
             return
-        if frame.dst_addr != BROADCAST and frame.dst_addr == modem.address:
+        if self.acks and frame.dst_addr != BROADCAST and frame.dst_addr == modem.address:
             ack = modem.control_frame(ACK, self.ack_bytes, frame.src_addr, frame.src, frame)
             if modem.phy_busy:
                 self.pending_acks.append(ack)

@@ -54,7 +54,13 @@ def test_interval_flow_sends_at_start_plus_k_interval_before_stop():
 
 
 def test_trace_lines_follow_the_design_format():
-    _, trace, text = run(TWO)
+    _, events, text = run(TWO)
+    poses = [e for e in events if e["ev"] == "pose"]
+    trace = [e for e in events if e["ev"] != "pose"]
+    # once a second, every vehicle's position (for the report's distance plots)
+    assert poses[:2] == [{"t": 0.0, "ev": "pose", "vehicle": "a", "position": [0.0, 0.0, 0.0]},
+                         {"t": 0.0, "ev": "pose", "vehicle": "b", "position": [150.0, 0.0, 0.0]}]
+    assert len(poses) == 2 * 11
     for event in trace:
         keys = [k for k in event if k != "cause"]
         assert keys == TRACE_KEYS
@@ -115,7 +121,7 @@ def test_broadcast_flow_counts_each_receiver():
     summary, trace, _ = run(text)
     flow = summary["flows"][0]
     assert flow["to"] == "*" and flow["tx_packets"] == 4 and flow["rx_packets"] == 8
-    assert {e["dst"] for e in trace} == {"*"}
+    assert {e["dst"] for e in trace if e["ev"] != "pose"} == {"*"}
 
 
 def test_sim_command_prints_the_table_and_writes_trace_and_summary(tmp_path):
