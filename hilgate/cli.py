@@ -236,7 +236,20 @@ def cmd_emulate(args: argparse.Namespace) -> int:
     return cmd_run(args)
 
 
+def cmd_report(args: argparse.Namespace) -> int:
+    from .report import ReportError, report
+
+    try:
+        written = report(args.trace, args.summaries, args.out, args.vehicles, args.csv, args.title)
+    except ReportError as exc:
+        print(f"hilgate: {exc}", file=sys.stderr)
+        return 1
+    print(f"{len(written)} files in {args.out}: open {written[-1]}")
+    return 0
+
+
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "report": cmd_report,
     "emulate": cmd_emulate,
     "queues": cmd_queues,
     "check": cmd_check,
@@ -314,6 +327,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("vehicle", nargs="*", help="only these vehicles")
     p.add_argument("--interval", type=float, default=0.5, help="seconds between updates (default 0.5)")
     p.add_argument("--runtime-dir")
+
+    p = sub.add_parser("report", help="figures (and --csv tables) of a trace, and of summaries side by side")
+    p.add_argument("trace", help="a trace written by --trace")
+    p.add_argument("summaries", nargs="*", help="summaries written by --summary, compared flow by flow")
+    p.add_argument("--out", required=True, help="the folder for the figures and index.html")
+    p.add_argument("--vehicles", nargs="+", help="vehicles whose distances to plot (default: the first four)")
+    p.add_argument("--csv", action="store_true", help="also write the tables behind the figures")
+    p.add_argument("--title", help="the page's title")
 
     p = sub.add_parser("send", help="send text to a link (arguments, or one frame per stdin line)")
     p.add_argument("link")
