@@ -1,0 +1,133 @@
+#!/usr/bin/env python3
+"""Runs UWSim-NET's third experiment end to end: the daemon, the fake BlueROV, the operator, the
+leader's and the followers' applications; then says how far each follower stayed from its slot.
+
+    python examples/formation/run.py --seconds 60 [--mac s-fama] [--out formation-out]
+
+Writes the trace and summary, ``formation.csv`` (time, follower, error in metres) and, when
+matplotlib is installed, ``formation-error.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+SCENE = os.path.join(HERE, "..", "..", "scenes", "paper-exp3-formation.yaml")
+SLOTS = {"follower1": (-1.5, 0.0, 0.0), "follower2": (0.0, -1.5, 0.0), "follower3": (-1.5, -1.5, 0.0)}
+LINKS = ["buoy_ac", "leader_ac", "follower1_ac", "follower2_ac", "follower3_ac"]
+
+
+def formation_errors(trace_path: str) -> list[tuple[float, str, float]]:
+    poses: dict[float, dict[str, list[float]]] = {}
+    with open(trace_path, encoding="utf-8") as handle:
+        for line in handle:
+            event = json.loads(line)
+            if event.get("ev") == "pose" and event.get("position"):
+                poses.setdefault(event["t"], {})[event["vehicle"]] = event["position"]
+    rows = []
+    for t in sorted(poses):
+        snapshot = poses[t]
+        if "leader" not in snapshot:
+            continue
+        for follower, slot in SLOTS.items():
+            if follower in snapshot:
+                expected = [l + s for l, s in zip(snapshot["leader"], slot)]
+                rows.append((t, follower, math.dist(snapshot[follower], expected)))
+    return rows
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--mac", default="cs-aloha", choices=["cs-aloha", "s-fama", "none"])
+    parser.add_argument("--legs", type=int, default=3, help="legs of the operator's route (3 m each)")
+    parser.add_argument("--out", default="formation-out")
+    args = parser.parse_args()
+    os.makedirs(args.out, exist_ok=True)
+    runtime = tempfile.mkdtemp(prefix="hilgate-formation-")
+    trace = os.path.join(args.out, f"trace-{args.mac}.jsonl")
+    summary = os.path.join(args.out, f"summary-{args.mac}.json")
+    if os.path.exists(trace):
+        os.unlink(trace)
+    overrides = [f"links.*.mac.protocol={args.mac}"]
+    if args.mac != "cs-aloha":
+        overrides.append("links.*.mac.backoff_s=null")
+    notify_path = os.path.join(runtime, "notify")
+    notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    notify.bind(notify_path)
+    hilgate = [sys.executable, "-m", "hilgate"]
+    daemon = subprocess.Popen(
+        [*hilgate, "run", SCENE, *(x for o in overrides for x in ("--set", o)), "--runtime-dir", runtime,
+         "--trace", trace, "--summary", summary, "--until", str(args.seconds), "--no-status-line"],
+        env=dict(os.environ, NOTIFY_SOCKET=notify_path))
+    notify.settimeout(30)
+    while b"READY=1" not in notify.recv(4096):
+        pass
+    python = sys.executable
+    common = ["--runtime-dir", runtime]
+    apps = [subprocess.Popen([python, os.path.join(HERE, "fake_bluerov.py"), "--seconds", str(args.seconds + 5)])]
+    for i, (name, slot) in enumerate(SLOTS.items(), 1):
+        apps.append(subprocess.Popen([python, os.path.join(HERE, "follower.py"), "--link", f"follower{i}_ac",
+                                      "--slot", *map(str, slot), *common]))
+    apps.append(subprocess.Popen([python, os.path.join(HERE, "leader.py"), *common]))
+    time.sleep(1.0)
+    apps.append(subprocess.Popen([python, os.path.join(HERE, "operator.py"), "--legs", str(args.legs), *common]))
+    try:
+        daemon.wait(args.seconds + 60)
+    finally:
+        for app in apps:
+            app.send_signal(signal.SIGTERM)
+        for app in apps:
+            try:
+                app.wait(5)
+            except subprocess.TimeoutExpired:
+                app.kill()
+        subprocess.run([*hilgate, "queues", SCENE, "--unlink"], capture_output=True)
+    rows = formation_errors(trace)
+    with open(os.path.join(args.out, f"formation-{args.mac}.csv"), "w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["t", "follower", "error_m"])
+        writer.writerows(rows)
+    settled = [r for r in rows if r[0] >= 0.75 * args.seconds]
+    print(f"formation error with {args.mac} over {args.seconds:g} s (whole run / last quarter):")
+    for follower in SLOTS:
+        everything = [e for _, f, e in rows if f == follower]
+        errors = [e for _, f, e in settled if f == follower]
+        if errors:
+            print(f"  {follower}: mean {sum(everything) / len(everything):.3f} m, max {max(everything):.3f} m / "
+                  f"mean {sum(errors) / len(errors):.3f} m, final {errors[-1]:.3f} m")
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots(figsize=(9, 3.5))
+        for follower in SLOTS:
+            points = [(t, e) for t, f, e in rows if f == follower]
+            ax.plot([t for t, _ in points], [e for _, e in points], label=follower)
+        ax.set_xlabel("time (s)")
+        ax.set_ylabel("distance from the slot (m)")
+        ax.set_title(f"Formation error, {args.mac}")
+        ax.legend()
+        ax.grid(alpha=0.3)
+        fig.tight_layout()
+        fig.savefig(os.path.join(args.out, f"formation-error-{args.mac}.png"), dpi=110)
+    except ImportError:
+        pass
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,29 @@
+"""UWSim-NET's third experiment end to end (examples/formation/run.py): a fake BlueROV over MAVLink as
+the leader, three simulated followers steered by their applications from what they hear through the
+GLI.  The followers lag while the leader moves and settle on their slots once it stops."""
+
+import csv
+import os
+import subprocess
+import sys
+
+import pytest
+
+RUN = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples", "formation", "run.py")
+
+
+@pytest.mark.parametrize("mac", ["cs-aloha", "s-fama"])
+def test_followers_keep_formation_and_settle_once_the_leader_stops(tmp_path, mac):
+    result = subprocess.run([sys.executable, RUN, "--seconds", "24", "--legs", "1", "--mac", mac, "--out",
+                             str(tmp_path)], capture_output=True, text=True, timeout=180)
+    assert result.returncode == 0, result.stdout + result.stderr
+    with open(tmp_path / f"formation-{mac}.csv") as handle:
+        rows = [(float(t), follower, float(error)) for t, follower, error in list(csv.reader(handle))[1:]]
+    followers = {f for _, f, _ in rows}
+    assert followers == {"follower1", "follower2", "follower3"}
+    moving = [e for t, _, e in rows if 3 <= t <= 10]  # the leader flies 3 m at 0.3 m/s
+    settled = [e for t, _, e in rows if t >= 20]       # stopped since ~12 s
+    assert max(moving) > 0.05  # the followers do lag behind a moving leader…
+    assert max(e for _, _, e in rows) < 1.5  # …but never lose it
+    assert max(settled) < 0.2, settled
+    assert os.path.exists(tmp_path / f"formation-error-{mac}.png")
