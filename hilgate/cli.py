@@ -240,7 +240,8 @@ def cmd_report(args: argparse.Namespace) -> int:
     from .report import ReportError, report
 
     try:
-        written = report(args.trace, args.summaries, args.out, args.vehicles, args.csv, args.title)
+        written = report(args.trace, args.summaries, args.out, args.vehicles, args.csv, args.title,
+                         tuple(args.window) if args.window else None)
     except ReportError as exc:
         print(f"hilgate: {exc}", file=sys.stderr)
         return 1
@@ -335,6 +336,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--vehicles", nargs="+", help="vehicles whose distances to plot (default: the first four)")
     p.add_argument("--csv", action="store_true", help="also write the tables behind the figures")
     p.add_argument("--title", help="the page's title")
+    p.add_argument("--window", type=float, nargs=2, metavar=("START", "END"), help="only these seconds of the trace")
 
     p = sub.add_parser("send", help="send text to a link (arguments, or one frame per stdin line)")
     p.add_argument("link")

@@ -52,7 +52,8 @@ class Trace:
         return sorted({(p.src, p.dst) for p in self.packets.values()})
 
 
-def load_trace(path: str) -> Trace:
+def load_trace(path: str, window: tuple[float, float] | None = None) -> Trace:
+    """Read a trace; with ``window`` only the events from ``window[0]`` to ``window[1]`` seconds."""
     trace = Trace()
     try:
         handle = open(path, encoding="utf-8")
@@ -68,6 +69,8 @@ def load_trace(path: str) -> Trace:
             except json.JSONDecodeError:
                 raise ReportError(f"{path}:{number}: not a JSON line") from None
             t = float(event.get("t", 0.0))
+            if window is not None and not window[0] <= t <= window[1]:
+                continue
             trace.end = max(trace.end, t)
             ev = event.get("ev")
             if ev == "pose":
@@ -267,9 +270,10 @@ def write_index(out: str, written: list[tuple[str, str]], tables: list[str], tit
 
 
 def report(trace_path: str, summary_paths: list[str], out: str, vehicles: list[str] | None = None,
-           csv_tables: bool = False, title: str | None = None) -> list[str]:
+           csv_tables: bool = False, title: str | None = None,
+           window: tuple[float, float] | None = None) -> list[str]:
     """Everything ``hilgate report`` writes; returns the paths."""
-    trace = load_trace(trace_path)
+    trace = load_trace(trace_path, window)
     summaries = {os.path.splitext(os.path.basename(p))[0]: load_summary(p) for p in summary_paths}
     chosen = vehicles or sorted(trace.poses)[:4]
     os.makedirs(out, exist_ok=True)
