@@ -19,7 +19,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from hilgate.backends import AppFrame, Backend
+from hilgate.backends import AppFrame, QueuedBackend
 from hilgate.packets import PacketClass, PacketError, Raw
 
 from .evologics_codec import AsyncError, AtProtocolError, HostCodec, Notification, Reply, Unexpected
@@ -53,36 +53,26 @@ class EvologicsOptions:
         return {"cr": b"\r", "lf": b"\n", "crlf": b"\r\n"}[self.eol]
 
 
-class EvologicsBackend(Backend):
+class EvologicsBackend(QueuedBackend):
     kind = "evologics"
 
     def __init__(self, link_id: str, address: int, packet: PacketClass, options: EvologicsOptions, scheduler: Any,
                  trace: Callable[[dict], Any]):
-        super().__init__()
-        self.link_id = link_id
+        super().__init__(link_id, scheduler, trace, options.queue_frames)
         self.address = address
         self.packet = packet
         self.options = options
-        self.scheduler = scheduler
-        self.trace = trace
         self.codec = HostCodec(eol=options.eol_bytes())
-        self.queue: deque[AppFrame] = deque()
         self.commands: deque[tuple[str, str, bytes | None, tuple, Callable[[Reply], Any] | None]] = deque()
         self.inflight: tuple | None = None
         self.inflight_timer = None
         self.sending: AppFrame | None = None
         self.delivery_timer = None
         self.retry_timer = None
-        self._state = "starting"
-        self.tx_packets = self.rx_packets = self.drops = 0
         self.port = Port(options.port, scheduler, self._on_data, self._on_port, baud=options.baud, name=link_id)
         self.port.open()
 
     # -- Backend ---------------------------------------------------------------------------------
-
-    @property
-    def state(self) -> str:
-        return self._state
 
     @property
     def idle(self) -> bool:
@@ -97,32 +87,15 @@ class EvologicsBackend(Backend):
             mode = "an instant message" if self.options.im else "a burst"
             raise PacketError("size", f"{len(frame.real)} bytes on air do not fit {mode} of the EvoLogics modem "
                                       f"(at most {self.limit}); use a smaller packet class or im: false")
-        if len(self.queue) >= self.options.queue_frames:
-            self._drop(frame, "queue_full" if self._state == "up" else "down")
-            return False
-        self.queue.append(frame)
-        self._pump()
-        return True
-
-    def status(self) -> dict[str, Any]:
-        return {"tx_packets": self.tx_packets, "rx_packets": self.rx_packets, "drops": self.drops,
-                "fifo_bytes": sum(len(f.real) for f in self.queue)}
+        return super().send(frame)
 
     def close(self) -> None:
         for timer in (self.inflight_timer, self.delivery_timer, self.retry_timer):
             self.scheduler.cancel(timer)
         self.port.close()
-        while self.queue:
-            self._drop(self.queue.popleft(), "closed")
+        super().close()
 
     # -- the port and the init sequence ---------------------------------------------------------------
-
-    def _set_state(self, state: str) -> None:
-        if state != self._state:
-            self._state = state
-            self.trace({"t": round(self.scheduler.now(), 9), "ev": "link", "link": self.link_id, "state": state})
-            if self.on_state is not None:
-                self.on_state(state)
 
     def _on_port(self, up: bool) -> None:
         self.codec = HostCodec(eol=self.options.eol_bytes())
@@ -134,10 +107,10 @@ class EvologicsBackend(Backend):
             self.queue.appendleft(self.sending)
             self.sending = None
         if up:
-            self._set_state("starting")
+            self.set_state("starting")
             self._init()
         else:
-            self._set_state("down")
+            self.set_state("down")
 
     def _init(self) -> None:
         o = self.options
@@ -161,8 +134,8 @@ class EvologicsBackend(Backend):
 
     def _init_done(self, reply: Reply) -> None:
         self._init_reply(reply)
-        self._set_state("up")
-        self._pump()
+        self.set_state("up")
+        self.pump()
 
     # -- commands -----------------------------------------------------------------------------------
 
@@ -201,7 +174,7 @@ class EvologicsBackend(Backend):
 
     # -- frames out -----------------------------------------------------------------------------------
 
-    def _pump(self) -> None:
+    def pump(self) -> None:
         if self._state != "up" or self.sending is not None or not self.queue or self.retry_timer:
             return
         frame = self.sending = self.queue.popleft()
@@ -232,7 +205,7 @@ class EvologicsBackend(Backend):
             self._retry_later(frame, 1.0, error)
         elif "INTERNAL" in error:
             self.command("Z", "4")
-            self._set_state("starting")
+            self.set_state("starting")
             self._init()
             self._retry_later(frame, 1.0, error)
         elif error.startswith("BUSY") or error == "TIMEOUT":
@@ -240,17 +213,17 @@ class EvologicsBackend(Backend):
         else:  # WRONG FORMAT, OUT OF RANGE…: this frame will never go
             log.warning("%s: modem refused a frame: %s", self.link_id, error)
             self.sending = None
-            self._drop(frame, "refused")
+            self.drop(frame, "refused")
             self._frame_done()
 
     def _retry_later(self, frame: AppFrame, delay: float, why: str) -> None:
         self.sending = None
         self.queue.appendleft(frame)
-        self.trace({"t": round(self.scheduler.now(), 9), "ev": "retry", "link": self.link_id, "cause": why})
+        self.event("retry", cause=why)
 
         def again() -> None:
             self.retry_timer = None
-            self._pump()
+            self.pump()
 
         self.retry_timer = self.scheduler.at(self.scheduler.now() + delay * self.scheduler_speed(), again)
 
@@ -260,18 +233,13 @@ class EvologicsBackend(Backend):
         self.sending = None
         if self.idle and self.on_idle is not None:
             self.on_idle()
-        self._pump()
+        self.pump()
 
     def _delivery_timeout(self) -> None:
         frame = self.sending
         if frame is not None:
-            self._drop(frame, "no_report")
+            self.drop(frame, "no_report")
         self._frame_done()
-
-    def _drop(self, frame: AppFrame, cause: str) -> None:
-        self.drops += 1
-        self.trace({"t": round(self.scheduler.now(), 9), "ev": "drop", "link": self.link_id, "dst": frame.dst,
-                    "size": len(frame.real), "cause": cause})
 
     # -- bytes in -------------------------------------------------------------------------------------
 
@@ -298,7 +266,7 @@ class EvologicsBackend(Backend):
                         "dst": int(n.field(0) or 0)})
             if self.sending is not None and self.delivery_timer is not None:
                 if not delivered:
-                    self._drop(self.sending, "failed")
+                    self.drop(self.sending, "failed")
                 self._frame_done()
             if delivered:
                 self.command("?T", on_reply=self._propagation_time)

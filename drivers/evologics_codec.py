@@ -227,6 +227,20 @@ def _parse_recv(buffer: bytes | bytearray) -> tuple[int, Notification] | None:
     raise last_error or AtProtocolError(f"bad {name}")
 
 
+def _data_before_escape(buffer: bytearray) -> Data | None:
+    """In data mode: take the raw burst bytes before the next ``+++AT``, holding back a tail that may
+    be the start of one (``+``, ``++``, ``+++A``) until the next bytes tell."""
+    at = buffer.find(ESCAPE)
+    if at < 0:
+        keep = next((n for n in range(min(len(ESCAPE) - 1, len(buffer)), 0, -1) if buffer.endswith(ESCAPE[:n])), 0)
+        at = len(buffer) - keep
+    if at <= 0:
+        return None
+    data = bytes(buffer[:at])
+    del buffer[:at]
+    return Data(data)
+
+
 def _classify(line: str) -> str:
     """notification | async_error | reply"""
     if line in UNSOLICITED_ERRORS:
@@ -385,23 +399,8 @@ class HostCodec:
 
     def _next_data_mode(self) -> object | None:
         buffer = self._buffer
-        at = buffer.find(ESCAPE)
-        if at < 0:
-            # hold back a tail that could be the start of an escape
-            keep = 0
-            for n in range(min(len(ESCAPE) - 1, len(buffer)), 0, -1):
-                if buffer.endswith(ESCAPE[:n]):
-                    keep = n
-                    break
-            if len(buffer) > keep:
-                data = bytes(buffer[: len(buffer) - keep])
-                del buffer[: len(buffer) - keep]
-                return Data(data)
-            return None
-        if at > 0:
-            data = bytes(buffer[:at])
-            del buffer[:at]
-            return Data(data)
+        if not buffer.startswith(ESCAPE):
+            return _data_before_escape(buffer)
         match = re.match(rb"\+\+\+AT([^:\r\n]{0,16}):(\d{1,5}):", bytes(buffer[:40]))
         if match is None:
             if re.fullmatch(rb"\+\+\+AT[^:\r\n]{0,16}(:\d{0,5})?", bytes(buffer[:40])):
@@ -471,22 +470,8 @@ class ModemCodec:
         if not buffer:
             return None
         if self.data_mode:
-            at = buffer.find(ESCAPE)
-            if at < 0:
-                keep = 0
-                for n in range(min(len(ESCAPE) - 1, len(buffer)), 0, -1):
-                    if buffer.endswith(ESCAPE[:n]):
-                        keep = n
-                        break
-                if len(buffer) > keep:
-                    data = bytes(buffer[: len(buffer) - keep])
-                    del buffer[: len(buffer) - keep]
-                    return Data(data)
-                return None
-            if at > 0:
-                data = bytes(buffer[:at])
-                del buffer[:at]
-                return Data(data)
+            if not buffer.startswith(ESCAPE):
+                return _data_before_escape(buffer)
             return self._command(escaped=True)
         if buffer[:5] == ESCAPE:
             parsed = self._command(escaped=True)
@@ -525,7 +510,6 @@ class ModemCodec:
     def _command(self, escaped: bool) -> object | None:
         buffer = self._buffer
         prefix = 5 if escaped else 2
-        name_end = prefix
         # SEND commands carry a length-framed payload
         for name, fields_before in SEND_FIELDS.items():
             keyword = name.encode()

@@ -17,6 +17,8 @@ from typing import Any, Callable
 
 import serial
 
+from hilgate.streams import Outbox
+
 log = logging.getLogger(__name__)
 
 
@@ -41,7 +43,7 @@ class Port:
         self.reopen_timer = None
         self.opens = 0
         self.losses = 0
-        self._out = bytearray()
+        self.outbox: Outbox | None = None
 
     def open(self) -> None:
         """Try now; on failure, retry later (never raises)."""
@@ -63,7 +65,7 @@ class Port:
         self.up = True
         self.opens += 1
         self.backoff = 0.5
-        self._out.clear()
+        self.outbox = Outbox(self.scheduler, fd, lambda data: os.write(fd, data), self._lost, self.max_buffer)
         self.scheduler.add_reader(fd, self._readable)
         log.info("%s: %s open", self.name, self.url)
         self.on_state(True)
@@ -91,38 +93,11 @@ class Port:
         """Queue bytes for the device; False if it is down (the caller keeps or drops what it sends)."""
         if not self.up:
             return False
-        if self._out:
-            if len(self._out) + len(data) > self.max_buffer:
-                return False
-            self._out += data
-            return True
-        try:
-            written = os.write(self.fd, data)
-        except (BlockingIOError, InterruptedError):
-            written = 0
-        except OSError as exc:
-            self._lost(exc)
-            return False
-        if written < len(data):
-            self._out += data[written:]
-            self.scheduler.set_writer(self.fd, self._writable)
-        return True
-
-    def _writable(self) -> None:
-        try:
-            written = os.write(self.fd, self._out)
-        except (BlockingIOError, InterruptedError):
-            return
-        except OSError as exc:
-            self._lost(exc)
-            return
-        del self._out[:written]
-        if not self._out:
-            self.scheduler.set_writer(self.fd, None)
+        return self.outbox.write(data)
 
     def _release(self) -> None:
         if self.fd is not None:
-            self.scheduler.set_writer(self.fd, None)
+            self.outbox.clear()
             self.scheduler.remove_reader(self.fd)
         if self.device is not None:
             try:

@@ -15,7 +15,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from hilgate.backends import AppFrame, Backend
+from hilgate.backends import AppFrame, QueuedBackend
 from hilgate.packets import Decoded, PacketClass, Raw
 
 from .port import Port
@@ -33,82 +33,49 @@ class S100Options:
     queue_frames: int = 50
 
 
-class S100Backend(Backend):
+class S100Backend(QueuedBackend):
     kind = "s100"
 
     def __init__(self, link_id: str, address: int, packet: PacketClass, options: S100Options, scheduler: Any,
                  trace: Callable[[dict], Any]):
-        super().__init__()
-        self.link_id = link_id
+        super().__init__(link_id, scheduler, trace, options.queue_frames)
         self.address = address
         self.packet = packet
         self.wire = wire_class(packet)
         self.options = options
-        self.scheduler = scheduler
-        self.trace = trace
         self.hunter = FrameHunter(packet)
-        self.queue: deque[AppFrame] = deque()
         self.pieces: deque[bytes] = deque()
         self.piece_timer = None
-        self.tx_packets = self.rx_packets = self.drops = 0
-        self._state = "starting"
         self.port = Port(options.port, scheduler, self._on_data, self._on_port, baud=options.baud,
                          rtscts=options.rtscts, name=link_id)
         self.port.open()
 
     @property
-    def state(self) -> str:
-        return self._state
-
-    @property
     def idle(self) -> bool:
         return not self.queue and not self.pieces
-
-    def send(self, frame: AppFrame) -> bool:
-        if len(self.queue) >= self.options.queue_frames:
-            self._drop(frame, "queue_full" if self._state == "up" else "down")
-            return False
-        self.queue.append(frame)
-        self._pump()
-        return True
-
-    def status(self) -> dict[str, Any]:
-        return {"tx_packets": self.tx_packets, "rx_packets": self.rx_packets, "drops": self.drops,
-                "fifo_bytes": sum(len(f.real) for f in self.queue)}
 
     def close(self) -> None:
         self.scheduler.cancel(self.piece_timer)
         self.port.close()
-        while self.queue:
-            self._drop(self.queue.popleft(), "closed")
-
-    def _drop(self, frame: AppFrame, cause: str) -> None:
-        self.drops += 1
-        self.trace({"t": round(self.scheduler.now(), 9), "ev": "drop", "link": self.link_id,
-                    "size": len(frame.real), "cause": cause})
+        super().close()
 
     def _on_port(self, up: bool) -> None:
         self.hunter = FrameHunter(self.packet)
         self.scheduler.cancel(self.piece_timer)
         self.piece_timer = None
         self.pieces.clear()  # a frame half written is lost with the adapter; the rest wait
-        state = "up" if up else "down"
-        if state != self._state:
-            self._state = state
-            self.trace({"t": round(self.scheduler.now(), 9), "ev": "link", "link": self.link_id, "state": state})
-            if self.on_state is not None:
-                self.on_state(state)
+        self.set_state("up" if up else "down")
         if up:
-            self._pump()
+            self.pump()
 
-    def _pump(self) -> None:
+    def pump(self) -> None:
         if self._state != "up" or self.pieces or not self.queue:
             return
         frame = self.queue.popleft()
         real = frame.real if not isinstance(self.packet, Raw) else self.wire.encode(frame.payload)
         self.pieces.extend(pieces(real, self.options.rtscts))
         self.tx_packets += 1
-        self.trace({"t": round(self.scheduler.now(), 9), "ev": "tx", "link": self.link_id, "size": len(real)})
+        self.event("tx", size=len(real))
         self._write_piece()
 
     def _write_piece(self) -> None:
@@ -116,7 +83,7 @@ class S100Backend(Backend):
         if not self.pieces:
             if self.idle and self.on_idle is not None:
                 self.on_idle()
-            self._pump()
+            self.pump()
             return
         piece = self.pieces.popleft()
         if not self.port.write(piece):
@@ -126,17 +93,16 @@ class S100Backend(Backend):
         self.piece_timer = self.scheduler.at(self.scheduler.now() + pace * speed, self._write_piece)
 
     def _on_data(self, data: bytes) -> None:
-        now = round(self.scheduler.now(), 9)
         for event in self.hunter.receive_data(data):
             if isinstance(event, Decoded):
                 self.rx_packets += 1
-                self.trace({"t": now, "ev": "rx", "link": self.link_id, "size": len(event.real)})
+                self.event("rx", size=len(event.real))
                 if self.on_receive is not None:
                     real = event.payload if isinstance(self.packet, Raw) else event.real
                     self.on_receive(AppFrame(real, event.payload, self.packet, 0, event.src, event.dst,
                                              self.scheduler.now()))
             elif isinstance(event, Skipped) and event.reason == "crc":
                 self.drops += 1
-                self.trace({"t": now, "ev": "err", "link": self.link_id, "cause": "crc"})
+                self.event("err", cause="crc")
             elif isinstance(event, Notice):
                 log.info("%s: modem notice %r", self.link_id, event.text)

@@ -10,6 +10,7 @@ the new one behind the same GLI endpoints.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -62,6 +63,59 @@ class Backend(ABC):
 
     def close(self) -> None:
         """Release the modem; queued frames are reported dropped."""
+
+
+class QueuedBackend(Backend):
+    """What every real modem driver shares: a bounded queue of frames (kept while the modem is down,
+    dropped with a cause beyond ``queue_frames``), its counters, and its ``link`` state in the trace."""
+
+    def __init__(self, link_id: str, scheduler: Any, trace: Callable[[dict], Any], queue_frames: int):
+        super().__init__()
+        self.link_id = link_id
+        self.scheduler = scheduler
+        self.trace = trace
+        self.queue_frames = queue_frames
+        self.queue: deque[AppFrame] = deque()
+        self.tx_packets = self.rx_packets = self.drops = 0
+        self._state = "starting"
+
+    @property
+    def state(self) -> str:
+        return self._state
+
+    def send(self, frame: AppFrame) -> bool:
+        if len(self.queue) >= self.queue_frames:
+            self.drop(frame, "queue_full" if self._state == "up" else "down")
+            return False
+        self.queue.append(frame)
+        self.pump()
+        return True
+
+    @abstractmethod
+    def pump(self) -> None:
+        """Start sending the head of the queue if the modem can take it."""
+
+    def event(self, ev: str, **fields: Any) -> None:
+        self.trace({"t": round(self.scheduler.now(), 9), "ev": ev, "link": self.link_id, **fields})
+
+    def drop(self, frame: AppFrame, cause: str) -> None:
+        self.drops += 1
+        self.event("drop", dst=frame.dst, size=len(frame.real), cause=cause)
+
+    def set_state(self, state: str) -> None:
+        if state != self._state:
+            self._state = state
+            self.event("link", state=state)
+            if self.on_state is not None:
+                self.on_state(state)
+
+    def status(self) -> dict[str, Any]:
+        return {"tx_packets": self.tx_packets, "rx_packets": self.rx_packets, "drops": self.drops,
+                "fifo_bytes": sum(len(f.real) for f in self.queue)}
+
+    def close(self) -> None:
+        while self.queue:
+            self.drop(self.queue.popleft(), "closed")
 
 
 class SimBackend(Backend):

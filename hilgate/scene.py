@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from .fields import (
-    MISSING, Fields, boolean, choice, describe, integer, items, join_path, mapping, number, text, vector,
+    Fields, boolean, choice, describe, integer, items, join_path, mapping, number, text, vector,
 )
 from .located import Node, SceneError, load_file, load_text, parse_scalar
 from .models.errormodel import UNITS, ErrorModel

@@ -15,6 +15,55 @@ from typing import Any, Callable
 log = logging.getLogger(__name__)
 
 
+class Outbox:
+    """Output for a non-blocking descriptor: written at once when the kernel takes it, the rest kept
+    (at most ``max_buffer`` bytes) and flushed when the loop says the descriptor can take more."""
+
+    def __init__(self, scheduler: Any, fd: int, send: Callable[[bytes], int], on_error: Callable[[OSError], Any],
+                 max_buffer: int):
+        self.scheduler = scheduler
+        self.fd = fd
+        self.send = send
+        self.on_error = on_error
+        self.max_buffer = max_buffer
+        self._pending = bytearray()
+
+    def write(self, data: bytes) -> bool:
+        """False (nothing queued) when the backlog is full or the descriptor failed."""
+        if self._pending:
+            if len(self._pending) + len(data) > self.max_buffer:
+                return False
+            self._pending += data
+            return True
+        try:
+            sent = self.send(data)
+        except (BlockingIOError, InterruptedError):
+            sent = 0
+        except OSError as exc:
+            self.on_error(exc)
+            return False
+        if sent < len(data):
+            self._pending += data[sent:]
+            self.scheduler.set_writer(self.fd, self._writable)
+        return True
+
+    def _writable(self) -> None:
+        try:
+            sent = self.send(self._pending)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError as exc:
+            self.on_error(exc)
+            return
+        del self._pending[:sent]
+        if not self._pending:
+            self.scheduler.set_writer(self.fd, None)
+
+    def clear(self) -> None:
+        self._pending.clear()
+        self.scheduler.set_writer(self.fd, None)
+
+
 class Connection:
     def __init__(self, sock: socket.socket, scheduler: Any, on_data: Callable[[bytes], Any],
                  on_close: Callable[[], Any], max_buffer: int = 1 << 20):
@@ -24,8 +73,7 @@ class Connection:
         self.scheduler = scheduler
         self.on_data = on_data
         self.on_close = on_close
-        self.max_buffer = max_buffer
-        self._out = bytearray()
+        self.outbox = Outbox(scheduler, self.fd, sock.send, self._stop_writing, max_buffer)
         self.closed = False
         self.write_failed = False
         scheduler.add_reader(self.fd, self._readable)
@@ -48,46 +96,18 @@ class Connection:
         """Queue ``data``; False (nothing queued) if the connection is closed or its buffer is full."""
         if self.closed or self.write_failed:
             return False
-        if self._out:
-            if len(self._out) + len(data) > self.max_buffer:
-                return False
-            self._out += data
-            return True
-        try:
-            sent = self.sock.send(data)
-        except (BlockingIOError, InterruptedError):
-            sent = 0
-        except OSError as exc:
-            self._stop_writing(exc)
-            return False
-        if sent < len(data):
-            self._out += data[sent:]
-            self.scheduler.set_writer(self.fd, self._writable)
-        return True
-
-    def _writable(self) -> None:
-        try:
-            sent = self.sock.send(self._out)
-        except (BlockingIOError, InterruptedError):
-            return
-        except OSError as exc:
-            self._stop_writing(exc)
-            return
-        del self._out[:sent]
-        if not self._out:
-            self.scheduler.set_writer(self.fd, None)
+        return self.outbox.write(data)
 
     def _stop_writing(self, exc: OSError) -> None:
         log.debug("connection %d: cannot write any more: %s", self.fd, exc)
         self.write_failed = True
-        self._out.clear()
-        self.scheduler.set_writer(self.fd, None)
+        self.outbox.clear()
 
     def close(self) -> None:
         if self.closed:
             return
         self.closed = True
-        self.scheduler.set_writer(self.fd, None)
+        self.outbox.clear()
         self.scheduler.remove_reader(self.fd)
         try:
             self.sock.close()

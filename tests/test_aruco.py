@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from aruco_render import K_720P, frontal, render, tilted, write_calibration
+from aruco_render import frontal, render, tilted, write_calibration
 from hilgate.drivers.aruco import (
     CameraError, CameraThread, Estimator, FixedCameraTracker, OnboardTracker, load_calibration, open_capture,
     placement,

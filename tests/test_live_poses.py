@@ -4,7 +4,6 @@ The fake BlueROV is pymavlink itself, sending HEARTBEAT, LOCAL_POSITION_NED, ATT
 GLOBAL_POSITION_INT to the daemon over UDP loopback, as BlueOS sends them to the topside.
 """
 
-import json
 import math
 import socket
 import subprocess

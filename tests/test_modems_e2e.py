@@ -6,7 +6,6 @@ application.  All in one daemon; nothing mocked: pyserial opens the pty slaves, 
 the bytes.
 """
 
-import json
 import time
 
 import pytest
