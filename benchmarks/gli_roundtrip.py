@@ -29,6 +29,8 @@ import time
 
 import posix_ipc
 
+from hilgate.gli_mq import unlink_queues
+
 MESSAGE = 2066
 MAX_REAL = 2053
 
@@ -138,12 +140,7 @@ class Daemon:
     def close(self) -> None:
         self.process.terminate()
         self.process.wait()
-        for link in self.links:
-            for direction in ("tx", "rx"):
-                try:
-                    posix_ipc.unlink_message_queue(f"/{link}_{direction}_dlnk_phy")
-                except posix_ipc.ExistentialError:
-                    pass
+        unlink_queues(self.links)
 
 
 def through_hilgate(count: int) -> list[float]:

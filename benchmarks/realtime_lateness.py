@@ -135,15 +135,10 @@ def main() -> None:
     finally:
         cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
         if router is not None:
-            router.close()
-            import posix_ipc
+            from hilgate.gli_mq import unlink_queues
 
-            for link in scene.links:
-                for direction in ("tx", "rx"):
-                    try:
-                        posix_ipc.unlink_message_queue(f"/{link}_{direction}_dlnk_phy")
-                    except posix_ipc.ExistentialError:
-                        pass
+            router.close()
+            unlink_queues(scene.links)
     late_ms = [1e3 * x for x in recorder.lateness]
     p50, p99, worst = percentile(late_ms, 0.5), percentile(late_ms, 0.99), max(late_ms)
     print(f"{args.nodes} nodes, {args.seconds:g} s{' with GLI endpoints' if args.gli else ''}, {setup}: "

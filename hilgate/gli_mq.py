@@ -124,6 +124,20 @@ def open_queue(name: str, needed_size: int = MAX_MESSAGE_SIZE, full_size: bool =
     return queue
 
 
+def unlink_queues(link_ids) -> list[str]:
+    """Remove the dccomms queues of these links (those that exist); returns their names.  Linux
+    charges a queue to its creator until it is unlinked; dccomms never does."""
+    removed = []
+    for link_id in link_ids:
+        for name in queue_names(link_id):
+            try:
+                posix_ipc.unlink_message_queue(name)
+                removed.append(name)
+            except posix_ipc.ExistentialError:
+                pass
+    return removed
+
+
 def drain(queue: posix_ipc.MessageQueue) -> int:
     count = 0
     while True:

@@ -14,11 +14,10 @@ maximum range (τ_max), the receiver's intrinsic delay, the ACK's airtime, its w
 
 from __future__ import annotations
 
-from collections import OrderedDict
 from typing import TYPE_CHECKING, Any
 
 from .frame import ACK, BROADCAST, DATA
-from .mac import Mac, Param
+from .mac import Duplicates, Mac, Param
 
 if TYPE_CHECKING:
     from .frame import Frame
@@ -54,7 +53,7 @@ class CsAloha(Mac):
         self.attempts = 0
         self.timer = None
         self.pending_acks: list[Frame] = []
-        self.seen: OrderedDict[tuple[str, int], None] = OrderedDict()
+        self.duplicates = Duplicates()
 
     @property
     def holding(self) -> bool:
@@ -172,13 +171,9 @@ class CsAloha(Mac):
                 self.pending_acks.append(ack)
             else:
                 modem.transmit(ack)
-        key = (frame.src, frame.id)
-        if key in self.seen:
+        if self.duplicates.seen(frame):
             modem.observer.mac(modem.clock.now(), modem, frame, "dup")
             return
-        self.seen[key] = None
-        if len(self.seen) > 4096:
-            self.seen.popitem(last=False)
         modem.deliver(frame)
 
     def describe(self) -> dict[str, Any]:

@@ -27,6 +27,7 @@ It *may*, through the modem (see :class:`hilgate.models.modem.SimModem`):
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -91,6 +92,24 @@ class Mac:
         """Whether these parameters work for a modem with these ``ModemParams`` (checked when the scene
         loads, so a problem is reported with its file and line); None if they do, else why not."""
         return None
+
+
+class Duplicates:
+    """Remembers the last frames delivered, so that a retransmission (its ACK was lost) is delivered
+    once; ``seen`` answers and remembers in one step."""
+
+    def __init__(self, size: int = 4096):
+        self.size = size
+        self._recent: OrderedDict[tuple[str, int], None] = OrderedDict()
+
+    def seen(self, frame: "Frame") -> bool:
+        key = (frame.src, frame.id)
+        if key in self._recent:
+            return True
+        self._recent[key] = None
+        if len(self._recent) > self.size:
+            self._recent.popitem(last=False)
+        return False
 
 
 class NoMac(Mac):

@@ -24,11 +24,10 @@ delay); with ``tx_delay_s: 0`` exactly on it.
 from __future__ import annotations
 
 import math
-from collections import OrderedDict
 from typing import TYPE_CHECKING, Any
 
 from .frame import ACK, BROADCAST, CTS, DATA, RTS
-from .mac import Mac, Param
+from .mac import Duplicates, Mac, Param
 
 if TYPE_CHECKING:
     from .frame import Frame
@@ -66,7 +65,7 @@ class SFama(Mac):
         self.timer = None
         self.silent_until = 0.0
         self.rts_slot = 0
-        self.seen: OrderedDict[tuple[str, int], None] = OrderedDict()
+        self.duplicates = Duplicates()
         self.answering = 0  # CTS/ACK exchanges this node has promised as a receiver
 
     @property
@@ -245,13 +244,9 @@ class SFama(Mac):
             if frame.dst_addr != BROADCAST and frame.dst_addr == modem.address:
                 ack = modem.control_frame(ACK, self.ack_bytes, frame.src_addr, frame.src, frame)
                 self._answer(self.next_boundary(now), ack)
-            key = (frame.src, frame.id)
-            if key in self.seen:
+            if self.duplicates.seen(frame):
                 modem.observer.mac(now, modem, frame, "dup")
                 return
-            self.seen[key] = None
-            if len(self.seen) > 4096:
-                self.seen.popitem(last=False)
             modem.deliver(frame)
 
     def _answer(self, at: float, frame: "Frame") -> None:

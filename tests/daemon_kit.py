@@ -17,7 +17,7 @@ import sys
 import time
 import uuid
 
-import posix_ipc
+from hilgate.gli_mq import unlink_queues
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 PEER = os.path.join(HERE, "peers", "dccomms_peer.py")
@@ -113,12 +113,7 @@ class Daemon:
         self.stop()
         self.notify.close()
         self.log.close()
-        for link in self.links:
-            for direction in ("tx", "rx"):
-                try:
-                    posix_ipc.unlink_message_queue(f"/{link}_{direction}_dlnk_phy")
-                except posix_ipc.ExistentialError:
-                    pass
+        unlink_queues(self.links)
 
 
 def peer_events(process: subprocess.Popen, timeout: float = 30.0) -> list[dict]:
