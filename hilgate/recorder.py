@@ -97,7 +97,6 @@ class Recorder:
         self._json: dict[str, str] = {}
         self.flows: list[FlowStats] = []
         self.mac_events: dict[str, int] = {}
-        self.unrouted_drops = 0
 
     def add_flow(self, spec: FlowSpec) -> FlowStats:
         stats = FlowStats(spec)

@@ -46,13 +46,6 @@ class VirtualScheduler:
         """Run ``fn()`` after the events due now (in virtual time: at once, nothing waits)."""
         fn()
 
-    def next_time(self) -> float | None:
-        """Time of the next live event, or None when nothing is scheduled."""
-        heap = self._heap
-        while heap and heap[0][2] is None:
-            heappop(heap)
-        return heap[0][0] if heap else None
-
     def run(self, until: float = float("inf")) -> int:
         """Fire every event up to and including ``until``; the clock then reads ``until`` (if finite)."""
         heap = self._heap

@@ -175,7 +175,3 @@ class CsAloha(Mac):
             modem.observer.mac(modem.clock.now(), modem, frame, "dup")
             return
         modem.deliver(frame)
-
-    def describe(self) -> dict[str, Any]:
-        return {"protocol": self.name, "ack_timeout_s": self.ack_timeout, "max_retries": self.max_retries,
-                "backoff_s": list(self.backoff_s), "ack_bytes": self.ack_bytes}

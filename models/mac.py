@@ -84,9 +84,6 @@ class Mac:
         if not modem.phy_busy and modem.fifo:
             modem.transmit(modem.fifo_pop())
 
-    def describe(self) -> dict[str, Any]:
-        return {"protocol": self.name}
-
     @classmethod
     def check(cls, modem: Any, params: dict[str, Any]) -> str | None:
         """Whether these parameters work for a modem with these ``ModemParams`` (checked when the scene

@@ -260,7 +260,3 @@ class SFama(Mac):
         if modem.phy_busy:
             return  # half duplex: the answer cannot go out; the sender will retry
         modem.transmit(frame)
-
-    def describe(self) -> dict[str, Any]:
-        return {"protocol": self.name, "slot_s": self.slot, "tau_max_s": self.tau_max,
-                "max_backoff_slots": self.max_backoff_slots}
