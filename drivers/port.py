@@ -21,6 +21,29 @@ from hilgate.streams import Outbox
 
 log = logging.getLogger(__name__)
 
+# pyserial's URL handlers (serial.urlhandler.protocol_*) that hilgate opens; a path without "://" is a
+# device node.  Anything else would pass validation and then retry forever, so it is refused at load.
+SCHEMES = ("socket", "loop", "rfc2217", "spy", "alt", "hwgrep")
+
+
+def port_problem(url: str) -> str | None:
+    """None if hilgate can open this port spec (now or once the device is plugged in), else why not
+    (one line).  Checks the spelling only: a missing device is an outage the port rides out, not a
+    configuration error."""
+    if not isinstance(url, str) or not url.strip():
+        return "empty port (give a device such as /dev/ttyUSB0 or a URL such as socket://HOST:PORT)"
+    if "\0" in url:
+        return "the port contains a NUL character"
+    if "://" not in url:
+        return None
+    scheme, _, rest = url.partition("://")
+    if scheme.lower() not in SCHEMES:
+        return (f"unknown URL scheme '{scheme}://' (hilgate opens a device path or "
+                + ", ".join(s + "://" for s in SCHEMES) + ")")
+    if not rest and scheme.lower() not in ("loop",):
+        return f"'{scheme}://' needs what to open after it"
+    return None
+
 
 class Port:
     def __init__(self, url: str, scheduler: Any, on_data: Callable[[bytes], Any], on_state: Callable[[bool], Any],
