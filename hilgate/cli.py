@@ -365,8 +365,9 @@ def main(argv: list[str] | None = None) -> int:
             args.text = [*args.text, *extra]
         else:
             parser.error(f"unrecognized arguments: {' '.join(extra)}")
-    level = logging.WARNING - 10 * min(args.verbose, 2)
-    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    from .logsetup import setup_logging
+
+    setup_logging(args.verbose, daemon=args.command in ("run", "emulate"))
     try:
         return COMMANDS[args.command](args)
     except SceneError as exc:
