@@ -32,6 +32,7 @@ class AppFrame:
     dst: int
     t0: float = 0.0
     meta: dict[str, Any] | None = None  # what an emulated modem needs to print it (IM, burst, ack…)
+    lateness: float = 0.0  # the loop was this late reading it: t0 may be up to this much after the send
     on_delivered: Callable[["AppFrame", Any], Any] | None = field(default=None, repr=False)
 
 
@@ -67,7 +68,8 @@ class Backend(ABC):
 
 class QueuedBackend(Backend):
     """What every real modem driver shares: a bounded queue of frames (kept while the modem is down,
-    dropped with a cause beyond ``queue_frames``), its counters, and its ``link`` state in the trace."""
+    dropped with a cause beyond ``queue_frames``), its counters, and its ``link`` state in the trace,
+    with the reason it is down (the port's one line: cannot open, lost) for ``hilgate status``."""
 
     def __init__(self, link_id: str, scheduler: Any, trace: Callable[[dict], Any], queue_frames: int):
         super().__init__()
@@ -78,6 +80,7 @@ class QueuedBackend(Backend):
         self.queue: deque[AppFrame] = deque()
         self.tx_packets = self.rx_packets = self.drops = 0
         self._state = "starting"
+        self.reason: str | None = None
 
     @property
     def state(self) -> str:
@@ -102,16 +105,18 @@ class QueuedBackend(Backend):
         self.drops += 1
         self.event("drop", dst=frame.dst, size=len(frame.real), cause=cause)
 
-    def set_state(self, state: str) -> None:
+    def set_state(self, state: str, reason: str | None = None) -> None:
+        """``reason``: why the link is down (kept until the next state), None otherwise."""
+        self.reason = reason
         if state != self._state:
             self._state = state
-            self.event("link", state=state)
+            self.event("link", state=state, **({"reason": reason} if reason else {}))
             if self.on_state is not None:
                 self.on_state(state)
 
     def status(self) -> dict[str, Any]:
         return {"tx_packets": self.tx_packets, "rx_packets": self.rx_packets, "drops": self.drops,
-                "fifo_bytes": sum(len(f.real) for f in self.queue)}
+                "fifo_bytes": sum(len(f.real) for f in self.queue), "reason": self.reason}
 
     def close(self) -> None:
         while self.queue:

@@ -23,8 +23,13 @@ for milliseconds.  :func:`make_realtime` (``hilgate run --realtime-priority``, o
 
 Timers fire with the model clock set to their exact scheduled time (lateness is visible as the
 difference with :meth:`model_time`), so the models compute the same times as in virtual time.  Input
-from a descriptor is handled at the current model time, clamped so that model time never goes
-backwards.  ``speed`` K runs the model at K times real time.
+from a descriptor is stamped with the model time at which it is read, never earlier: before an input
+is handled, every timer already due fires first, at its own time.  (Stamping input with an overdue
+timer's time instead would back-date it: after a preemption, a frame an application sent after
+another frame had arrived would be placed on air while that frame was still arriving, and collide
+with it in the model although it never did.)  When the loop was late as it read an input, by how
+much is kept in :attr:`input_lateness` for the trace: the input may have waited up to that long.
+``speed`` K runs the model at K times real time.
 """
 
 from __future__ import annotations
@@ -98,6 +103,11 @@ class RealtimeScheduler(VirtualScheduler):
         self._running = False
         self._signals: dict[int, Callable[[int], Any]] = {}
         self._deferred: list[Callable[[], Any]] = []
+        self._fired = 0
+        self._watch_end = 0.0  # model time at which the loop last stopped watching its descriptors
+        self.input_lateness = 0.0
+        """Model seconds by which the loop was late when it read the input being handled (0 if on time)."""
+        self.late_threshold = 0.0005
 
     # -- time ---------------------------------------------------------------------------------
 
@@ -201,31 +211,74 @@ class RealtimeScheduler(VirtualScheduler):
 
     # -- the loop -------------------------------------------------------------------------------
 
-    def _input_time(self) -> None:
+    def _begin_inputs(self, blind: float) -> None:
+        """The loop is about to read input.  Input may have waited since the loop last stopped
+        watching its descriptors (``blind``: firing timers, or a preemption between two waits), and
+        longer if the loop overslept or timers are overdue (a preemption during the wait).  That
+        bound is kept in :attr:`input_lateness`; overdue timers then fire first, at their own times."""
         heap = self._heap
         t = self.model_time()
+        late = blind
+        while heap and heap[0][2] is None:
+            heappop(heap)
         if heap and heap[0][0] < t:
-            t = heap[0][0]  # a due timer fires first; model time never goes back
+            late = max(late, t - heap[0][0])
+        self.input_lateness = late if late > self.late_threshold else 0.0
+        self._input_time()
+
+    def _input_time(self) -> None:
+        """Make the model clock read now for an input: overdue timers fire first, at their own times,
+        then the clock moves to the wall clock's model time (never backwards)."""
+        heap = self._heap
+        t = self.model_time()
+        if heap and heap[0][0] <= t:
+            self._fire_due(t)
         if t > self._now:
             self._now = t
 
+    def _fire_due(self, now: float) -> None:
+        """Fire every timer due at or before ``now``, each at its own time."""
+        heap = self._heap
+        while heap and heap[0][0] <= now:
+            entry = heappop(heap)
+            fn = entry[2]
+            if fn is None:
+                continue
+            self._now = entry[0]
+            try:
+                fn(*entry[3])
+            except Exception:
+                log.exception("timer callback %r failed", fn)
+            self._fired += 1
+
     def _handle_inputs(self, timeout: float) -> None:
+        entry = self.model_time()
+        blind = entry - self._watch_end  # not watching inputs since the last wait or poll ended
         if timeout > 0:
+            deadline = entry + timeout * self.speed
             try:
                 ready, _, _ = select.select([self._epoll.fileno()], [], [], timeout)
             except InterruptedError:  # pragma: no cover - PEP 475 retries, kept for safety
                 ready = True
+            woke = self.model_time()
+            self._watch_end = woke
             if not ready:
                 return
+            blind += max(0.0, woke - deadline)  # overslept: stopped or preempted while waiting
         events_ready = self._epoll.poll(0)
+        if timeout <= 0:
+            self._watch_end = self.model_time()
         if events_ready or self._posted:
             self._last_input = time.perf_counter()
+            self._begin_inputs(blind)
         for fd, events in events_ready:
             if events & select.EPOLLOUT:
-                writer = self._writers.get(fd)
+                self._input_time()
+                writer = self._writers.get(fd)  # looked up after overdue timers, which may close it
                 if writer is not None:
                     self._call(writer)
             if events & ~select.EPOLLOUT:
+                self._input_time()
                 reader = self._readers.get(fd)
                 if reader is not None:
                     self._call(reader)
@@ -237,9 +290,9 @@ class RealtimeScheduler(VirtualScheduler):
                 fn(*args)
             except Exception:
                 log.exception("posted call %r failed", fn)
+        self.input_lateness = 0.0
 
     def _call(self, callback: Callable[[], Any]) -> None:
-        self._input_time()
         try:
             callback()
         except Exception:  # one broken input must not stop the daemon
@@ -250,6 +303,7 @@ class RealtimeScheduler(VirtualScheduler):
         lower_timer_slack()
         self.start_clock()
         self._running = True
+        self._watch_end = self.model_time()
         spin = self.spin_s
         gc_was_enabled = gc.isenabled()
         gc.disable()
@@ -276,21 +330,15 @@ class RealtimeScheduler(VirtualScheduler):
 
     def _loop(self, until: float, spin: float) -> int:
         heap = self._heap
-        fired = 0
+        self._fired = 0
         while self._running:
             now = self.model_time()
-            while heap and heap[0][0] <= now:
-                entry = heappop(heap)
-                fn = entry[2]
-                if fn is None:
-                    continue
-                self._now = entry[0]
-                try:
-                    fn(*entry[3])
-                except Exception:
-                    log.exception("timer callback %r failed", fn)
-                fired += 1
+            if heap and heap[0][0] <= now:
+                self._fire_due(now)
                 now = self.model_time()
+                while heap and heap[0][0] <= now:  # firing took time: what became due meanwhile
+                    self._fire_due(now)
+                    now = self.model_time()
             if self._deferred:
                 self._run_deferred()
             if now >= until:
@@ -306,5 +354,4 @@ class RealtimeScheduler(VirtualScheduler):
                 self._handle_inputs(min(max(0.0, wait - spin), 0.5))
             else:
                 self._handle_inputs(0.0)
-        return fired
-
+        return self._fired

@@ -73,6 +73,14 @@ class FlowStats:
         }
 
 
+def _lateness(frame: Any) -> str:
+    """``, "lateness_s": x`` for a frame from an application that the daemon read late (its stamp
+    ``t`` may be up to x after the application sent it); nothing otherwise."""
+    payload = frame.payload
+    late = getattr(payload, "lateness", 0.0) if payload is not None else 0.0
+    return f', "lateness_s": {round(late, 6)!r}' if late else ""
+
+
 def _num(value: float) -> float:
     return round(value, 9)
 
@@ -141,7 +149,7 @@ class Recorder:
         if stats is not None and frame.kind == DATA:
             stats.offered += 1
         if self._write is not None:
-            self._line(t, "enq", modem, frame)
+            self._line(t, "enq", modem, frame, None, _lateness(frame))
 
     def drop(self, t: float, modem: Any, frame: Any, cause: str) -> None:
         stats = frame.flow
@@ -150,7 +158,7 @@ class Recorder:
             if cause == "fifo":
                 stats.fifo_drops += 1
         if self._write is not None:
-            self._line(t, "drop", modem, frame, cause)
+            self._line(t, "drop", modem, frame, cause, _lateness(frame))
 
     def tx(self, t: float, modem: Any, frame: Any) -> None:
         stats = frame.flow

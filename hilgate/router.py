@@ -120,7 +120,10 @@ class Link:
         self._send(real, payload, self.seq, dst)
 
     def _send(self, real: bytes, payload: bytes, seq: int, dst: int) -> None:
-        self.send_frame(AppFrame(real, payload, self.packet, seq, self.address, dst, self.router.scheduler.now()))
+        scheduler = self.router.scheduler
+        frame = AppFrame(real, payload, self.packet, seq, self.address, dst, scheduler.now())
+        frame.lateness = getattr(scheduler, "input_lateness", 0.0)
+        self.send_frame(frame)
 
     def send_frame(self, frame: AppFrame) -> None:
         """Hand a frame to the backend. A frame it cannot carry (too large for the modem) raises
