@@ -97,7 +97,7 @@ class EvologicsBackend(QueuedBackend):
 
     # -- the port and the init sequence ---------------------------------------------------------------
 
-    def _on_port(self, up: bool) -> None:
+    def _on_port(self, up: bool, reason: str | None) -> None:
         self.codec = HostCodec(eol=self.options.eol_bytes())
         self.commands.clear()
         self.inflight = None
@@ -110,7 +110,7 @@ class EvologicsBackend(QueuedBackend):
             self.set_state("starting")
             self._init()
         else:
-            self.set_state("down")
+            self.set_state("down", reason)
 
     def _init(self) -> None:
         o = self.options

@@ -59,12 +59,12 @@ class S100Backend(QueuedBackend):
         self.port.close()
         super().close()
 
-    def _on_port(self, up: bool) -> None:
+    def _on_port(self, up: bool, reason: str | None) -> None:
         self.hunter = FrameHunter(self.packet)
         self.scheduler.cancel(self.piece_timer)
         self.piece_timer = None
         self.pieces.clear()  # a frame half written is lost with the adapter; the rest wait
-        self.set_state("up" if up else "down")
+        self.set_state("up" if up else "down", reason)
         if up:
             self.pump()
 
