@@ -25,7 +25,7 @@ PROTO = 1
 
 
 class ControlServer:
-    def __init__(self, path: str, scheduler: Any, status: Callable[[], dict], reload: Callable[[], tuple[bool, str]],
+    def __init__(self, path: str, scheduler: Any, status: Callable[[], dict], reload: Callable[[Callable[[bool, str], Any]], Any],
                  extra: dict[str, Callable[[dict], dict]] | None = None):
         self.path = path
         self.scheduler = scheduler
@@ -80,9 +80,8 @@ class _ControlClient:
         server = self.server
         if kind == "STATUS":
             self.send(self._status())
-        elif kind == "RELOAD":
-            ok, error = server.reload()
-            self.send({"class": "RELOAD", "ok": ok, **({"error": error} if error else {})})
+        elif kind == "RELOAD":  # answered when the new scene is applied or refused
+            server.reload(lambda ok, error: self.send({"class": "RELOAD", "ok": ok, **({"error": error} if error else {})}))
         elif kind == "WATCH":
             self._stop_watch()
             if request.get("enable", True):

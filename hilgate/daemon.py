@@ -10,7 +10,7 @@ import signal
 import socket
 import sys
 import time
-from typing import Any
+from typing import Any, Callable
 
 from . import __version__
 from .control import ControlServer
@@ -21,6 +21,7 @@ from .realtime import RealtimeScheduler
 from .recorder import Recorder
 from .router import Router
 from .scene import Scene, SceneError, load_scene
+from .scene_worker import SceneJob, request_for
 from .sdnotify import notify, watchdog_interval
 from .simulate import write_summary
 from .streams import Listener
@@ -52,6 +53,10 @@ class Daemon:
         self.scene: Scene | None = None
         self.trace = None
         self.stopping = False
+        self._reload_job: SceneJob | None = None
+        self._reload_again = False
+        self._reload_waiting: list[Callable[[bool, str], Any]] = []
+        self._reload_next: list[Callable[[bool, str], Any]] = []
 
     def run(self) -> int:
         scene = load_scene(self.scene_path, self.overrides)  # a bad scene never half-starts
@@ -79,7 +84,7 @@ class Daemon:
                 log.info("GLI over TCP on %s:%d", host, port)
             self.control = ControlServer(os.path.join(self.runtime_dir, "control.sock"), scheduler,
                                          self.status, self.reload)
-            scheduler.on_signal(signal.SIGHUP, lambda s: self.reload())
+            scheduler.on_signal(signal.SIGHUP, lambda s: self.reload())  # answered in the log only
             scheduler.on_signal(signal.SIGTERM, self.stop)
             scheduler.on_signal(signal.SIGINT, self.stop)
             self._periodic()
@@ -129,20 +134,64 @@ class Daemon:
         return (f"hilgate t={self.scheduler.now():8.1f} s | {up}/{len(links)} links up | tx {tx} rx {rx} "
                 f"drops {drops} | {clients} socket clients")
 
-    def reload(self) -> tuple[bool, str]:
+    def reload(self, reply: Callable[[bool, str], Any] | None = None) -> None:
+        """Re-read the scene (SIGHUP, ``systemctl reload``, a control RELOAD).  The file is loaded
+        and validated in a worker process (:mod:`hilgate.scene_worker`) while the loop keeps
+        delivering; a valid scene is applied on the loop.  Every outcome is answered to ``reply``,
+        logged in one line and followed by READY=1.  A reload asked while one runs is done once
+        more after it, so the last version of the file always wins."""
+        if self._reload_job is not None:
+            self._reload_again = True
+            if reply is not None:
+                self._reload_next.append(reply)
+            return
+        if reply is not None:
+            self._reload_waiting.append(reply)
         notify("RELOADING=1", f"MONOTONIC_USEC={time.monotonic_ns() // 1000}", "STATUS=reloading")
+        log.info("reloading %s", self.scene_path)
         try:
-            scene = load_scene(self.scene_path, self.overrides)
-        except SceneError as exc:
-            log.error("reload refused, the running scene stays: %s", exc)
-            notify("READY=1", f"STATUS=reload refused: {exc}")
-            return False, str(exc)
-        self.router.apply(scene)
-        self.live.apply(scene, self.router.world.poses)
-        self.scene = scene
-        log.info("reloaded %s", self.scene_path)
-        notify("READY=1", f"STATUS=running {scene.name!r}: {len(scene.links)} links")
-        return True, ""
+            self._reload_job = SceneJob(self.scheduler, self._scene_request(), self._reload_loaded)
+        except Exception as exc:  # cannot even start the worker (out of processes, memory…)
+            self._reload_finished(False, f"cannot start the scene loader: {type(exc).__name__}: {exc}")
+
+    def _scene_request(self) -> dict[str, Any]:
+        return request_for(self.scene_path, self.overrides)
+
+    def _reload_loaded(self, scene: Scene | None, error: str | None) -> None:
+        self._reload_job = None
+        if scene is None:
+            self._reload_finished(False, error or "unknown error")
+            return
+        try:
+            self.router.apply(scene)
+            self.live.apply(scene, self.router.world.poses)
+            self.scene = scene
+        except Exception as exc:  # e.g. a new link's port or queue cannot be opened
+            log.debug("reload failed while applying", exc_info=True)
+            self._reload_finished(False, f"applying the new scene failed (it may be applied in part): "
+                                         f"{type(exc).__name__}: {exc}")
+            return
+        self._reload_finished(True, "")
+
+    def _reload_finished(self, ok: bool, error: str) -> None:
+        scene = self.scene
+        if ok:
+            log.info("reloaded %s: %d links", self.scene_path, len(scene.links))
+            notify("READY=1", f"STATUS=running {scene.name!r}: {len(scene.links)} links")
+        else:
+            error = " ".join(error.split())
+            log.error("reload refused, the running scene stays: %s", error)
+            notify("READY=1", f"STATUS=reload refused: {error}"[:1000])
+        waiting, self._reload_waiting = self._reload_waiting, []
+        for reply in waiting:
+            try:
+                reply(ok, error)
+            except Exception:
+                log.exception("answering a reload request failed")
+        if self._reload_again:
+            self._reload_again = False
+            self._reload_waiting, self._reload_next = self._reload_next, []
+            self.reload()
 
     def stop(self, signum: int | None = None) -> None:
         log.info("stopping (%s)", signal.Signals(signum).name if signum else "request")
@@ -160,6 +209,8 @@ class Daemon:
             summary = self.recorder.summary(self.scene, router.world.seed, self.scheduler.now(), 0.0,
                                             router.world.modems.values())
             write_summary(summary, self.summary_path)
+        if self._reload_job is not None:
+            self._reload_job.cancel()
         for closer in (getattr(self, "live", None), self.control, self.tcp_listener, router):
             if closer is not None:
                 try:

@@ -33,6 +33,10 @@ class ErrorModel:
             return r
         return -math.expm1(self._bits_per_byte * size * math.log1p(-r))
 
+    def __reduce__(self):
+        """Pickled as its source: the daemon validates a reloaded scene in a child process."""
+        return (ErrorModel, (self.unit, self.expression.text))
+
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, ErrorModel):
             return NotImplemented
