@@ -23,12 +23,18 @@ def _add_scene_args(parser: argparse.ArgumentParser, optional: bool = False) -> 
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY.PATH=VALUE",
                         help="override a scene value, '*' matches every key at its level "
                              "(e.g. --set 'links.*.mac.protocol=s-fama'); VALUE null removes the key; repeatable")
+    parser.add_argument("--plugin", dest="plugins", action="append", default=[], metavar="FILE.py|MODULE",
+                        help="load this plugin (e.g. a MAC protocol) besides the scene's plugins: list; a .py file "
+                             "(relative to the working directory) or an installed module; repeatable")
+    parser.add_argument("--preset-dir", dest="preset_dirs", action="append", default=[], metavar="DIR",
+                        help="model: preset files may also come from this directory (besides the scene's own); "
+                             "repeatable")
 
 
 def cmd_check(args: argparse.Namespace) -> int:
     from .scene import load_scene, scene_summary
 
-    scene = load_scene(args.scene, args.overrides)
+    scene = load_scene(args.scene, args.overrides, plugins=args.plugins, preset_dirs=args.preset_dirs)
     print(scene_summary(scene))
     print("ok")
     return 0
@@ -39,7 +45,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from .simulate import simulate, write_summary
     from .table import format_summary
 
-    scene = load_scene(args.scene, args.overrides)
+    scene = load_scene(args.scene, args.overrides, plugins=args.plugins, preset_dirs=args.preset_dirs)
     if args.until is not None and args.until <= 0:
         raise SceneError("--until", 0, "", f"must be positive, not {args.until:g}")
     trace_path = args.trace if args.trace is not None else scene.trace_file
@@ -72,7 +78,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
         log.info("real-time set-up: %s", make_realtime(args.realtime_priority))
     daemon = Daemon(scene, args.overrides, daemon_runtime_dir(args.runtime_dir), args.speed, args.tcp,
-                    args.trace, args.summary, args.until, status_line, args.gli_backlog)
+                    args.trace, args.summary, args.until, status_line, args.gli_backlog, args.group,
+                    args.max_clients, args.max_link_clients, plugins=args.plugins, preset_dirs=args.preset_dirs)
     return daemon.run()
 
 
@@ -200,7 +207,7 @@ def cmd_queues(args: argparse.Namespace) -> int:
     from .gli_mq import queue_names
     from .scene import load_scene
 
-    scene = load_scene(args.scene, args.overrides)
+    scene = load_scene(args.scene, args.overrides, plugins=args.plugins, preset_dirs=args.preset_dirs)
     for link_id in scene.links:
         for name in queue_names(link_id):
             try:
@@ -303,6 +310,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--gli-backlog", type=int, default=1000, metavar="N",
                    help="frames kept per link while an application's receive queue is full (default 1000); "
                         "beyond that they are dropped and counted")
+    p.add_argument("--group", metavar="GROUP",
+                   help="the group whose members may use the sockets and queues (default: the daemon's own "
+                        "group; the systemd unit runs as group hilgate)")
+    p.add_argument("--max-clients", type=int, default=256, metavar="N",
+                   help="socket GLI clients at once, all links together (default 256)")
+    p.add_argument("--max-link-clients", type=int, default=32, metavar="N",
+                   help="socket GLI clients at once on one link (default 32)")
 
     e = sub.add_parser("emulate", help="run a scene with one simulated link shown as an EvoLogics or S100 device")
     e.add_argument("protocol", choices=["evologics", "s100"])
@@ -311,7 +325,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--pty", help="link the emulated device's pseudo-terminal here (e.g. /tmp/ttyEVO0)")
     e.add_argument("--tcp", type=int, help="listen on this loopback port instead (EvoLogics only)")
     for action in p._actions:  # the daemon's own options (speed, runtime dir, trace…), not its --tcp
-        if action.dest not in ("help", "scene", "overrides", "tcp") and action.option_strings:
+        if action.dest not in ("help", "scene", "overrides", "plugins", "preset_dirs", "tcp") and action.option_strings:
             e._add_action(action)
 
     p = sub.add_parser("queues", help="list (or --unlink) the dccomms POSIX queues of a scene's links")

@@ -11,11 +11,22 @@ import difflib
 import math
 from typing import Any, Callable, Iterable, Sequence
 
-from .located import Node, SceneError
+from .located import Node, SceneError, one_line
 
 MISSING: Any = object()
 
 Checker = Callable[[Node, str], Any]
+
+
+QUOTE = 60  # characters of a value quoted in a message
+
+
+def quote(value: Any) -> str:
+    """``repr(value)`` short enough for an error line (a scene may hold a 1 MB string or a 1 000-digit
+    number; the message needs only its beginning)."""
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10 ** QUOTE:
+        return f"a number of {len(str(abs(value)))} digits"
+    return one_line(repr(value), QUOTE)
 
 
 def describe(node: Node) -> str:
@@ -29,8 +40,8 @@ def describe(node: Node) -> str:
     if isinstance(value, bool):
         return f"the boolean {str(value).lower()}"
     if isinstance(value, str):
-        return f"the text {value!r}"
-    return f"{value!r}"
+        return f"the text {quote(value)}"
+    return quote(value)
 
 
 def join_path(path: str, key: str | int) -> str:
@@ -87,7 +98,10 @@ def number(minimum: float | None = None, maximum: float | None = None, *, above:
         value = node.value
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise node.error(path, f"must be a number, not {describe(node)}")
-        value = float(value)
+        try:
+            value = float(value)
+        except OverflowError:
+            raise node.error(path, f"must be a finite number; {describe(node)} is too large") from None
         if math.isnan(value) or (math.isinf(value) and not allow_inf):
             raise node.error(path, f"must be a finite number, not {value}")
         if minimum is not None and value < minimum:
@@ -109,9 +123,9 @@ def integer(minimum: int | None = None, maximum: int | None = None) -> Checker:
         if isinstance(value, bool) or not isinstance(value, int):
             raise node.error(path, f"must be a whole number, not {describe(node)}")
         if minimum is not None and value < minimum:
-            raise node.error(path, f"must be at least {minimum}, not {value}")
+            raise node.error(path, f"must be at least {minimum}, not {quote(value)}")
         if maximum is not None and value > maximum:
-            raise node.error(path, f"must be at most {maximum}, not {value}")
+            raise node.error(path, f"must be at most {maximum}, not {quote(value)}")
         return value
 
     return check

@@ -7,18 +7,20 @@ A scene is validated completely before anything is built from it, so a bad scene
 
 from __future__ import annotations
 
-import importlib
 import importlib.resources
+import logging
 import math
 import os
 import re
+import stat
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 from .fields import (
-    Fields, boolean, choice, describe, integer, items, join_path, mapping, number, text, vector,
+    Fields, boolean, choice, describe, integer, items, join_path, mapping, number, quote, text, vector,
 )
-from .located import Node, SceneError, load_file, load_text, parse_scalar
+from .located import MAX_DEPTH, MAX_FILE_BYTES, Node, SceneError, load_file, load_text, parse_scalar, read_limited, size_text
+from .plugins import Plugin, PluginError, classes_of, load_plugin
 from .models.errormodel import UNITS, ErrorModel
 from .models.expr import ExprError, compile_expression
 from .models.flows import FlowSpec
@@ -33,7 +35,9 @@ __all__ = [
     "preset_names", "POSE_KINDS", "BACKENDS",
 ]
 
-TOP_KEYS = ("name", "seed", "duration_s", "channels", "vehicles", "links", "flows", "trace", "cameras")
+log = logging.getLogger(__name__)
+
+TOP_KEYS = ("name", "seed", "duration_s", "plugins", "channels", "vehicles", "links", "flows", "trace", "cameras")
 CHANNEL_KEYS = ("speed_mps", "min_delay_s")
 VEHICLE_KEYS = ("pose", "stale_after_s", "stale", "extrapolate_s", "initial", "feedback")
 LIVE_KINDS = ("mavlink", "aruco")
@@ -53,7 +57,9 @@ LINK_KEYS = ("vehicle", "backend", "model", "address", "channel", "tx_channel", 
 FLOW_KEYS = ("from", "to", "size_bytes", "interval_s", "rate_hz", "poisson", "start_s", "stop_s")
 BACKENDS = ("sim", "evologics", "s100")
 PACKET_CLASSES = ("raw", "vl1b", "vl2b", "dlf16", "dlf32", "simple:N")
-LINK_ID = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,200}$")
+LINK_ID = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,200}")
+PRESET_SUFFIXES = (".yaml", ".yml")
+MAX_PRESET_BYTES = 64 * 1024
 
 
 @dataclass(frozen=True)
@@ -100,11 +106,19 @@ class CameraSpec:
 
 @dataclass(frozen=True)
 class MacSpec:
+    """``protocol`` as the scene names it; ``cls`` is the class it named (a built-in one, or one that a
+    listed plugin provides), resolved when the scene loaded so that building never imports anything."""
+
     protocol: str
     params: tuple[tuple[str, Any], ...] = ()
+    cls: type[Mac] | None = field(default=None, compare=False, repr=False)
+
+    @property
+    def mac_class(self) -> type[Mac]:
+        return self.cls or MAC_REGISTRY[self.protocol]
 
     def build(self) -> Mac:
-        return mac_class(self.protocol)(**dict(self.params))
+        return self.mac_class(**dict(self.params))
 
 
 @dataclass(frozen=True)
@@ -143,7 +157,38 @@ class Scene:
         return None
 
 
-# -- presets --------------------------------------------------------------------------------------
+# -- what a scene may reference: paths, presets, plugins ----------------------------------------
+
+
+@dataclass(frozen=True)
+class _Context:
+    """What validation needs besides the YAML: where the scene is, the extra preset directories the
+    user allowed (``--preset-dir``) and the loaded plugins by name."""
+
+    scene_dir: str
+    preset_dirs: tuple[str, ...] = ()
+    plugins: dict[str, Plugin] = field(default_factory=dict)
+
+
+def base_dir(node: Node) -> str:
+    """The directory a relative path written in ``node`` is taken from: that of the file it was
+    written in (a scene travels with the files it names, and under systemd the working directory is
+    /var/lib/hilgate), or the working directory for a value given on the command line (``--set``)."""
+    if not node.file or node.file == "--set" or node.file.startswith("<"):
+        return os.getcwd()
+    return os.path.dirname(os.path.abspath(node.file))
+
+
+def path_value(node: Node, path: str) -> str:
+    """Checker: a file path, made absolute relative to the file that names it (see :func:`base_dir`)."""
+    value = text(node, path)
+    if "\0" in value:
+        raise node.error(path, "a path cannot contain a NUL character")
+    return os.path.normpath(os.path.join(base_dir(node), value))
+
+
+def _inside(path: str, folder: str) -> bool:
+    return path == folder or path.startswith(folder.rstrip(os.sep) + os.sep)
 
 
 def preset_names() -> list[str]:
@@ -151,21 +196,75 @@ def preset_names() -> list[str]:
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".yaml"))
 
 
-def _load_preset(name_node: Node, path: str, scene_dir: str) -> Node:
+def _load_preset(name_node: Node, path: str, ctx: _Context) -> Node:
+    """A packaged preset by name, or a preset file the scene may read (see :func:`_preset_file`)."""
     name = text(name_node, path)
-    if name.endswith((".yaml", ".yml")) or os.sep in name:
-        file = name if os.path.isabs(name) else os.path.join(scene_dir, name)
-        node = load_file(file)
-    else:
+    if name in preset_names():
         resource = importlib.resources.files("hilgate.models") / f"{name}.yaml"
-        if not re.fullmatch(r"[A-Za-z0-9_.-]+", name) or not resource.is_file():
-            raise name_node.error(path, f"unknown modem model {name!r}; presets: {', '.join(preset_names())} "
-                                        "(or a path to your own .yaml)")
         node = load_text(resource.read_text(encoding="utf-8"), f"models/{name}.yaml")
+    elif name.endswith(PRESET_SUFFIXES) or "/" in name or os.sep in name:
+        file, real, info = _preset_file(name_node, path, name, ctx)
+        try:
+            node = load_text(read_limited(real, MAX_PRESET_BYTES, "the preset", expect=info), file, MAX_PRESET_BYTES)
+        except SceneError as exc:
+            if exc.line or exc.file != real:
+                raise
+            raise name_node.error(path, exc.message) from None
+    else:
+        raise name_node.error(path, f"unknown modem model {quote(name)}; presets: {', '.join(preset_names())} "
+                                    "(or a .yaml file of your own in the scene's directory)")
     if node is None or not node.is_map:
         raise SceneError(node.file if node else name, node.line if node else 0, "", "a modem preset must be a mapping of link keys")
     Fields(node, "", MODEM_KEYS)
     return node
+
+
+def _preset_file(node: Node, path: str, name: str, ctx: _Context) -> tuple[str, str, os.stat_result]:
+    """Where a preset file is, checked before it is opened: a ``.yaml``/``.yml`` regular file of at most
+    64 KB whose real path (symbolic links resolved) lies under the scene's directory or a
+    ``--preset-dir``.  Anything else (``/etc/shadow``, ``/dev/zero``, a FIFO) is refused unread, so no
+    error can show a line of it.  Returns (the path as named, its real path, its stat)."""
+    if "\0" in name:
+        raise node.error(path, "a path cannot contain a NUL character")
+    if not name.endswith(PRESET_SUFFIXES):
+        raise node.error(path, "a preset file must end in .yaml or .yml")
+    file = os.path.normpath(os.path.join(base_dir(node), name))
+    real = os.path.realpath(file)
+    roots = [os.path.realpath(folder) for folder in (ctx.scene_dir, *ctx.preset_dirs)]
+    if not any(_inside(real, root) for root in roots):
+        raise node.error(path, f"preset {quote(name)} is outside the scene's directory {ctx.scene_dir}"
+                               + (" and the --preset-dir directories" if ctx.preset_dirs else "")
+                               + " (add its directory with --preset-dir)")
+    try:
+        info = os.stat(real)
+    except OSError as exc:
+        raise node.error(path, f"cannot read preset {quote(name)}: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(info.st_mode):
+        raise node.error(path, f"preset {quote(name)} is not a regular file")
+    if info.st_size > MAX_PRESET_BYTES:
+        raise node.error(path, f"preset {quote(name)} is larger than {size_text(MAX_PRESET_BYTES)}")
+    return file, real, info
+
+
+def _load_plugins(node: Node | None, extra: Sequence[str]) -> dict[str, Plugin]:
+    """The scene's ``plugins:`` (relative to the scene) and ``--plugin`` ones (relative to the working
+    directory), loaded: the only user code a scene runs."""
+    plugins: dict[str, Plugin] = {}
+    entries: list[tuple[Node, str]] = []
+    if node is not None and node.value is not None:
+        entries = [(item, join_path("plugins", i)) for i, item in enumerate(items(node, "plugins"))]
+    entries += [(Node(entry, "--plugin", 0), "") for entry in extra]
+    for item, path in entries:
+        entry = text(item, path) if path else str(item.value)
+        try:
+            plugin = load_plugin(entry, base_dir(item))
+        except PluginError as exc:
+            raise item.error(path, f"cannot load plugin {quote(entry)}: {exc}") from None
+        other = plugins.get(plugin.name)
+        if other is not None and other.source != plugin.source:
+            raise item.error(path, f"two plugins are named {plugin.name!r}: {other.source} and {plugin.source}")
+        plugins[plugin.name] = plugin
+    return plugins
 
 
 def _merge(base: Node, override: Node) -> Node:
@@ -190,6 +289,8 @@ def apply_override(root: Node, assignment: str) -> None:
     parts = [p for p in path.strip().split(".")]
     if not all(parts):
         raise SceneError("--set", 0, path, "empty key in the path")
+    if len(parts) > MAX_DEPTH:
+        raise SceneError("--set", 0, path, f"a key path deeper than {MAX_DEPTH} levels")
     value = parse_scalar(raw)
 
     def to_node(v: Any) -> Node:
@@ -254,22 +355,51 @@ def _packet_class(node: Node, path: str) -> str:
     if isinstance(value, str):
         if value in ("raw", "vl1b", "vl2b", "dlf16", "dlf32"):
             return value
-        match = re.fullmatch(r"simple:(\d+)", value)
+        match = re.fullmatch(r"simple:([0-9]{1,5})", value)
         if match and 4 <= int(match.group(1)) <= 8000:
             return value
     raise node.error(path, f"must be one of {', '.join(PACKET_CLASSES)} (N, the whole packet, from 4 to 8000 "
                            f"bytes), not {describe(node)}")
 
 
-def mac_class(protocol: str) -> type[Mac]:
+def _plugin_macs(plugins: dict[str, Plugin]) -> dict[str, list[tuple[str, type[Mac]]]]:
+    """MAC classes the plugins define, by their own ``name`` attribute → [(``plugin:Class``, class)]."""
+    found: dict[str, list[tuple[str, type[Mac]]]] = {}
+    for plugin in plugins.values():
+        for attr, cls in classes_of(plugin, Mac).items():
+            name = cls.__dict__.get("name")
+            if isinstance(name, str) and name:
+                found.setdefault(name, []).append((f"{plugin.name}:{attr}", cls))
+    return found
+
+
+def _mac_class(protocol: str, node: Node, path: str, plugins: dict[str, Plugin]) -> type[Mac]:
+    """The class a ``protocol`` names: built in, ``plugin:Class`` of a listed plugin, or the ``name``
+    of a MAC a listed plugin defines.  Never imports anything: plugins are loaded already."""
     if protocol in MAC_REGISTRY:
         return MAC_REGISTRY[protocol]
-    module_name, _, class_name = protocol.partition(":")
-    module = importlib.import_module(module_name)
-    cls = getattr(module, class_name)
-    if not (isinstance(cls, type) and issubclass(cls, Mac)):
-        raise TypeError(f"{protocol} is not a subclass of hilgate.models.mac.Mac")
-    return cls
+    if ":" in protocol:
+        plugin_name, _, class_name = protocol.partition(":")
+        plugin = plugins.get(plugin_name)
+        if plugin is None:
+            raise node.error(path, f"MAC {quote(protocol)}: {quote(plugin_name)} is not a listed plugin (list its .py "
+                                   "file or module under plugins:, or give --plugin)")
+        cls = getattr(plugin.module, class_name, None) if class_name.isidentifier() else None
+        if cls is None:
+            raise node.error(path, f"plugin {plugin_name!r} has no {quote(class_name)}")
+        if not (isinstance(cls, type) and issubclass(cls, Mac)):
+            raise node.error(path, f"{quote(protocol)} is not a MAC (a subclass of hilgate.models.mac.Mac)")
+        return cls
+    provided = _plugin_macs(plugins)
+    if len(provided.get(protocol, ())) == 1:
+        return provided[protocol][0][1]
+    if protocol in provided:
+        raise node.error(path, f"MAC {protocol!r} is defined by several plugins ("
+                               f"{', '.join(ref for ref, _ in provided[protocol])}); name one as plugin:Class")
+    offered = ", ".join(f"{name} ({refs[0][0]})" for name, refs in provided.items())
+    raise node.error(path, f"unknown MAC protocol {quote(protocol)}; built in: {', '.join(MAC_REGISTRY)}"
+                           + (f"; from plugins: {offered}" if offered else "")
+                           + " (a MAC of your own comes from a .py file or module listed under plugins:)")
 
 
 def _param_value(param: Param, node: Node, path: str) -> Any:
@@ -291,7 +421,7 @@ def _param_value(param: Param, node: Node, path: str) -> Any:
     raise node.error(path, f"internal: unknown parameter kind {param.kind!r}")
 
 
-def _mac_spec(node: Node, path: str) -> MacSpec:
+def _mac_spec(node: Node, path: str, plugins: dict[str, Plugin]) -> MacSpec:
     if isinstance(node.value, str):  # shorthand: mac: cs-aloha
         node = Node({"protocol": Node(node.value, node.file, node.line)}, node.file, node.line)
     values = mapping(node, path)
@@ -299,21 +429,14 @@ def _mac_spec(node: Node, path: str) -> MacSpec:
     if proto_node is None:
         raise node.error(path, "missing required key 'protocol'")
     protocol = text(proto_node, join_path(path, "protocol"))
-    if protocol not in MAC_REGISTRY and ":" not in protocol:
-        raise proto_node.error(join_path(path, "protocol"),
-                               f"unknown MAC protocol {protocol!r}; built in: {', '.join(MAC_REGISTRY)} "
-                               "(or package.module:ClassName)")
-    try:
-        cls = mac_class(protocol)
-    except Exception as exc:  # the user's own module: any import problem is a scene error
-        raise proto_node.error(join_path(path, "protocol"), f"cannot load MAC {protocol!r}: {exc}") from None
+    cls = _mac_class(protocol, proto_node, join_path(path, "protocol"), plugins)
     f = Fields(node, path, ("protocol",) + tuple(cls.PARAMETERS))
     params = []
     for key, param in cls.PARAMETERS.items():
         value = f.get(key, lambda n, p, param=param: _param_value(param, n, p), param.default)
         if value is not None:
             params.append((key, value))
-    return MacSpec(protocol, tuple(params))
+    return MacSpec(protocol, tuple(params), None if protocol in MAC_REGISTRY else cls)
 
 
 # -- pose sources ---------------------------------------------------------------------------------
@@ -384,7 +507,29 @@ def _mavlink_pose(node: Node, path: str) -> Any:
     if rates_node is not None:
         rates = tuple((name, number(above=0, maximum=1000)(value, join_path(f.sub("message_rates"), name)))
                       for name, value in mapping(rates_node, f.sub("message_rates")).items())
-    heartbeat = f.get("heartbeat", boolean, True)
+    # hilgate sends a vehicle nothing the scene did not ask for, and never as its ground station
+    # (drivers/mavlink_identity.py says why): heartbeat: false (default) | true | {system_id, component_id, rate_hz}
+    from .drivers import mavlink_identity as ident
+
+    hb_node, hb_path = f.child("heartbeat"), f.sub("heartbeat")
+    heartbeat = None
+    if hb_node is not None and (hb_node.is_map or boolean(hb_node, hb_path)):
+        own, component, rate = system_id, ident.DEFAULT_COMPONENT_ID, ident.DEFAULT_HEARTBEAT_HZ  # as a companion's
+        where = {"system_id": (f.child("system_id"), f.sub("system_id")), "component_id": (hb_node, hb_path)}
+        if hb_node.is_map:
+            hf = Fields(hb_node, hb_path, ("system_id", "component_id", "rate_hz"))
+            own = hf.get("system_id", integer(1, 255), own)
+            component = hf.get("component_id", integer(1, 255), component)
+            rate = hf.get("rate_hz", number(above=0, maximum=10), rate)
+            where.update({key: (hf.child(key), hf.sub(key)) for key in ("system_id", "component_id") if key in hf})
+        if own is None:
+            raise hb_node.error(hb_path, "needs a system id to send as: give the vehicle's system_id (hilgate then "
+                                "sends as its companion computer does) or heartbeat: {system_id: N}")
+        for key, problem in (("system_id", ident.system_problem(own)),
+                             ("component_id", ident.component_problem(component))):
+            if problem is not None:
+                raise where[key][0].error(where[key][1], problem)
+        heartbeat = (("system_id", own), ("component_id", component), ("rate_hz", rate))
     return (("url", url), ("system_id", system_id), ("origin", origin), ("message_rates", rates),
             ("heartbeat", heartbeat))
 
@@ -468,9 +613,7 @@ def _camera(name: str, node: Node, path: str, vehicles: dict[str, VehicleSpec]) 
     source_node = f.child("source")
     if source_node is None:
         raise f.error("missing required key 'source' (a device index, a video file or a stream URL)")
-    source = source_node.value
-    if isinstance(source, bool) or not isinstance(source, (int, str)) or source == "":
-        raise source_node.error(f.sub("source"), f"must be a device index or a text, not {describe(source_node)}")
+    source = _camera_source(source_node, f.sub("source"))
     from .drivers.aruco import DICTIONARIES
 
     dictionary = f.get("dictionary", choice(*DICTIONARIES), "DICT_4X4_50")
@@ -494,13 +637,42 @@ def _camera(name: str, node: Node, path: str, vehicles: dict[str, VehicleSpec]) 
         entries = []
         for marker_id, marker_node in mapping(map_node, f.sub("map")).items():
             where = join_path(f.sub("map"), marker_id)
-            if not str(marker_id).isdigit():
+            if not re.fullmatch(r"[0-9]{1,9}", marker_id):
                 raise marker_node.error(where, "map keys are marker ids (whole numbers)")
             entries.append((int(marker_id), *_placement(marker_node, where)))
         markers = tuple(entries)
-    return CameraSpec(name, source, f.get("calibration", text), dictionary, f.get("marker_length_m", number(above=0)),
+    return CameraSpec(name, source, f.get("calibration", _calibration), dictionary, f.get("marker_length_m", number(above=0)),
                       fixed, onboard, markers, f.get("fps", number(above=0), None))
 
+
+
+def _camera_source(node: Node, path: str) -> int | str:
+    """A device index, a stream URL or a GStreamer pipeline as written; a video file relative to the scene."""
+    source = node.value
+    if isinstance(source, bool) or not isinstance(source, (int, str)) or source == "":
+        raise node.error(path, f"must be a device index or a text, not {describe(node)}")
+    if isinstance(source, str) and "://" not in source and not re.search(r"[\s!]", source) and not source.isdigit():
+        return path_value(node, path)
+    return source
+
+
+def _calibration(node: Node, path: str) -> str:
+    """The camera's calibration file, relative to the scene, read now by the camera driver's own
+    reader so that a missing or broken one fails ``hilgate check`` (not the daemon, later)."""
+    file = path_value(node, path)
+    if not os.path.lexists(file):
+        raise node.error(path, f"calibration file {file} does not exist")
+    try:
+        read_limited(file, MAX_FILE_BYTES, "the calibration file")  # a regular, readable, small file
+    except SceneError as exc:
+        raise node.error(path, f"{file}: {exc.message}") from None
+    from .drivers.aruco import CameraError, load_calibration
+
+    try:
+        load_calibration(file)
+    except CameraError as exc:
+        raise node.error(path, str(exc)) from None
+    return file
 
 
 def unknown_pose(kind: str) -> str:
@@ -512,14 +684,14 @@ def unknown_pose(kind: str) -> str:
 # -- links ----------------------------------------------------------------------------------------
 
 
-def _link(link_id: str, node: Node, path: str, scene: dict[str, Any], scene_dir: str) -> LinkSpec:
-    if not LINK_ID.match(link_id):
+def _link(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: _Context) -> LinkSpec:
+    if not LINK_ID.fullmatch(link_id):
         raise node.error(path, "a link id must be letters, digits, '_', '.' or '-' (it names POSIX queues)")
     Fields(node, path, LINK_KEYS)  # unknown keys first, before the preset hides them
     model_node = node.value.get("model")
     merged = node
     if model_node is not None:
-        merged = _merge(_load_preset(model_node, join_path(path, "model"), scene_dir), node)
+        merged = _merge(_load_preset(model_node, join_path(path, "model"), ctx), node)
     f = Fields(merged, path, LINK_KEYS)
     vehicle = f.get("vehicle", text)
     if vehicle not in scene["vehicles"]:
@@ -555,8 +727,11 @@ def _link(link_id: str, node: Node, path: str, scene: dict[str, Any], scene_dir:
         duplex=f.get("duplex", choice("half", "full"), "half"),
         promiscuous=f.get("promiscuous", boolean, False),
     )
-    mac = f.get("mac", _mac_spec, MacSpec("none"))
-    problem = mac_class(mac.protocol).check(params, dict(mac.params))
+    mac = f.get("mac", lambda n, p: _mac_spec(n, p, ctx.plugins), MacSpec("none"))
+    try:
+        problem = mac.mac_class.check(params, dict(mac.params))
+    except Exception as exc:  # a plugin's own check() failed
+        problem = f"the MAC's check failed: {type(exc).__name__}: {exc}"
     if problem:
         raise (f.child("mac") or f.node).error(f.sub("mac"), problem)
     packet = f.get("packet", _packet_class, "vl2b")
@@ -571,7 +746,7 @@ def _link(link_id: str, node: Node, path: str, scene: dict[str, Any], scene_dir:
 
 
 _DRIVER_CHECKS: dict[str, Callable[[Node, str], Any]] = {
-    "port": text,
+    "port": lambda node, path: _port(node, path),
     "baud": integer(50, 4_000_000),
     "im": boolean,
     "ack": boolean,
@@ -585,6 +760,18 @@ _DRIVER_CHECKS: dict[str, Callable[[Node, str], Any]] = {
     "queue_frames": integer(0, 100_000),
     "eol": choice("auto", "cr", "lf", "crlf"),
 }
+
+
+def _port(node: Node, path: str) -> str:
+    """A device path (relative to the scene) or a pyserial URL that hilgate can open."""
+    from .drivers.port import port_problem
+
+    value = node.value
+    problem = port_problem(value) if isinstance(value, str) and value else None
+    if problem:
+        raise node.error(path, problem)
+    value = text(node, path)
+    return value if "://" in value else path_value(node, path)
 
 
 def _driver_options(f: Fields, backend: str) -> tuple[tuple[str, Any], ...]:
@@ -610,7 +797,7 @@ def _emulate(node: Node, path: str) -> tuple[tuple[str, Any], ...]:
         if protocol != "evologics":
             raise f.child("tcp").error(f.sub("tcp"), "only the EvoLogics modem speaks TCP; the S100 is serial")
         return (("protocol", protocol), ("tcp", f.get("tcp", integer(1, 65535))))
-    return (("protocol", protocol), ("pty", f.get("pty", text)))
+    return (("protocol", protocol), ("pty", f.get("pty", path_value)))
 
 
 def _assign_addresses(links: dict[str, LinkSpec], nodes: dict[str, Node]) -> dict[str, LinkSpec]:
@@ -686,13 +873,14 @@ def _flow(node: Node, path: str, links: dict[str, LinkSpec], duration: float) ->
 # -- the whole scene ------------------------------------------------------------------------------
 
 
-def _validate(root: Node | None, file: str) -> Scene:
+def _validate(root: Node | None, file: str, plugins: Sequence[str] = (), preset_dirs: Sequence[str] = ()) -> Scene:
     if root is None:
         raise SceneError(file, 0, "", "the scene is empty")
     if root.is_map:  # top-level x-… keys hold YAML anchors for reuse (as in docker-compose): ignored
         root = Node({k: v for k, v in root.items() if not k.startswith("x-")}, root.file, root.line)
     f = Fields(root, "", TOP_KEYS)
     scene_dir = os.path.dirname(os.path.abspath(file)) if not file.startswith("<") else os.getcwd()
+    ctx = _Context(scene_dir, tuple(preset_dirs), _load_plugins(f.child("plugins"), plugins))
     name = f.get("name", text, os.path.splitext(os.path.basename(file))[0])
     seed = f.get("seed", integer(0, 2**63 - 1), 1)
     duration = f.get("duration_s", number(above=0), 60.0)
@@ -738,7 +926,7 @@ def _validate(root: Node | None, file: str) -> Scene:
         raise f.error("missing required key 'links'")
     link_nodes = mapping(links_node, "links")
     context = {"channels": channels, "vehicles": vehicles}
-    links = {lid: _link(lid, lnode, join_path("links", lid), context, scene_dir) for lid, lnode in link_nodes.items()}
+    links = {lid: _link(lid, lnode, join_path("links", lid), context, ctx) for lid, lnode in link_nodes.items()}
     links = _assign_addresses(links, link_nodes)
 
     flows: list[FlowSpec] = []
@@ -752,25 +940,35 @@ def _validate(root: Node | None, file: str) -> Scene:
     trace_node = f.child("trace")
     if trace_node is not None:
         tf = Fields(trace_node, "trace", ("file", "poses_s"))
-        trace_file = tf.get("file", text, None)
+        trace_file = tf.get("file", path_value, None)
         trace_poses = tf.get("poses_s", number(0), 1.0) or None
     return Scene(name, seed, duration, channels, vehicles, links, flows, trace_file, file, cameras, trace_poses)
 
 
-def load_scene(path: str, overrides: list[str] | tuple[str, ...] = ()) -> Scene:
+def load_scene(path: str, overrides: Sequence[str] = (), *, plugins: Sequence[str] = (),
+               preset_dirs: Sequence[str] = ()) -> Scene:
+    """Load, override and validate the scene file at ``path``; every problem is one :class:`SceneError`.
+
+    ``plugins``: ``--plugin`` entries (``.py`` files relative to the working directory, or module
+    names), loaded besides the scene's own ``plugins:``; ``preset_dirs``: ``--preset-dir``
+    directories a ``model:`` file may come from besides the scene's own directory."""
     root = load_file(path)
     for assignment in overrides:
         if root is None:
             root = Node({}, path, 0)
         apply_override(root, assignment)
-    return _validate(root, path)
+    return _validate(root, path, plugins, preset_dirs)
 
 
-def load_scene_text(text_: str, file: str = "<scene>", overrides: list[str] | tuple[str, ...] = ()) -> Scene:
+def load_scene_text(text_: str, file: str = "<scene>", overrides: Sequence[str] = (), *,
+                    plugins: Sequence[str] = (), preset_dirs: Sequence[str] = ()) -> Scene:
+    """:func:`load_scene` for text; ``file`` names it in errors and its directory is the scene's."""
     root = load_text(text_, file)
     for assignment in overrides:
+        if root is None:
+            root = Node({}, file, 0)
         apply_override(root, assignment)
-    return _validate(root, file)
+    return _validate(root, file, plugins, preset_dirs)
 
 
 def scene_summary(scene: Scene) -> str:

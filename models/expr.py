@@ -307,7 +307,13 @@ def compile_expression(text: object) -> Expression:
     """Parse ``text`` (a string or a number) into an :class:`Expression`, or raise :class:`ExprError`."""
     if isinstance(text, bool) or not isinstance(text, (str, int, float)):
         raise ExprError(f"an error-rate expression must be a string or a number, not {type(text).__name__}")
-    source = text if isinstance(text, str) else repr(float(text))
+    if isinstance(text, str):
+        source = text
+    else:
+        try:
+            source = repr(float(text))
+        except OverflowError:  # an int beyond a float's range (YAML reads 400 nines as one)
+            raise ExprError("the number is too large (beyond a float's ±1.8e308)") from None
     if len(source) > MAX_LENGTH:
         raise ExprError(f"expression longer than {MAX_LENGTH} characters")
     if not source.strip():

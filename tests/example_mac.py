@@ -1,7 +1,8 @@
 """The README's example of a user-defined MAC: TDMA, each node sends only in its own time slot.
 
-Load it in a scene with ``mac: {protocol: "example_mac:Tdma", slot_s: 0.5, slots: 4}`` (the module
-must be importable: on PYTHONPATH, or installed)."""
+List it in a scene (``plugins: [example_mac.py]``, relative to the scene's file) or give
+``--plugin example_mac.py``, then name it by its ``name``, ``mac: {protocol: tdma, slot_s: 0.5, slots: 4}``,
+or as ``plugin:Class``, ``mac: {protocol: "example_mac:Tdma"}``."""
 
 from hilgate.models.mac import Mac, Param
 

@@ -122,3 +122,12 @@ def test_fuzz_only_expr_errors_and_evaluation_never_raises(text):
         value = expression(d)
         assert isinstance(value, float)
         assert 0.0 <= expression.rate(d) <= 1.0
+
+
+def test_integers_beyond_a_float_are_refused_not_overflowing():
+    with pytest.raises(ExprError, match="too large"):
+        compile_expression(10 ** 400)
+    with pytest.raises(ExprError, match="too large"):
+        compile_expression(-(10 ** 5000))
+    with pytest.raises(ExprError, match="too large"):
+        compile_expression("9" * 400)

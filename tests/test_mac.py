@@ -3,6 +3,7 @@ carrier sense and overhearing; and that backoffs are reproducible for a seed."""
 
 import io
 import json
+import os
 
 import pytest
 
@@ -199,13 +200,31 @@ def test_mac_parameters_are_validated_with_file_and_line():
     assert "max_range_m" in info.value.message and info.value.path == "links.la.mac"
 
 
-def test_user_defined_mac_from_a_module():
+EXAMPLE_MAC = os.path.join(os.path.dirname(os.path.abspath(__file__)), "example_mac.py")
+
+
+def trace_of_plugin(text, **kw):
+    out = io.StringIO()
+    return simulate(load_scene_text(text, "mac.yaml", **kw), trace=out), out.getvalue()
+
+
+@pytest.mark.parametrize("protocol,scene_plugins,cli_plugins", [
+    ("tdma", f"plugins: [{json.dumps(EXAMPLE_MAC)}]\n", ()),       # listed in the scene, named by its name
+    ("example_mac:Tdma", "", (EXAMPLE_MAC,)),                        # --plugin, named as plugin:Class
+    ("example_mac:Tdma", "plugins: [example_mac]\n", ()),            # an importable module
+])
+def test_user_defined_mac_from_a_plugin(protocol, scene_plugins, cli_plugins):
     text = SCENE.format(seed=1).replace("{protocol: cs-aloha, backoff_s: [0.1, 0.5]}",
-                                        '{protocol: "example_mac:Tdma", slot_s: 0.5, slots: 4}')
-    summary, trace = trace_of(text)
+                                        f'{{protocol: "{protocol}", slot_s: 0.5, slots: 4}}') + scene_plugins
+    summary, trace = trace_of_plugin(text, plugins=cli_plugins)
     sends = [json.loads(line) for line in trace.splitlines() if '"ev": "tx"' in line]
     slots = {"la": 1, "lb": 2, "lc": 3}  # addresses 1, 2, 3 -> slots 1, 2, 3 of a 2 s cycle
     assert sends and all(round(e["t"] % 2.0, 6) in (round(slots[e["link"]] * 0.5, 6),) for e in sends)
     assert summary["flows"][0]["lost"]["col"] == 0 and summary["flows"][0]["rx_packets"] > 0
-    with pytest.raises(SceneError, match="cannot load MAC"):
+
+
+def test_a_mac_that_no_listed_plugin_provides_is_a_scene_error():
+    with pytest.raises(SceneError, match="not a listed plugin"):
         load_scene_text(SCENE.format(seed=1).replace("cs-aloha", "no_such_module:Mac"), "mac.yaml")
+    with pytest.raises(SceneError, match="unknown MAC protocol 'tdma'"):
+        load_scene_text(SCENE.format(seed=1).replace("cs-aloha", "tdma"), "mac.yaml")

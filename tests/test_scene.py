@@ -61,7 +61,7 @@ def test_good_scene_with_presets_and_overrides():
     assert scene.links["rov0_ac"].params.range_m == (0.0, math.inf)
     poisson = scene.flows[1]
     assert poisson.poisson and poisson.interval_s == pytest.approx(0.2) and poisson.dst == "*"
-    assert scene.trace_file == "trace.jsonl"
+    assert scene.trace_file == os.path.join(os.getcwd(), "trace.jsonl")  # relative to the scene's directory
 
 
 def test_presets_exist_with_the_numbers_of_the_design_card():
