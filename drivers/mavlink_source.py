@@ -5,9 +5,13 @@ daemon's loop.  What it uses, in ArduSub's terms (``shared/protocols/s100-mavlin
 ``LOCAL_POSITION_NED`` (x, y, z and velocities, relative to the EKF origin) and ``ATTITUDE`` when the
 vehicle sends them; else ``GLOBAL_POSITION_INT`` around a configured origin; else, with no origin,
 the depth alone (``relative_alt``, negative under water).  In a bare tank ArduSub sends no
-LOCAL_POSITION_NED at all, which is why a camera (merge) often gives x and y.  On the vehicle's
-first heartbeat it may ask for message rates (``MAV_CMD_SET_MESSAGE_INTERVAL``).  A silent or
-vanished endpoint is not an error: the pose goes stale and the connection is retried.
+LOCAL_POSITION_NED at all, which is why a camera (merge) often gives x and y.  A silent or vanished
+endpoint is not an error: the pose goes stale and the connection is retried.
+
+It sends the vehicle nothing the scene did not ask for (:mod:`hilgate.drivers.mavlink_identity`
+says why, and who hilgate is when it sends): a HEARTBEAT only with ``heartbeat`` (for routers and
+autopilots that stream only to endpoints they have heard from), message-rate requests
+(``MAV_CMD_SET_MESSAGE_INTERVAL``, on the autopilot's first heartbeat) only with ``message_rates``.
 
 :class:`Feedback` sends the vehicle's position back as ``VISION_POSITION_ESTIMATE`` (ArduPilot's
 ExternalNav) or ``GPS_INPUT`` around an origin (what the UWSim-NET authors did), so a real BlueROV can
@@ -26,6 +30,8 @@ from typing import Any, Callable
 os.environ.setdefault("MAVLINK20", "1")  # before pymavlink is imported: MAVLink 2 framing
 os.environ.setdefault("MAVLINK_DIALECT", "ardupilotmega")
 from pymavlink import mavutil  # noqa: E402
+
+from .mavlink_identity import Identity, identity_problem  # noqa: E402
 
 log = logging.getLogger(__name__)
 
@@ -55,7 +61,11 @@ class MavlinkSource:
 
     def __init__(self, name: str, url: str, deliver: Callable[..., Any], system_id: int | None = None,
                  origin: tuple[float, float, float] | None = None, message_rates: tuple = (),
-                 heartbeat: bool = True):
+                 heartbeat: Identity | None = None, heartbeat_hz: float = 1.0):
+        """``heartbeat``: who to send HEARTBEATs as (None: send none); ``system_id``: only this vehicle."""
+        problem = identity_problem(heartbeat) if heartbeat is not None else None
+        if problem:
+            raise ValueError(f"mavlink {name}: heartbeat: {problem}")
         self.name = name
         self.url = url
         self.deliver = deliver
@@ -63,6 +73,7 @@ class MavlinkSource:
         self.origin = origin
         self.message_rates = dict(message_rates)
         self.heartbeat = heartbeat
+        self.heartbeat_period = 1.0 / heartbeat_hz
         self.messages = 0
         self.connected = False
         self._stop = threading.Event()
@@ -80,7 +91,9 @@ class MavlinkSource:
     def _run(self) -> None:
         while not self._stop.is_set():
             try:
-                connection = mavutil.mavlink_connection(self.url, source_system=255, source_component=190)
+                me = self.heartbeat or Identity(self.system_id or 1)  # what pymavlink stamps; sent only if asked
+                connection = mavutil.mavlink_connection(self.url, source_system=me.system_id,
+                                                        source_component=me.component_id)
             except Exception as exc:  # any pymavlink/OS error: the endpoint is not there yet
                 log.warning("mavlink %s: cannot open %s (%s); retrying", self.name, self.url, exc)
                 self._stop.wait(2.0)
@@ -99,14 +112,15 @@ class MavlinkSource:
                     pass
 
     def _serve(self, connection: Any) -> None:
-        last_beat = 0.0
+        last_beat = -math.inf
         while not self._stop.is_set():
             now = time.monotonic()
-            if self.heartbeat and now - last_beat >= 1.0:
+            if self.heartbeat is not None and now - last_beat >= self.heartbeat_period:
                 last_beat = now
-                try:
-                    connection.mav.heartbeat_send(mavutil.mavlink.MAV_TYPE_GCS, mavutil.mavlink.MAV_AUTOPILOT_INVALID,
-                                                  0, 0, 0)
+                try:  # an onboard peripheral's heartbeat, never a ground station's
+                    connection.mav.heartbeat_send(mavutil.mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
+                                                  mavutil.mavlink.MAV_AUTOPILOT_INVALID, 0, 0,
+                                                  mavutil.mavlink.MAV_STATE_ACTIVE)
                 except OSError:
                     pass  # udpin before the vehicle has spoken: nobody to send to yet
             message = connection.recv_match(type=POSE_MESSAGES, blocking=True, timeout=0.2)
@@ -120,16 +134,9 @@ class MavlinkSource:
     def _handle(self, connection: Any, message: Any) -> None:
         kind = message.get_type()
         if kind == "HEARTBEAT":
-            if self.message_rates and not self._asked:
-                self._asked = True
-                for name, rate in self.message_rates.items():
-                    message_id = getattr(mavutil.mavlink, f"MAVLINK_MSG_ID_{name.upper()}", None)
-                    if message_id is None:
-                        log.warning("mavlink %s: unknown message %s in message_rates", self.name, name)
-                        continue
-                    connection.mav.command_long_send(
-                        message.get_srcSystem(), message.get_srcComponent(),
-                        mavutil.mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0, message_id, 1e6 / rate, 0, 0, 0, 0, 0)
+            if message.autopilot != mavutil.mavlink.MAV_AUTOPILOT_INVALID and self.message_rates and not self._asked:
+                self._asked = True  # the autopilot's (not a ground station's or a companion's) first heartbeat
+                self._ask_rates(connection, message.get_srcSystem(), message.get_srcComponent())
         elif kind == "LOCAL_POSITION_NED":
             self._last_local = time.monotonic()
             self.deliver({"x": message.x, "y": message.y, "z": message.z},
@@ -147,12 +154,36 @@ class MavlinkSource:
             else:
                 self.deliver({"z": depth}, {"z": velocity["z"]}, None)
 
+    def _ask_rates(self, connection: Any, system: int, component: int) -> None:
+        """SET_MESSAGE_INTERVAL for each of ``message_rates``, sent as the heartbeat's identity or, with
+        none, as a companion computer of the vehicle (its system id, hilgate's own component)."""
+        me = self.heartbeat or Identity(system)
+        problem = identity_problem(me)
+        if problem:
+            log.warning("mavlink %s: not asking for message rates: %s", self.name, problem)
+            return
+        connection.mav.srcSystem, connection.mav.srcComponent = me.system_id, me.component_id
+        for name, rate in self.message_rates.items():
+            message_id = getattr(mavutil.mavlink, f"MAVLINK_MSG_ID_{name.upper()}", None)
+            if message_id is None:
+                log.warning("mavlink %s: unknown message %s in message_rates", self.name, name)
+                continue
+            connection.mav.command_long_send(system, component, mavutil.mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                                             message_id, 1e6 / rate, 0, 0, 0, 0, 0)
+
 
 class Feedback:
-    """Sends a vehicle's board position to its autopilot at ``rate_hz`` (from the daemon's loop)."""
+    """Sends a vehicle's board position to its autopilot at ``rate_hz`` (from the daemon's loop), as
+    ``identity`` (default: a companion computer of the vehicle ``system_id``, which ArduPilot accepts
+    even with SYSID_ENFORCE, with hilgate's own component id)."""
 
     def __init__(self, name: str, url: str, message: str, rate_hz: float, origin, system_id: int,
-                 position: Callable[[], tuple | None], attitude: Callable[[], tuple | None], scheduler: Any):
+                 position: Callable[[], tuple | None], attitude: Callable[[], tuple | None], scheduler: Any,
+                 identity: Identity | None = None):
+        identity = identity or Identity(system_id)
+        problem = identity_problem(identity)
+        if problem:
+            raise ValueError(f"feedback {name}: {problem}")
         self.name = name
         self.message = message
         self.period = 1.0 / rate_hz
@@ -162,7 +193,8 @@ class Feedback:
         self.attitude = attitude
         self.scheduler = scheduler
         self.sent = 0
-        self.connection = mavutil.mavlink_connection(url, source_system=255, source_component=197)
+        self.connection = mavutil.mavlink_connection(url, source_system=identity.system_id,
+                                                     source_component=identity.component_id)
         self.timer = scheduler.at(scheduler.now() + self.period * getattr(scheduler, "speed", 1.0), self._tick)
 
     def _tick(self) -> None:

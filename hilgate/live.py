@@ -17,6 +17,26 @@ from .scene import Scene
 log = logging.getLogger(__name__)
 
 
+def _identity(heartbeat: tuple | None) -> Any:
+    """The scene's ``heartbeat`` identity (system_id, component_id), or None: send no heartbeat."""
+    from .drivers.mavlink_identity import Identity
+
+    if not heartbeat:
+        return None
+    options = dict(heartbeat)
+    return Identity(options["system_id"], options["component_id"])
+
+
+def _feedback_identity(vehicle: Any) -> Any:
+    """Feedback goes as the vehicle's MAVLink heartbeat identity when the scene gives one (one
+    identity for everything hilgate sends a vehicle), else as its companion computer (Feedback's default)."""
+    if vehicle.pose.kind == "live":
+        for kind, params in vehicle.pose.params:
+            if kind == "mavlink" and dict(params)["heartbeat"]:
+                return _identity(dict(params)["heartbeat"])
+    return None
+
+
 class LiveSources:
     def __init__(self, scheduler: Any):
         self.scheduler = scheduler
@@ -33,7 +53,7 @@ class LiveSources:
                     if kind == "mavlink":
                         self._start_mavlink(name, pose, dict(params))
             if vehicle.feedback:
-                self._start_feedback(name, pose, dict(vehicle.feedback))
+                self._start_feedback(name, pose, dict(vehicle.feedback), _feedback_identity(vehicle))
         for camera in scene.cameras.values():
             self._start_camera(scene, camera, poses)
 
@@ -49,18 +69,24 @@ class LiveSources:
     def _start_mavlink(self, name: str, vehicle: LiveVehicle, params: dict) -> None:
         from .drivers.mavlink_source import MavlinkSource
 
+        heartbeat = dict(params["heartbeat"] or ())
         source = MavlinkSource(name, params["url"], self._deliver(vehicle, "mavlink"), params["system_id"],
-                               params["origin"], params["message_rates"], params["heartbeat"])
+                               params["origin"], params["message_rates"], _identity(params["heartbeat"]),
+                               heartbeat.get("rate_hz", 1.0))
         source.start()
         self.mavlink.append(source)
 
-    def _start_feedback(self, name: str, pose: Any, params: dict) -> None:
+    def _start_feedback(self, name: str, pose: Any, params: dict, identity: Any) -> None:
         from .drivers.mavlink_source import Feedback
 
         now = self.scheduler.now
-        feedback = Feedback(name, params["url"], params["message"], params["rate_hz"], params["origin"],
-                            params["system_id"], lambda: pose.position(now()),
-                            lambda: getattr(pose, "attitude", None), self.scheduler)
+        try:
+            feedback = Feedback(name, params["url"], params["message"], params["rate_hz"], params["origin"],
+                                params["system_id"], lambda: pose.position(now()),
+                                lambda: getattr(pose, "attitude", None), self.scheduler, identity)
+        except ValueError as exc:  # it would send as a ground station: send nothing
+            log.error("%s; no feedback sent", exc)
+            return
         self.feedback.append(feedback)
 
     def _start_camera(self, scene: Scene, camera: Any, poses: dict[str, Any]) -> None:
