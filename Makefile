@@ -5,8 +5,21 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 SCENE  ?= scenes/demo.yaml
+FUZZ   ?= 1
 
-.PHONY: run test sim bench clean
+# `sudo make install` / `sudo make uninstall`: hilgate as a systemd service (systemd/install.sh; README,
+# "Operations"). DESTDIR=DIR writes every file under DIR instead and skips the root-only steps (the
+# hilgate user, systemctl); PURGE=1 also removes changed configuration, the user, state and traces.
+DESTDIR      ?=
+PREFIX       ?= /opt/hilgate
+SYSCONFDIR   ?= /etc
+UNITDIR      ?= /etc/systemd/system
+LOGROTATEDIR ?= /etc/logrotate.d
+BINDIR       ?= /usr/local/bin
+PIP_ARGS     ?=
+PURGE        ?=
+
+.PHONY: run test sim bench fuzz install uninstall clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -28,6 +41,15 @@ sim: $(VENV)/.installed
 
 test: $(VENV)/.installed-test
 	$(BIN)/python -m pytest -q
+
+# The fuzz tests (test_fuzz_*) for minutes instead of seconds: HILGATE_FUZZ multiplies their examples.
+fuzz: $(VENV)/.installed-test
+	HILGATE_FUZZ=$(FUZZ) $(BIN)/python -m pytest -q -k fuzz
+
+install uninstall:
+	DESTDIR='$(DESTDIR)' PREFIX='$(PREFIX)' SYSCONFDIR='$(SYSCONFDIR)' UNITDIR='$(UNITDIR)' \
+	LOGROTATEDIR='$(LOGROTATEDIR)' BINDIR='$(BINDIR)' PYTHON='$(PYTHON)' PIP_ARGS='$(PIP_ARGS)' PURGE='$(PURGE)' \
+	sh systemd/install.sh $@
 
 bench: $(VENV)/.installed
 	$(BIN)/python benchmarks/ring_aloha.py
