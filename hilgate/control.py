@@ -6,17 +6,23 @@ Requests and their replies:
 - ``{"class": "STATUS"}`` → ``{"class": "STATUS", "time": t, "scene": name, "links": [...], "vehicles": [...]}``
 - ``{"class": "RELOAD"}`` → ``{"class": "RELOAD", "ok": true}`` or ``{"ok": false, "error": "..."}``
 - ``{"class": "WATCH", "interval_s": 1.0}`` → a STATUS every interval until ``{"class": "WATCH", "enable": false}``
-- anything else → ``{"class": "ERROR", "message": "..."}``
+- anything else, or a request with bad values → ``{"class": "ERROR", "message": "..."}``
+
+Everything a client sends is checked: a line is at most 16 KB of JSON nested at most 32 deep, the
+``class`` is a string, every value has its type.  At most ``max_clients`` are connected at once (the
+next is told so and closed), and one that stops reading is disconnected once 256 KB of replies wait
+for it.  None of this costs another client, a link or the loop anything.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import math
 import os
 from typing import Any, Callable
 
-from . import __version__
+from . import __version__, safejson
 from .streams import Connection, Listener, listen_unix
 
 log = logging.getLogger(__name__)
@@ -24,19 +30,41 @@ log = logging.getLogger(__name__)
 PROTO = 1
 
 
+MAX_CLIENTS = 32
+"""Control connections at once: enough for every operator tool, few enough to bound memory."""
+
+OUTPUT_CAP = 256 * 1024
+"""Bytes of replies kept for one control client that does not read; past it, it is disconnected."""
+
+MIN_WATCH_S, MAX_WATCH_S = 0.05, 3600.0
+
+
+class RequestError(ValueError):
+    """A request the daemon understands the shape of, but not these values."""
+
+
 class ControlServer:
-    def __init__(self, path: str, scheduler: Any, status: Callable[[], dict], reload: Callable[[Callable[[bool, str], Any]], Any],
-                 extra: dict[str, Callable[[dict], dict]] | None = None):
+    def __init__(self, path: str, scheduler: Any, status: Callable[[], dict],
+                 reload: Callable[[Callable[[bool, str], Any]], Any],
+                 extra: dict[str, Callable[[dict], dict]] | None = None, max_clients: int = MAX_CLIENTS,
+                 group: int | None = None):
         self.path = path
         self.scheduler = scheduler
         self.status = status
         self.reload = reload
         self.extra = extra or {}
+        self.max_clients = max_clients
         self.clients: set[_ControlClient] = set()
+        self.refused = 0
+        self.disconnected_slow = 0
         os.makedirs(os.path.dirname(path), exist_ok=True)
-        self.listener = Listener(listen_unix(path), scheduler, self._accept, path)
+        self.listener = Listener(listen_unix(path, group=group), scheduler, self._accept, path)
 
     def _accept(self, sock) -> None:
+        if len(self.clients) >= self.max_clients:
+            self.refused += 1
+            refuse(sock, {"class": "ERROR", "message": f"too many control clients ({self.max_clients})"})
+            return
         client = _ControlClient(sock, self)
         self.clients.add(client)
 
@@ -46,51 +74,92 @@ class ControlServer:
         self.listener.close()
 
 
+def refuse(sock: Any, answer: dict) -> None:
+    """Say why in one line, without waiting for the peer, and close."""
+    try:
+        sock.setblocking(False)
+        sock.send((json.dumps(answer) + "\n").encode())
+    except OSError:
+        pass
+    sock.close()
+
+
 class _ControlClient:
-    MAX_LINE = 65536
+    MAX_LINE = 16384
 
     def __init__(self, sock, server: ControlServer):
         self.server = server
         self.buffer = bytearray()
         self.watch = None
-        self.connection = Connection(sock, server.scheduler, self._on_data, self._on_close)
+        self.connection = Connection(sock, server.scheduler, self._on_data, self._on_close, max_buffer=OUTPUT_CAP)
         self.send({"class": "VERSION", "release": __version__, "proto": PROTO})
 
     def send(self, obj: dict) -> None:
-        self.connection.write((json.dumps(obj) + "\n").encode())
+        if not self.connection.write((json.dumps(obj) + "\n").encode()) and not self.connection.closed:
+            # it stopped reading (a WATCH nobody consumes): it would only cost memory
+            self.server.disconnected_slow += 1
+            log.info("control client stopped reading; disconnected")
+            self.connection.close()
 
     def _on_data(self, data: bytes) -> None:
         self.buffer += data
-        while b"\n" in self.buffer:
-            line, _, rest = bytes(self.buffer).partition(b"\n")
-            self.buffer = bytearray(rest)
+        while not self.connection.closed:
+            end = self.buffer.find(b"\n")
+            if end < 0:
+                break
+            line = bytes(self.buffer[:end])
+            del self.buffer[: end + 1]
+            if len(line) > self.MAX_LINE:
+                self._too_long()
+                return
             if line.strip():
                 self.handle(line)
         if len(self.buffer) > self.MAX_LINE:
-            self.send({"class": "ERROR", "message": "line too long"})
-            self.connection.close()
+            self._too_long()
+
+    def _too_long(self) -> None:
+        self.send({"class": "ERROR", "message": f"line longer than {self.MAX_LINE} bytes"})
+        self.connection.close()
 
     def handle(self, line: bytes) -> None:
         try:
-            request = json.loads(line)
-            kind = request["class"]
-        except (ValueError, TypeError, KeyError):
-            self.send({"class": "ERROR", "message": "expected a JSON object with a 'class'"})
+            request = safejson.loads(line, max_bytes=self.MAX_LINE)
+        except safejson.JsonError as exc:
+            self.send({"class": "ERROR", "message": f"expected a JSON object with a 'class': {exc}"})
             return
+        kind = request.get("class") if isinstance(request, dict) else None
+        if not isinstance(kind, str):
+            self.send({"class": "ERROR", "message": "expected a JSON object with a 'class' (a string)"})
+            return
+        try:
+            self._dispatch(kind, request)
+        except RequestError as exc:
+            self.send({"class": "ERROR", "message": f"{kind}: {exc}"})
+        except Exception as exc:  # a bug must cost one answer, not the client or the daemon
+            log.error("control request %s failed: %s: %s", kind[:40], type(exc).__name__, exc)
+            self.send({"class": "ERROR", "message": f"{kind}: internal error: {type(exc).__name__}"})
+
+    def _dispatch(self, kind: str, request: dict) -> None:
         server = self.server
         if kind == "STATUS":
             self.send(self._status())
         elif kind == "RELOAD":  # answered when the new scene is applied or refused
             server.reload(lambda ok, error: self.send({"class": "RELOAD", "ok": ok, **({"error": error} if error else {})}))
         elif kind == "WATCH":
+            enable = request.get("enable", True)
+            if not isinstance(enable, bool):
+                raise RequestError("enable must be true or false")
+            interval = request.get("interval_s", 1.0)
+            if enable and (isinstance(interval, bool) or not isinstance(interval, (int, float))
+                           or not math.isfinite(interval)):
+                raise RequestError(f"interval_s must be a number of seconds, not {json.dumps(interval)[:40]}")
             self._stop_watch()
-            if request.get("enable", True):
-                interval = float(request.get("interval_s", 1.0))
-                self._watch(max(0.05, interval))
+            if enable:
+                self._watch(min(MAX_WATCH_S, max(MIN_WATCH_S, float(interval))))
         elif kind in server.extra:
             self.send(server.extra[kind](request))
         else:
-            self.send({"class": "ERROR", "message": f"unknown class {kind!r}"})
+            self.send({"class": "ERROR", "message": f"unknown class {kind[:40]!r}"})
 
     def _status(self) -> dict:
         return {"class": "STATUS", "time": round(self.server.scheduler.now(), 6), **self.server.status()}

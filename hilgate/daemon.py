@@ -3,6 +3,7 @@ runs the model in real time, reloads on SIGHUP and stops cleanly (trace complete
 
 from __future__ import annotations
 
+import datetime
 import gc
 import logging
 import os
@@ -10,12 +11,13 @@ import signal
 import socket
 import sys
 import time
+import uuid
 from typing import Any, Callable
 
 from . import __version__
+from .access import prepare_private_dir, raise_descriptor_limit, resolve_group
 from .control import ControlServer
 from .gli_mq import raise_queue_budget
-from .gli_socket import GliClient
 from .live import LiveSources
 from .realtime import RealtimeScheduler
 from .recorder import Recorder
@@ -35,11 +37,25 @@ def parse_tcp(value: str) -> tuple[str, int]:
     return (host or "127.0.0.1"), int(port)
 
 
+def _link_list(scene: Scene, limit: int = 12) -> str:
+    parts = [f"{link.id}={link.backend}" for link in scene.links.values()]
+    if len(parts) > limit:
+        parts = parts[:limit] + [f"… {len(parts) - limit} more"]
+    return ", ".join(parts)
+
+
 class Daemon:
     def __init__(self, scene_path: str, overrides: list[str] | tuple[str, ...] = (), runtime_dir: str = "",
                  speed: float = 1.0, tcp: str | None = None, trace_path: str | None = None,
                  summary_path: str | None = None, until: float | None = None, status_line: bool = False,
-                 gli_backlog: int = 1000):
+                 gli_backlog: int = 1000, group: str | None = None, max_clients: int = 256,
+                 max_link_clients: int = 32, plugins: list[str] | tuple[str, ...] = (),
+                 preset_dirs: list[str] | tuple[str, ...] = ()):
+        self.plugins = list(plugins)
+        self.preset_dirs = list(preset_dirs)
+        self.group_name = group
+        self.max_clients = max_clients
+        self.max_link_clients = max_link_clients
         self.scene_path = scene_path
         self.overrides = list(overrides)
         self.runtime_dir = runtime_dir
@@ -59,15 +75,25 @@ class Daemon:
         self._reload_next: list[Callable[[bool, str], Any]] = []
 
     def run(self) -> int:
-        scene = load_scene(self.scene_path, self.overrides)  # a bad scene never half-starts
+        scene = load_scene(self.scene_path, self.overrides, plugins=self.plugins,
+                           preset_dirs=self.preset_dirs)  # a bad scene never half-starts
         self.scene = scene
+        group = resolve_group(self.group_name)
+        prepare_private_dir(self.runtime_dir, group)
+        prepare_private_dir(os.path.join(self.runtime_dir, "gli"), group)
+        raise_queue_budget()
+        raise_descriptor_limit()
         trace_path = self.trace_path or scene.trace_file
         self.trace = open(trace_path, "a", encoding="utf-8", buffering=1 << 16) if trace_path else None
         self.scheduler = scheduler = RealtimeScheduler(self.speed)
         self.recorder = Recorder(self.trace)
-        os.makedirs(self.runtime_dir, exist_ok=True)
-        raise_queue_budget()
-        self.router = Router(scheduler, self.recorder, os.path.join(self.runtime_dir, "gli"), self.gli_backlog)
+        self.run_id = uuid.uuid4().hex[:12]
+        self.recorder.event({"t": 0.0, "ev": "run", "run": self.run_id,
+                             "start": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="milliseconds"),
+                             "scene": scene.name, "path": os.path.abspath(self.scene_path), "version": __version__,
+                             "speed": self.speed})
+        self.router = Router(scheduler, self.recorder, os.path.join(self.runtime_dir, "gli"), self.gli_backlog,
+                             group, self.max_clients, self.max_link_clients)
         self.tcp_listener = None
         self.control = None
         self.live = LiveSources(scheduler)
@@ -80,18 +106,20 @@ class Daemon:
                 host, port = parse_tcp(self.tcp)
                 sock = socket.create_server((host, port), reuse_port=False)
                 sock.setblocking(False)
-                self.tcp_listener = Listener(sock, scheduler, lambda s: GliClient(s, scheduler, self.router))
-                log.info("GLI over TCP on %s:%d", host, port)
+                self.tcp_listener = Listener(sock, scheduler, self.router.accept_client)
             self.control = ControlServer(os.path.join(self.runtime_dir, "control.sock"), scheduler,
-                                         self.status, self.reload)
+                                         self.status, self.reload, group=group)
             scheduler.on_signal(signal.SIGHUP, lambda s: self.reload())  # answered in the log only
             scheduler.on_signal(signal.SIGTERM, self.stop)
             scheduler.on_signal(signal.SIGINT, self.stop)
             self._periodic()
             gc.collect()
             gc.freeze()  # everything built so far is long-lived: keep it out of the collector's walks
-            log.info("hilgate %s running scene %r: %d links, runtime directory %s",
-                     __version__, scene.name, len(scene.links), self.runtime_dir)
+            log.info("hilgate %s started: scene %r (%s), %d links (%s), endpoints: POSIX queues /ID_{tx,rx}_dlnk_phy, "
+                     "sockets %s/gli/ID.sock%s, control %s/control.sock; run %s",
+                     __version__, scene.name, os.path.abspath(self.scene_path), len(scene.links),
+                     _link_list(scene), self.runtime_dir,
+                     f", TCP {self.tcp}" if self.tcp else "", self.runtime_dir, self.run_id)
             notify("READY=1", f"STATUS=running {scene.name!r}: {len(scene.links)} links",
                    f"MAINPID={os.getpid()}")
             scheduler.run(self.until if self.until is not None else float("inf"))
@@ -155,7 +183,7 @@ class Daemon:
             self._reload_finished(False, f"cannot start the scene loader: {type(exc).__name__}: {exc}")
 
     def _scene_request(self) -> dict[str, Any]:
-        return request_for(self.scene_path, self.overrides)
+        return request_for(self.scene_path, self.overrides, plugins=self.plugins, preset_dirs=self.preset_dirs)
 
     def _reload_loaded(self, scene: Scene | None, error: str | None) -> None:
         self._reload_job = None

@@ -21,8 +21,10 @@ kernel says the queue has room; only beyond that are frames dropped and counted 
 
 from __future__ import annotations
 
+import errno
 import logging
 import os
+import pwd
 import resource
 from collections import deque
 from typing import Any, Callable
@@ -93,35 +95,109 @@ def _warn_compact(limit: int, why: str) -> None:
                     "(systemd) or ulimit -q to get dccomms' default size.", why, limit)
 
 
-def open_queue(name: str, needed_size: int = MAX_MESSAGE_SIZE, full_size: bool = True) -> posix_ipc.MessageQueue:
-    """Open or create a queue that any local user's application can use (mode 0666 whatever the
-    umask, as dccomms does with 0777 under umask 0), non-blocking.
+def open_queue(name: str, needed_size: int = MAX_MESSAGE_SIZE, full_size: bool = True,
+               group: int | None = None, remedy: str = "hilgate queues SCENE --unlink") -> posix_ipc.MessageQueue:
+    """Open or create one of a link's queues, non-blocking, mode 0660 for hilgate's group.
+
+    dccomms opens its queues as the application's user; that user must be in the daemon's group
+    (``hilgate`` under systemd) to reach them, as for the sockets.  A queue that exists already is
+    checked before it is used: it must belong to the daemon's user (anyone else who created it
+    first could read every frame, or refuse them) and carry whole frames of the link's packet class.
+    Anything else is refused in one line that says what is wrong and how to remove it (``remedy``).
 
     Created at dccomms' 10 × 8192 bytes when ``full_size``, else (or when the user's queue budget is
-    exhausted) at the ``needed_size`` of the link's packet class.  An existing queue is used as is."""
-    old = os.umask(0)
+    exhausted) at the ``needed_size`` of the link's packet class."""
+    while True:
+        try:
+            queue = posix_ipc.MessageQueue(name)
+        except posix_ipc.ExistentialError:
+            queue = _create_queue(name, needed_size, full_size)
+            if queue is None:
+                continue  # someone created it in between: check theirs
+        except posix_ipc.PermissionsError:
+            raise QueueError(f"POSIX queue {name} exists but hilgate may not open it (created by another user "
+                             f"with a mode that excludes hilgate's); remove it: {remedy}") from None
+        except OSError as exc:
+            raise QueueError(_open_failure(name, exc)) from None
+        break
+    try:
+        _check_queue(name, queue, needed_size, group, remedy)
+    except QueueError:
+        queue.close()
+        raise
+    queue.block = False
+    return queue
+
+
+def _create_queue(name: str, needed_size: int, full_size: bool) -> posix_ipc.MessageQueue | None:
+    old = os.umask(0o007)
     sizes = (MAX_MESSAGE_SIZE, needed_size) if full_size else (needed_size,)
+    error: BaseException | None = None
     try:
         for size in dict.fromkeys(sizes):
             try:
-                queue = posix_ipc.MessageQueue(name, posix_ipc.O_CREAT, mode=0o666, max_messages=MAX_MESSAGES,
-                                               max_message_size=size)
-                break
+                return posix_ipc.MessageQueue(name, posix_ipc.O_CREX, mode=0o660, max_messages=MAX_MESSAGES,
+                                              max_message_size=size)
+            except posix_ipc.ExistentialError:
+                return None
             except (posix_ipc.Error, OSError) as exc:
                 error = exc
-                if size != needed_size:
+                if size != needed_size and _is_budget(exc):
                     _warn_compact(resource.getrlimit(resource.RLIMIT_MSGQUEUE)[0],
                                   "the POSIX queue budget is exhausted")
-        else:
-            raise QueueError(f"cannot open POSIX queue {name}: {error}. Each link needs two queues and Linux "
-                             f"limits their total size per user (ulimit -q, now "
-                             f"{resource.getrlimit(resource.RLIMIT_MSGQUEUE)[0]} bytes): raise it with "
-                             "LimitMSGQUEUE=infinity in the systemd unit or `ulimit -q unlimited`, or remove "
-                             "stale queues (hilgate queues --unlink SCENE).")
     finally:
         os.umask(old)
-    queue.block = False
-    return queue
+    raise QueueError(_open_failure(name, error))
+
+
+def _is_budget(exc: BaseException) -> bool:
+    """mq_open says EMFILE both for RLIMIT_MSGQUEUE and for the descriptor limit: tell them apart."""
+    if "maximum number of files" not in str(exc) and getattr(exc, "errno", None) != errno.EMFILE:
+        return False
+    try:
+        open_fds = len(os.listdir("/proc/self/fd"))
+    except OSError:
+        return True
+    return open_fds < resource.getrlimit(resource.RLIMIT_NOFILE)[0] - 1
+
+
+def _open_failure(name: str, exc: BaseException | None) -> str:
+    if exc is not None and _is_budget(exc):
+        return (f"cannot create POSIX queue {name}: the queue budget of this user is used up. Each link needs "
+                f"two queues and Linux limits their total size per user (ulimit -q, now "
+                f"{resource.getrlimit(resource.RLIMIT_MSGQUEUE)[0]} bytes): raise it with "
+                "LimitMSGQUEUE=infinity in the systemd unit or `ulimit -q unlimited`, or remove stale queues "
+                "(hilgate queues SCENE --unlink).")
+    return f"cannot open POSIX queue {name}: {exc}"
+
+
+def _check_queue(name: str, queue: posix_ipc.MessageQueue, needed_size: int, group: int | None,
+                 remedy: str) -> None:
+    info = os.fstat(queue.mqd)
+    if info.st_uid != os.geteuid():
+        raise QueueError(f"POSIX queue {name} belongs to {_user(info.st_uid)}, not to hilgate's user "
+                         f"{_user(os.geteuid())}: another program created it first; remove it (as its owner "
+                         f"or root): {remedy}")
+    if queue.max_message_size < needed_size:
+        raise QueueError(f"POSIX queue {name} holds messages of at most {queue.max_message_size} bytes but the "
+                         f"link's packet class needs {needed_size}; remove it: {remedy}")
+    if queue.max_messages < 1:  # pragma: no cover - the kernel refuses 0
+        raise QueueError(f"POSIX queue {name} holds no message; remove it: {remedy}")
+    # ours: make sure nobody outside the group can read frames, whoever created it with 0666 before
+    if info.st_mode & 0o007 or (group is not None and info.st_gid != group):
+        try:
+            os.fchmod(queue.mqd, 0o660)
+            if group is not None and info.st_gid != group:
+                os.fchown(queue.mqd, -1, group)
+        except OSError as exc:
+            raise QueueError(f"POSIX queue {name}: cannot restrict it to hilgate's group: {exc}") from None
+
+
+def _user(uid: int) -> str:
+    try:
+        return f"user {pwd.getpwuid(uid).pw_name} (uid {uid})"
+    except KeyError:
+        return f"uid {uid}"
 
 
 def unlink_queues(link_ids) -> list[str]:
@@ -138,18 +214,26 @@ def unlink_queues(link_ids) -> list[str]:
     return removed
 
 
-def drain(queue: posix_ipc.MessageQueue) -> int:
-    count = 0
-    while True:
+def drain(queue: posix_ipc.MessageQueue, limit: int = 100_000) -> list[bytes]:
+    """Take every message waiting in ``queue`` (an earlier run's leftovers)."""
+    messages = []
+    while len(messages) < limit:
         try:
-            queue.receive()
+            message, _priority = queue.receive()
         except posix_ipc.BusyError:
-            return count
-        count += 1
+            break
+        messages.append(message)
+    return messages
 
 
 class MqEndpoint:
-    """One link's pair of queues, attached to the real-time scheduler's loop."""
+    """One link's pair of queues, attached to the real-time scheduler's loop.
+
+    Frames go into the application's queue only once an application has shown itself on the link
+    (dccomms applications say REQ_STATE when they start; any message counts): until then a frame
+    no application can read is not a drop of the queue's, and filling a queue nobody opened would
+    only hand stale frames to the next application.  Frames that an application left in the queues
+    while no daemon ran are drained at start and reported (``on_stale``), never sent on air."""
 
     kind = "mq"
 
@@ -163,6 +247,8 @@ class MqEndpoint:
         is_ready: Callable[[], bool],
         full_size: bool = True,
         backlog: int = 1000,
+        group: int | None = None,
+        on_stale: Callable[[str, int], Any] | None = None,
     ):
         self.link_id = link_id
         self.packet = packet
@@ -172,13 +258,29 @@ class MqEndpoint:
         self.is_ready = is_ready
         self.from_app_name, self.to_app_name = queue_names(link_id)
         needed = 1 + packet.body_size
-        self.from_app = open_queue(self.from_app_name, needed, full_size)
-        self.to_app = open_queue(self.to_app_name, needed, full_size)
-        stale = drain(self.from_app) + drain(self.to_app)
-        if stale:
-            log.info("link %s: drained %d stale messages from its queues", link_id, stale)
+        self.from_app = open_queue(self.from_app_name, needed, full_size, group)
+        try:
+            self.to_app = open_queue(self.to_app_name, needed, full_size, group)
+        except BaseException:
+            self.from_app.close()
+            raise
+        self.attended = False  # an application has spoken on this link's queue
+        self.stale = 0
+        for origin, queue in (("app", self.from_app), ("medium", self.to_app)):
+            for message in drain(queue):
+                if origin == "app" and message[:1] != bytes([FRAME]):
+                    self.attended = True  # its REQ_STATE came before the daemon: it is there
+                    continue
+                if message[:1] == bytes([FRAME]):
+                    self.stale += 1
+                    if on_stale is not None:
+                        on_stale(origin, len(message))
+        if self.stale:
+            log.warning("link %s: %d stale frames left in its queues while no daemon ran were dropped",
+                        link_id, self.stale)
         self.sent_state: int | None = None
         self.app_full = 0
+        self.no_reader = 0
         self.delivered = 0
         self.backlog_limit = backlog
         self.backlog: deque[bytes] = deque()
@@ -206,6 +308,9 @@ class MqEndpoint:
                 return True
             except posix_ipc.BusyError:
                 self.scheduler.set_writer(self.to_app.mqd, self._flush)
+            except (ValueError, posix_ipc.Error, OSError) as exc:  # checked at open; kept for safety
+                log.warning("link %s: cannot write %s: %s", self.link_id, self.to_app_name, exc)
+                return False
         if len(self.backlog) >= self.backlog_limit:
             return False
         self.backlog.append(message)
@@ -218,6 +323,8 @@ class MqEndpoint:
                 self.to_app.send(backlog[0])
             except posix_ipc.BusyError:
                 return
+            except (ValueError, posix_ipc.Error, OSError) as exc:
+                log.warning("link %s: cannot write %s: %s", self.link_id, self.to_app_name, exc)
             backlog.popleft()
         self.scheduler.set_writer(self.to_app.mqd, None)
 
@@ -231,6 +338,7 @@ class MqEndpoint:
             self._handle(message)
 
     def _handle(self, message: bytes) -> None:
+        self.attended = True
         if not message:
             self.on_bad("size", 0)
             return
@@ -249,13 +357,18 @@ class MqEndpoint:
         else:
             self.on_bad("type", len(message))
 
-    def deliver(self, real: bytes, seq: int, src: int, dst: int) -> bool:
-        """Hand a received frame to the application; False if its queue and the backlog are full."""
+    def deliver(self, real: bytes, seq: int, src: int, dst: int) -> str | None:
+        """Hand a received frame to the application: None when it is in its queue (or the backlog),
+        ``no_reader`` when no application has shown itself on this link, ``app_full`` when its queue
+        and the backlog are full."""
+        if not self.attended:
+            self.no_reader += 1
+            return "no_reader"
         if self._put(bytes([FRAME]) + self.packet.encode_body(real, seq, src, dst)):
             self.delivered += 1
-            return True
+            return None
         self.app_full += 1
-        return False
+        return "app_full"
 
     def close(self) -> None:
         self.scheduler.set_writer(self.to_app.mqd, None)

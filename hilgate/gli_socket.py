@@ -24,7 +24,8 @@ log = logging.getLogger(__name__)
 class GliClient:
     kind = "socket"
 
-    def __init__(self, sock: socket.socket, scheduler: Any, router: "Router", link_id: str | None = None):
+    def __init__(self, sock: socket.socket, scheduler: Any, router: "Router", link_id: str | None = None,
+                 output_cap: int = 256 * 1024):
         self.router = router
         self.decoder = wire.Decoder()
         self.link: Link | None = None
@@ -32,7 +33,7 @@ class GliClient:
         self.last_state: bool | None = None
         self.dropped = 0
         self.welcomed = False
-        self.connection = Connection(sock, scheduler, self._on_data, self._on_close)
+        self.connection = Connection(sock, scheduler, self._on_data, self._on_close, max_buffer=output_cap)
         if link_id is not None:
             self._bind(link_id)
 
@@ -40,10 +41,12 @@ class GliClient:
         """Attach to a link: from now on its frames and READY/BUSY come here."""
         link = self.router.links.get(link_id)
         if link is None:
-            self.fail(f"no link {link_id!r}")
+            self.fail(f"no link {link_id[:100]!r}")
+            return
+        if not link.attach_client(self):
+            self.fail(f"too many clients on link {link_id!r} ({self.router.max_link_clients})")
             return
         self.link = link
-        link.attach_client(self)
         self.state(link.ready)
 
     def fail(self, message: str) -> None:
@@ -94,15 +97,24 @@ class GliClient:
             raise wire.WireError(f"unexpected message type {kind}")
 
     def deliver(self, src: int, dst: int, t: float, payload: bytes) -> bool:
+        """False if the frame could not be queued for this client: it has stopped reading and its
+        output passed the cap, so it is disconnected (it would only cost the daemon memory)."""
         if self.connection.write(wire.encode_recv(src, dst, t, payload)):
             return True
         self.dropped += 1
+        self._too_slow()
         return False
 
     def state(self, ready: bool) -> None:
         if ready != self.last_state:
             self.last_state = ready
-            self.connection.write(wire.encode_state(ready))
+            if not self.connection.write(wire.encode_state(ready)):
+                self._too_slow()
+
+    def _too_slow(self) -> None:
+        if not self.connection.closed:
+            log.info("GLI client on %s stopped reading: disconnected", self.link.id if self.link else "?")
+            self.connection.close()
 
     def _on_close(self) -> None:
         if self.decoder.pending:
@@ -110,6 +122,17 @@ class GliClient:
                      self.decoder.pending)
         if self.link is not None:
             self.link.detach_client(self)
+        self.router.clients.discard(self)
 
     def close(self) -> None:
         self.connection.close()
+
+
+def refuse_client(sock: socket.socket, message: str) -> None:
+    """Tell a client why it cannot stay (one ERROR message, without waiting for it) and close."""
+    try:
+        sock.setblocking(False)
+        sock.send(wire.encode_json(wire.ERROR, {"error": message}))
+    except OSError:
+        pass
+    sock.close()

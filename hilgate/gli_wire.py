@@ -29,6 +29,8 @@ import json
 import struct
 from typing import Any
 
+from . import safejson
+
 HELLO, WELCOME, SEND, RECV, STATE, ERROR, COMMAND, REPLY = range(1, 9)
 NAMES = {HELLO: "HELLO", WELCOME: "WELCOME", SEND: "SEND", RECV: "RECV", STATE: "STATE", ERROR: "ERROR",
          COMMAND: "COMMAND", REPLY: "REPLY"}
@@ -78,9 +80,10 @@ def decode_recv(body: bytes) -> tuple[int, int, float, bytes]:
 
 
 def decode_json(body: bytes) -> Any:
+    """A JSON body, bounded in depth (a 5 000-deep HELLO is refused, not a RecursionError)."""
     try:
-        return json.loads(bytes(body).decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        return safejson.loads(body, max_bytes=MAX_MESSAGE)
+    except safejson.JsonError as exc:
         raise WireError(f"bad JSON: {exc}") from None
 
 

@@ -15,9 +15,10 @@ import os
 from collections import Counter
 from typing import Any, Callable
 
+from .access import LinkLock
 from .backends import AppFrame, Backend, SimBackend
 from .gli_mq import MqEndpoint, plan_message_size
-from .gli_socket import GliClient
+from .gli_socket import GliClient, refuse_client
 from .models.frame import BROADCAST
 from .packets import Decoded, PacketClass, PacketError, packet_class
 from .recorder import Recorder
@@ -26,6 +27,8 @@ from .streams import Listener, listen_unix
 from .world import World
 
 log = logging.getLogger(__name__)
+
+UNREAD_CAUSES = ("no_reader",)
 
 
 class Link:
@@ -41,18 +44,25 @@ class Link:
         self.mq: MqEndpoint | None = None
         self.listener: Listener | None = None
         self.emulator: Any = None
+        self.lock: LinkLock | None = None
         self._state_pending = False
 
     # -- set-up ----------------------------------------------------------------------------------
 
     def open_endpoints(self, scheduler: Any, socket_dir: str | None, full_size_queues: bool = True) -> None:
         self.mq = MqEndpoint(self.id, self.packet, scheduler, self.from_mq, self.bad_frame, lambda: self.ready,
-                             full_size_queues, self.router.gli_backlog)
+                             full_size_queues, self.router.gli_backlog, self.router.group, self._stale)
         if socket_dir is not None:
             path = os.path.join(socket_dir, f"{self.id}.sock")
-            self.listener = Listener(listen_unix(path), scheduler,
-                                     lambda sock: GliClient(sock, scheduler, self.router, self.id), path)
+            self.listener = Listener(listen_unix(path, group=self.router.group), scheduler,
+                                     lambda sock: self.router.accept_client(sock, self.id), path)
         self.open_emulator(scheduler)
+
+    def _stale(self, origin: str, size: int) -> None:
+        """A frame left in a queue while no daemon ran: never sent, counted and traced."""
+        self.gli_drops["stale"] += 1
+        self.router.recorder.event({"t": round(self.router.scheduler.now(), 9), "ev": "drop", "link": self.id,
+                                    "src": origin, "size": size, "cause": "stale"})
 
     def open_emulator(self, scheduler: Any) -> None:
         """An emulated EvoLogics/S100 device in front of this (simulated) link, if the scene asks."""
@@ -145,7 +155,11 @@ class Link:
     # -- medium → applications -------------------------------------------------------------------
 
     def to_apps(self, frame: AppFrame) -> None:
+        """A frame the link received: to the queue application, every socket client, the emulator.
+        A frame that no application at all was there to take is counted and traced (``no_reader``);
+        one that an application could not take is a drop of that application's (``app_full``)."""
         t = self.router.scheduler.now()
+        taken = False
         if self.mq is not None:
             real = frame.real
             if frame.packet.name != self.packet.name:
@@ -153,18 +167,30 @@ class Link:
                     real = self.packet.encode(frame.payload, src=frame.src, dst=frame.dst)
                 except PacketError:
                     real = None
-                    self.gli_drops["size"] += 1
-            if real is not None and not self.mq.deliver(real, frame.seq, frame.src, frame.dst):
-                self.gli_drops["app_full"] += 1
-                self.router.recorder.event({"t": round(t, 9), "ev": "drop", "link": self.id, "src": "medium",
-                                            "size": len(frame.real), "cause": "app_full"})
+                    self._lost("size", t, len(frame.real))
+            if real is not None:
+                outcome = self.mq.deliver(real, frame.seq, frame.src, frame.dst)
+                if outcome is None:
+                    taken = True
+                elif outcome == "app_full":
+                    self._lost("app_full", t, len(frame.real))
         for client in list(self.clients):
-            if not client.deliver(frame.src, frame.dst, t, frame.payload):
-                self.gli_drops["client_slow"] += 1
+            if client.deliver(frame.src, frame.dst, t, frame.payload):
+                taken = True
+            else:  # it stopped reading: past its output cap it is disconnected
+                self._lost("client_slow", t, len(frame.real))
         if self.emulator is not None:
             self.emulator.deliver(frame, t)
+            taken = True
+        if not taken and not (self.mq is not None and self.mq.attended):
+            self._lost("no_reader", t, len(frame.real))
         if frame.on_delivered is not None and frame.dst == self.address:
             frame.on_delivered(frame, self)
+
+    def _lost(self, cause: str, t: float, size: int) -> None:
+        self.gli_drops[cause] += 1
+        self.router.recorder.event({"t": round(t, 9), "ev": "drop", "link": self.id, "src": "medium",
+                                    "size": size, "cause": cause})
 
     def state_changed(self) -> None:
         """READY/BUSY may have changed: tell the applications once the events due now have fired, so
@@ -181,8 +207,12 @@ class Link:
         for client in list(self.clients):
             client.state(ready)
 
-    def attach_client(self, client: GliClient) -> None:
+    def attach_client(self, client: GliClient) -> bool:
+        """False when the link has as many socket clients as it may (``--max-link-clients``)."""
+        if len(self.clients) >= self.router.max_link_clients:
+            return False
         self.clients.add(client)
+        return True
 
     def detach_client(self, client: GliClient) -> None:
         self.clients.discard(client)
@@ -192,15 +222,23 @@ class Link:
     def status(self) -> dict[str, Any]:
         backend = self.backend
         figures = backend.status() if backend else {"tx_packets": 0, "rx_packets": 0, "drops": 0, "fifo_bytes": 0}
-        return {
+        causes = {cause: n for cause, n in self.gli_drops.items() if n}
+        status = {
             "id": self.id,
             "backend": self.spec.backend,
             "state": backend.state if backend else "down",
             "tx_packets": figures["tx_packets"],
             "rx_packets": figures["rx_packets"],
-            "drops": figures["drops"] + sum(self.gli_drops.values()),
+            # what an application lost; a frame no application was there to read is counted apart
+            "drops": figures["drops"] + sum(n for cause, n in causes.items() if cause not in UNREAD_CAUSES),
             "fifo_bytes": figures["fifo_bytes"],
+            "unread": causes.get("no_reader", 0),
+            "drop_causes": causes,
+            "clients": len(self.clients),
         }
+        if figures.get("reason"):
+            status["reason"] = figures["reason"]
+        return status
 
     def close(self) -> None:
         for client in list(self.clients):
@@ -213,10 +251,15 @@ class Link:
             self.mq.close()
         if self.backend is not None:
             self.backend.close()
+        if self.lock is not None:
+            self.lock.release()
+            self.lock = None
 
 
 class Router:
-    def __init__(self, scheduler: Any, recorder: Recorder, socket_dir: str | None = None, gli_backlog: int = 1000):
+    def __init__(self, scheduler: Any, recorder: Recorder, socket_dir: str | None = None, gli_backlog: int = 1000,
+                 group: int | None = None, max_clients: int = 256, max_link_clients: int = 32,
+                 client_output_cap: int = 256 * 1024):
         self.scheduler = scheduler
         self.gli_backlog = gli_backlog
         self.recorder = recorder
@@ -228,8 +271,26 @@ class Router:
         self.backend_factories: dict[str, Callable[[LinkSpec], Backend]] = {
             "sim": self._sim_backend, "evologics": self._driver_backend, "s100": self._driver_backend}
         self.full_size_queues: bool | None = None
+        self.group = group
+        self.max_clients = max_clients
+        self.max_link_clients = max_link_clients
+        self.client_output_cap = client_output_cap
+        self.clients: set[GliClient] = set()  # every socket client, on a link or not yet (TCP before HELLO)
+        self.clients_refused = 0
         if socket_dir is not None:
-            os.makedirs(socket_dir, exist_ok=True)
+            os.makedirs(socket_dir, mode=0o750, exist_ok=True)
+
+    def accept_client(self, sock: Any, link_id: str | None = None) -> None:
+        """A new socket client (on a link's Unix socket, or on the TCP listener before its HELLO),
+        unless the daemon has as many as it may: then it is told why and closed."""
+        if len(self.clients) >= self.max_clients:
+            self.clients_refused += 1
+            log.info("GLI client refused: %d clients already (--max-clients)", len(self.clients))
+            refuse_client(sock, f"too many clients ({self.max_clients})")
+            return
+        client = GliClient(sock, self.scheduler, self, link_id, self.client_output_cap)
+        if not client.connection.closed:  # refused at once (no such link, too many on it): gone already
+            self.clients.add(client)
 
     def link_name(self, channel: str, address: int) -> str:
         return self._names.get((channel, address), f"addr:{address}")
@@ -270,8 +331,15 @@ class Router:
         for spec in scene.links.values():
             link = self.links.get(spec.id)
             if link is None:
-                link = self.links[spec.id] = Link(spec, self)
-                link.open_endpoints(self.scheduler, self.socket_dir, bool(self.full_size_queues))
+                lock = LinkLock(spec.id)  # one daemon per link id on this host, or refused here
+                link = Link(spec, self)
+                link.lock = lock
+                try:
+                    link.open_endpoints(self.scheduler, self.socket_dir, bool(self.full_size_queues))
+                except BaseException:
+                    link.close()
+                    raise
+                self.links[spec.id] = link
                 link.set_backend(self.backend_factories[spec.backend](spec))
                 if link.mq is not None:
                     link.mq.start()

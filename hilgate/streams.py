@@ -116,11 +116,24 @@ class Connection:
         self.on_close()
 
 
-def listen_unix(path: str, backlog: int = 16) -> socket.socket:
-    """Bind a Unix stream socket at ``path``, replacing a stale file but never a live server."""
+def somaxconn() -> int:
+    """The kernel's largest accept backlog (a burst of clients connecting at once is not refused)."""
+    try:
+        with open("/proc/sys/net/core/somaxconn") as handle:
+            return max(16, int(handle.read().strip()))
+    except (OSError, ValueError):
+        return socket.SOMAXCONN
+
+
+def listen_unix(path: str, backlog: int | None = None, group: int | None = None, mode: int = 0o660) -> socket.socket:
+    """Bind a Unix stream socket at ``path`` for the daemon's user and group only (``mode``, and
+    ``group`` when given), replacing a stale file but never a live server.
+
+    The socket file is created under a umask that already excludes others, so there is no moment at
+    which anyone else could connect; the runtime directory (0750) keeps them out as well."""
     import os
 
-    if os.path.exists(path):
+    if os.path.lexists(path):
         probe = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         try:
             probe.connect(path)
@@ -131,9 +144,22 @@ def listen_unix(path: str, backlog: int = 16) -> socket.socket:
         finally:
             probe.close()
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    sock.bind(path)
-    os.chmod(path, 0o666)
-    sock.listen(backlog)
+    old = os.umask(0o777 & ~mode)
+    try:
+        sock.bind(path)
+    except OSError:
+        sock.close()
+        raise
+    finally:
+        os.umask(old)
+    try:
+        os.chmod(path, mode)
+        if group is not None:
+            os.chown(path, -1, group)
+        sock.listen(backlog if backlog is not None else somaxconn())
+    except OSError:
+        sock.close()
+        raise
     sock.setblocking(False)
     return sock
 

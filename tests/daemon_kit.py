@@ -28,12 +28,13 @@ def unique(prefix: str = "t") -> str:
 
 
 class Daemon:
-    def __init__(self, tmp_path, scene_text: str, links: list[str], *args: str, env: dict | None = None):
+    def __init__(self, tmp_path, scene_text: str, links: list[str], *args: str, env: dict | None = None,
+                 runtime: str | None = None):
         self.tmp = tmp_path
         self.links = links
         self.scene = tmp_path / "scene.yaml"
         self.scene.write_text(scene_text)
-        self.runtime = str(tmp_path / "rt")
+        self.runtime = runtime or str(tmp_path / "rt")
         self.trace = tmp_path / "trace.jsonl"
         self.summary = tmp_path / "summary.json"
         self.notify_path = str(tmp_path / "notify.sock")
