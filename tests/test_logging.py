@@ -129,5 +129,5 @@ links:
     assert code == 0, text
     lines = text.splitlines()
     assert lines and all(re.match(r"<[0-7]>", line) for line in lines), lines
-    assert any(line.startswith("<6>INFO hilgate.daemon: ") for line in lines), lines
+    assert any(line.startswith("<6>INFO hilgate") for line in lines), lines  # the start-up line
     assert not any(TIMESTAMP.search(line) for line in lines), lines
