@@ -106,49 +106,72 @@ class EchoServer:
 
 class Rfc2217Server:
     """pyserial's RFC 2217 server side (``PortManager``, as in its ``rfc2217_server.py`` example) in
-    front of a ``loop://`` serial port, on a free loopback port: a networked serial port in loopback."""
+    front of a ``loop://`` serial port, on a free loopback port: a networked serial port in loopback.
+    One client at a time; :meth:`drop` cuts the current one off (the network cable pulled)."""
 
     def __init__(self):
         self.listener = socket.create_server(("127.0.0.1", 0))
         self.port = self.listener.getsockname()[1]
         self.lock = threading.Lock()
-        self.stop = threading.Event()
+        self.conn = None
+        self.clients = 0
         threading.Thread(target=self._serve, daemon=True).start()
 
     def _serve(self):
-        try:
-            conn, _ = self.listener.accept()
-        except OSError:
-            return
-        self.conn = conn
-        device = serial.serial_for_url("loop://", timeout=0.05)
-        manager = serial.rfc2217.PortManager(device, self)
-        threading.Thread(target=self._to_client, args=(device, manager), daemon=True).start()
-        while not self.stop.is_set():
+        while True:
             try:
-                data = conn.recv(1024)
+                conn, _ = self.listener.accept()
             except OSError:
                 return
-            if not data:
-                return
-            device.write(b"".join(manager.filter(data)))
+            with self.lock:
+                self.conn = conn
+                self.clients += 1
+            self._client(conn)
 
-    def write(self, data):  # what PortManager calls to talk to the client
-        with self.lock:
-            self.conn.sendall(data)
+    def _client(self, conn):
+        device = serial.serial_for_url("loop://", timeout=0.05)
+        manager = serial.rfc2217.PortManager(device, _Sender(conn, self.lock))
+        done = threading.Event()
+        threading.Thread(target=self._to_client, args=(device, manager, done), daemon=True).start()
+        try:
+            while data := conn.recv(1024):
+                device.write(b"".join(manager.filter(data)))
+        except OSError:
+            pass
+        finally:
+            done.set()
+            conn.close()
 
-    def _to_client(self, device, manager):
-        while not self.stop.is_set():
+    @staticmethod
+    def _to_client(device, manager, done):
+        while not done.is_set():
             data = device.read(device.in_waiting or 1)
             if data:
                 try:
-                    self.write(b"".join(manager.escape(data)))
+                    manager.connection.write(b"".join(manager.escape(data)))
                 except OSError:
                     return
 
+    def drop(self):
+        with self.lock:
+            self.conn.shutdown(socket.SHUT_RDWR)
+
     def close(self):
-        self.stop.set()
         self.listener.close()
+        if self.conn is not None:
+            self.conn.close()
+
+
+class _Sender:
+    """What PortManager writes to: the client's socket."""
+
+    def __init__(self, conn, lock):
+        self.conn = conn
+        self.lock = lock
+
+    def write(self, data):
+        with self.lock:
+            self.conn.sendall(data)
 
 
 def one_link_scene(link: str, port: str, packet: str = "vl2b") -> str:
@@ -194,13 +217,18 @@ def test_a_driver_link_on_loop_url_comes_up_and_echoes(tmp_path):
         daemon.close()
 
 
-def test_a_driver_link_on_rfc2217_comes_up_and_echoes(tmp_path):
+def test_a_driver_link_on_rfc2217_comes_up_echoes_and_comes_back_after_the_network_drops(tmp_path):
     link = unique("rf")
     server = Rfc2217Server()
     daemon = Daemon(tmp_path, one_link_scene(link, f"rfc2217://127.0.0.1:{server.port}"), [link])
     try:
         daemon.wait_for("READY=1")
         wait_state(daemon, link, "up")
+        assert echoes(daemon, link, PAYLOADS) == PAYLOADS
+        server.drop()
+        wait_state(daemon, link, "down")
+        wait_state(daemon, link, "up")
+        assert server.clients == 2
         assert echoes(daemon, link, PAYLOADS) == PAYLOADS
     finally:
         daemon.close()
