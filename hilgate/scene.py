@@ -513,7 +513,9 @@ def _mavlink_pose(node: Node, path: str) -> Any:
 
     hb_node, hb_path = f.child("heartbeat"), f.sub("heartbeat")
     heartbeat = None
-    if hb_node is not None and (hb_node.is_map or boolean(hb_node, hb_path)):
+    if hb_node is not None and not hb_node.is_map and not isinstance(hb_node.value, bool):
+        raise hb_node.error(hb_path, "must be true, false or {system_id: N, component_id: M, rate_hz: R}")
+    if hb_node is not None and (hb_node.is_map or hb_node.value):
         own, component, rate = system_id, ident.DEFAULT_COMPONENT_ID, ident.DEFAULT_HEARTBEAT_HZ  # as a companion's
         where = {"system_id": (f.child("system_id"), f.sub("system_id")), "component_id": (hb_node, hb_path)}
         if hb_node.is_map:

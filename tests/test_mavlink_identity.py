@@ -194,6 +194,7 @@ def test_heartbeat_key_defaults():
     ("{url: u, system_id: 1, heartbeat: {component_id: 190}}", "ground station's"),
     ("{url: u, system_id: 1, heartbeat: {type: 6}}", "unknown key"),
     ("{url: u, system_id: 1, heartbeat: {rate_hz: 0}}", "rate_hz"),
+    ("{url: u, system_id: 1, heartbeat: 1}", "must be true, false or"),
 ])
 def test_a_heartbeat_that_would_pose_as_a_ground_station_or_the_autopilot_is_refused(options, why):
     with pytest.raises(SceneError, match=why):
