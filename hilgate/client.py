@@ -89,10 +89,16 @@ class Link:
     def max_payload(self) -> int:
         return int(self.info["max_payload"])
 
-    def send(self, data: bytes, dst: int = 255) -> None:
+    def send(self, data: bytes, dst: int = 255, timeout: float | None = None) -> None:
+        """Send one frame; blocks while hilgate is not reading (or up to ``timeout`` seconds, then
+        TimeoutError).  Independent of any timeout an earlier :meth:`recv` used."""
         if not 0 <= dst <= 255:
             raise ValueError("dst must be 0..255 (255 broadcasts)")
-        self.sock.sendall(wire.encode_send(dst, bytes(data)))
+        self._sendall(wire.encode_send(dst, bytes(data)), timeout)
+
+    def _sendall(self, data: bytes, timeout: float | None) -> None:
+        self.sock.settimeout(timeout)
+        self.sock.sendall(data)
 
     def recv(self, timeout: float | None = None) -> Message | None:
         """The next frame for this link, or None if none came within ``timeout`` seconds."""
@@ -110,7 +116,7 @@ class Link:
 
     def command(self, request: dict[str, Any], timeout: float = 5.0) -> Any:
         """Ask hilgate something about this link or its vehicle (a JSON object with a ``class``)."""
-        self.sock.sendall(wire.encode_json(wire.COMMAND, request))
+        self._sendall(wire.encode_json(wire.COMMAND, request), timeout)
         deadline = time.monotonic() + timeout
         while not self.replies:
             if self.errors:

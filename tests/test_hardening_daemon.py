@@ -90,3 +90,239 @@ def test_a_scene_is_parsed_off_the_loop_during_a_reload(pair):
     finally:
         slow.close()
         fast.close()
+
+
+# -- control requests ---------------------------------------------------------------------------
+
+HOSTILE_REQUESTS = [
+    b'{"class": []}', b'{"class": {}}', b'{"class": null}', b'{"class": 7}', b'[1, 2]', b'"STATUS"', b'null',
+    b'{"class": "WATCH", "interval_s": "x"}', b'{"class": "WATCH", "interval_s": null}',
+    b'{"class": "WATCH", "interval_s": [1]}', b'{"class": "WATCH", "interval_s": 1e999}',
+    b'{"class": "WATCH", "enable": "no"}', b"[" * 30000 + b"]" * 30000, b'{"a":' * 5000 + b"1" + b"}" * 5000,
+    b"\xff\xfe not utf-8", b'{"class": "' + b"X" * 200 + b'"}',
+]
+
+
+def test_hostile_control_requests_each_get_an_error_and_the_connection_stays(pair):
+    daemon, a, b = pair
+    sock, reader = control_connection(daemon)
+    try:
+        for request in HOSTILE_REQUESTS:
+            sock.sendall(request + b"\n")
+            if len(request) > 16384:  # a line longer than the limit ends the connection after its answer
+                answer = json.loads(reader.readline())
+                assert answer["class"] == "ERROR" and "longer than" in answer["message"]
+                sock.close()
+                sock, reader = control_connection(daemon)
+                continue
+            answer = json.loads(reader.readline())
+            assert answer["class"] == "ERROR", (request[:60], answer)
+        sock.sendall(b'{"class": "STATUS"}\n')
+        assert json.loads(reader.readline())["class"] == "STATUS"
+    finally:
+        sock.close()
+    assert "Traceback" not in daemon.output()
+
+
+def test_a_deeply_nested_hello_is_refused_without_a_traceback(pair):
+    from hilgate import gli_wire as wire
+
+    daemon, a, b = pair
+    sock = socket.create_connection(("127.0.0.1", 1), timeout=1) if False else socket.socket(socket.AF_UNIX)
+    sock.settimeout(60)
+    sock.connect(os.path.join(daemon.runtime, "gli", f"{a}.sock"))
+    try:
+        sock.sendall(wire.encode(wire.HELLO, b'{"link":' * 5000 + b'"x"' + b"}" * 5000))
+        decoder = wire.Decoder()
+        messages = []
+        while not any(kind == wire.ERROR for kind, _ in messages):
+            data = sock.recv(65536)
+            assert data, messages
+            messages += decoder.feed(data)
+        error = next(wire.decode_json(body) for kind, body in messages if kind == wire.ERROR)
+        assert "nested deeper" in error["error"]
+    finally:
+        sock.close()
+    assert "Traceback" not in daemon.output()
+    assert daemon.status()["class"] == "STATUS"
+
+
+def test_a_control_client_that_never_reads_is_disconnected_and_costs_nothing_else(pair):
+    daemon, a, b = pair
+    hog, _ = control_connection(daemon)
+    hog.settimeout(0.5)
+    sent = 0
+    try:
+        for _ in range(20000):  # replies pile up while it never reads; it is cut off past the cap
+            hog.sendall(b'{"class": "STATUS"}\n')
+            sent += 1
+    except (BrokenPipeError, ConnectionResetError, socket.timeout, BlockingIOError):
+        pass
+    finally:
+        hog.close()
+    assert daemon.status()["class"] == "STATUS"  # another client is served
+    assert sent < 20000 or "disconnected" in daemon.output()
+
+
+def test_the_unix_listen_backlog_takes_a_burst_of_connections(pair):
+    import signal
+
+    daemon, a, b = pair
+    path = os.path.join(daemon.runtime, "gli", f"{a}.sock")
+    clients = []
+    os.kill(daemon.process.pid, signal.SIGSTOP)  # nobody accepts: the kernel's backlog holds them
+    try:
+        for _ in range(200):
+            sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            sock.setblocking(False)
+            sock.connect(path)  # BlockingIOError (EAGAIN) here once the backlog is full
+            clients.append(sock)
+    finally:
+        os.kill(daemon.process.pid, signal.SIGCONT)
+        for sock in clients:
+            sock.close()
+    assert len(clients) == 200
+    assert daemon.status()["class"] == "STATUS"
+
+
+# -- GLI clients -------------------------------------------------------------------------------
+
+def test_clients_per_link_and_in_total_are_capped_with_an_answer(tmp_path):
+    from hilgate.client import GliError, Link
+
+    a, b = unique("a"), unique("b")
+    daemon = Daemon(tmp_path, scene(a, b), [a, b], "--max-link-clients", "2", "--max-clients", "3")
+    try:
+        daemon.wait_for("READY=1")
+        first, second = Link.open(a, runtime_dir=daemon.runtime), Link.open(a, runtime_dir=daemon.runtime)
+        with pytest.raises(GliError, match="too many clients on link"):
+            Link.open(a, runtime_dir=daemon.runtime)
+        third = Link.open(b, runtime_dir=daemon.runtime)
+        with pytest.raises(GliError, match=r"too many clients \(3\)"):
+            Link.open(b, runtime_dir=daemon.runtime)
+        first.close()
+        deadline = time.monotonic() + 60
+        while daemon.link_status(a)["clients"] != 1:  # the daemon has seen it leave
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        Link.open(b, runtime_dir=daemon.runtime).close()  # a place is free again
+        second.close()
+        third.close()
+    finally:
+        daemon.close()
+
+
+def test_a_gli_client_that_never_reads_is_dropped_past_its_cap_counted_and_traced(tmp_path):
+    from hilgate.client import Link
+
+    a, b = unique("a"), unique("b")
+    daemon = Daemon(tmp_path, scene(a, b).replace("bitrate_bps: 10000", "bitrate_bps: 1e9"), [a, b])
+    try:
+        daemon.wait_for("READY=1")
+        sleeper = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        sleeper.connect(os.path.join(daemon.runtime, "gli", f"{b}.sock"))  # b's client, never reads
+        with Link.open(a, runtime_dir=daemon.runtime) as sender:
+            deadline = time.monotonic() + 120
+            while daemon.link_status(b)["drop_causes"].get("client_slow", 0) == 0:
+                assert time.monotonic() < deadline, daemon.link_status(b)
+                for _ in range(50):
+                    sender.send(b"x" * 2000, dst=2)
+                time.sleep(0.01)
+        status = daemon.link_status(b)
+        assert status["clients"] == 0 and status["drops"] >= 1
+        sleeper.close()
+    finally:
+        daemon.stop()
+        events = daemon.trace_events()
+        daemon.close()
+    assert any(e.get("cause") == "client_slow" and e["link"] == b for e in events)
+
+
+def test_frames_nobody_was_there_to_read_are_not_counted_as_application_drops(tmp_path):
+    from hilgate.client import Link
+
+    a, b, c = unique("a"), unique("b"), unique("c")
+    extra = f"  {c}: {{vehicle: vb, address: 3, bitrate_bps: 10000, packet: vl2b}}"
+    daemon = Daemon(tmp_path, scene(a, b, extra), [a, b, c])
+    try:
+        daemon.wait_for("READY=1")
+        with Link.open(a, runtime_dir=daemon.runtime) as sender, Link.open(b, runtime_dir=daemon.runtime) as reader:
+            for i in range(5):
+                sender.send(b"hello %d" % i)  # broadcast: b (a socket client) and c (nobody) hear it
+            got = [reader.recv(timeout=60) for _ in range(5)]
+            assert all(m is not None for m in got)
+            deadline = time.monotonic() + 60
+            while daemon.link_status(c)["unread"] < 5:
+                assert time.monotonic() < deadline, daemon.link_status(c)
+                time.sleep(0.01)
+        status_b, status_c = daemon.link_status(b), daemon.link_status(c)
+        assert status_b["drops"] == 0 and status_b["unread"] == 0  # socket-only: every frame delivered
+        assert status_c["drops"] == 0 and status_c["unread"] == 5 and status_c["drop_causes"] == {"no_reader": 5}
+    finally:
+        daemon.stop()
+        events = daemon.trace_events()
+        daemon.close()
+    assert sum(1 for e in events if e.get("cause") == "no_reader" and e["link"] == c) == 5
+
+
+def test_frames_left_in_the_queue_while_no_daemon_ran_are_counted_and_traced_as_stale(tmp_path):
+    import posix_ipc
+
+    sys_path = os.path.join(os.path.dirname(__file__), "peers")
+    import sys
+
+    sys.path.insert(0, sys_path)
+    from dccomms_peer import encode_vl2b
+
+    a, b = unique("a"), unique("b")
+    queue = posix_ipc.MessageQueue(f"/{a}_tx_dlnk_phy", posix_ipc.O_CREX, mode=0o600, max_messages=10,
+                                   max_message_size=8192)
+    for i in range(3):
+        queue.send(b"\x00" + encode_vl2b(b"old %d" % i, i, 1, 2))
+    queue.close()
+    daemon = Daemon(tmp_path, scene(a, b), [a, b])
+    try:
+        daemon.wait_for("READY=1")
+        status = daemon.link_status(a)
+        assert status["drop_causes"] == {"stale": 3} and status["tx_packets"] == 0
+    finally:
+        daemon.stop()
+        events = daemon.trace_events()
+        daemon.close()
+    assert [e["cause"] for e in events if e.get("link") == a and e["ev"] == "drop"] == ["stale"] * 3
+
+
+def test_a_receive_timeout_does_not_become_the_send_timeout(pair):
+    import signal
+    import threading
+
+    from hilgate.client import Link
+
+    daemon, a, b = pair
+    errors = []
+    done = threading.Event()
+
+    def application():
+        try:
+            with Link.open(a, runtime_dir=daemon.runtime) as link:
+                assert link.recv(timeout=0.001) is None
+                stopped.wait(60)
+                for _ in range(300):  # more than the socket buffer while the daemon is stopped
+                    link.send(b"y" * 2000, dst=2)
+        except Exception as exc:
+            errors.append(exc)
+        finally:
+            done.set()
+
+    stopped = threading.Event()
+    worker = threading.Thread(target=application, daemon=True)
+    worker.start()
+    time.sleep(0.2)
+    os.kill(daemon.process.pid, signal.SIGSTOP)
+    stopped.set()
+    try:
+        done.wait(0.5)  # while stopped the sends must block, not time out
+    finally:
+        os.kill(daemon.process.pid, signal.SIGCONT)
+    assert done.wait(120)
+    assert errors == []
