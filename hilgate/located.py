@@ -262,9 +262,9 @@ class _Builder:
             return self.loader.construct_object(node, deep=True)
         except yaml.MarkedYAMLError as exc:
             raise self.error(line, f"bad value for {_short_tag(node.tag)}: {exc.problem or exc.context}", path) from None
-        except (yaml.YAMLError, ValueError, TypeError, AttributeError, OverflowError) as exc:
-            # e.g. ``!!timestamp not-a-date`` (AttributeError inside PyYAML), ``!!timestamp 2024-13-45``
-            reason = str(exc) if isinstance(exc, ValueError) else "not a valid value"
+        except Exception as exc:  # PyYAML's constructors trust their input: ``!!int ''`` is an IndexError,
+            # ``!!timestamp not-a-date`` an AttributeError, ``!!timestamp 2024-13-45`` a ValueError
+            reason = str(exc) if type(exc) is ValueError else "not a valid value"
             raise self.error(line, f"bad value for {_short_tag(node.tag)}: {reason}", path) from None
 
 

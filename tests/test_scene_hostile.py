@@ -281,6 +281,8 @@ HOSTILE = {
                           4, "simple:N"),
     "bad timestamp": ("x-t: !!timestamp not-a-date\n" + BASE, 1, "timestamp"),
     "impossible date": ("x-t: !!timestamp 2024-13-45\n" + BASE, 1, "timestamp"),
+    "empty int": ("x-t: !!int\n" + BASE, 1, "!!int"),
+    "empty float": ("x-t: !!float ''\n" + BASE, 1, "!!float"),
     "unknown tag": ("x-t: !foo bar\n" + BASE, 1, "!foo"),
     "python tag": ("x-t: !!python/object/apply:os.system [echo hi]\n" + BASE, 1, "tag"),
     "tagged mapping": ("x-t: !foo {a: 1}\n" + BASE, 1, "!foo"),
@@ -456,3 +458,8 @@ def test_port_urls_are_checked_when_the_scene_loads(tmp_path):
     assert dict(scene.links["x"].options)["port"] == str(tmp_path / "ttyEMU0")
     scene = load_scene(write_scene(tmp_path, link.format(port='"socket://localhost:9200"')))
     assert dict(scene.links["x"].options)["port"] == "socket://localhost:9200"
+
+
+def test_a_link_id_with_a_trailing_newline_is_refused():
+    error = scene_error(BASE.replace("  y: {vehicle: b}\n", '  "y\\n": {vehicle: b}\n'))
+    assert "POSIX queues" in error.message and error.line == 5
