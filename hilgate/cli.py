@@ -177,13 +177,41 @@ def _open_link(args: argparse.Namespace):
 
 
 def cmd_send(args: argparse.Namespace) -> int:
+    """Each frame is followed by a round trip to the daemon: an ERROR it answered the frame with
+    arrives first, so a refused frame is reported (and the exit status is 1), not lost silently."""
+    from .client import GliError
+
+    refused = 0
     with _open_link(args) as link:
-        if args.text:
-            link.send(" ".join(args.text).encode(), args.to)
-        else:
-            for line in sys.stdin:
-                link.send(line.rstrip("\n").encode(), args.to)
-    return 0
+        frames = [" ".join(args.text)] if args.text else (line.rstrip("\n") for line in sys.stdin)
+        for text in frames:
+            link.send(text.encode(), args.to)
+            try:
+                link.command({"class": "STATUS"})
+            except GliError as exc:
+                refused += 1
+                print(f"hilgate: {link.id}: frame refused: {exc}", file=sys.stderr)
+    return 1 if refused else 0
+
+
+def _address(value: str) -> int:
+    try:
+        address = int(value, 0)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{value!r} is not an address (0..255, 255 broadcasts)") from None
+    if not 0 <= address <= 255:
+        raise argparse.ArgumentTypeError(f"{address} is not an address (0..255, 255 broadcasts)")
+    return address
+
+
+def _tcp_address(value: str) -> str:
+    from .daemon import parse_tcp
+
+    try:
+        parse_tcp(value)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return value
 
 
 def cmd_listen(args: argparse.Namespace) -> int:
@@ -295,7 +323,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", help="the daemon: GLI endpoints for every link, in real time")
     _add_scene_args(p, optional=True)
     p.add_argument("--speed", type=float, default=1.0, help="run the model at K times real time (default 1)")
-    p.add_argument("--tcp", metavar="[HOST:]PORT", help="also serve the socket GLI over TCP (loopback by default)")
+    p.add_argument("--tcp", metavar="[HOST:]PORT", type=_tcp_address,
+                   help="also serve the socket GLI over TCP (loopback by default)")
     p.add_argument("--runtime-dir", help="where the sockets go (default: $RUNTIME_DIRECTORY, /run/hilgate, "
                                           "$XDG_RUNTIME_DIR/hilgate or /tmp/hilgate-UID)")
     p.add_argument("--trace", help="append the event trace (JSON lines) here")
@@ -355,8 +384,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("send", help="send text to a link (arguments, or one frame per stdin line)")
     p.add_argument("link")
     p.add_argument("text", nargs="*")
-    p.add_argument("--to", type=int, default=255, help="destination address (default 255, broadcast)")
-    p.add_argument("--tcp", metavar="[HOST:]PORT")
+    p.add_argument("--to", type=_address, default=255, help="destination address (default 255, broadcast)")
+    p.add_argument("--tcp", metavar="[HOST:]PORT", type=_tcp_address)
     p.add_argument("--runtime-dir")
 
     p = sub.add_parser("listen", help="print what a link receives")
@@ -364,7 +393,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--count", type=int, help="stop after N frames")
     p.add_argument("--timeout", type=float, help="stop after S seconds without a frame")
     p.add_argument("--hex", action="store_true", help="print payloads in hex")
-    p.add_argument("--tcp", metavar="[HOST:]PORT")
+    p.add_argument("--tcp", metavar="[HOST:]PORT", type=_tcp_address)
     p.add_argument("--runtime-dir")
     return parser
 

@@ -32,9 +32,11 @@ log = logging.getLogger(__name__)
 
 
 def parse_tcp(value: str) -> tuple[str, int]:
-    """``PORT`` or ``HOST:PORT``; loopback unless a host is given."""
-    host, _, port = value.rpartition(":")
-    return (host or "127.0.0.1"), int(port)
+    """``PORT`` or ``HOST:PORT``; loopback unless a host is given.  ValueError says what is wrong."""
+    host, _, port = str(value).rpartition(":")
+    if not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise ValueError(f"{value!r} is not [HOST:]PORT with a port from 1 to 65535")
+    return (host.strip("[]") or "127.0.0.1"), int(port)
 
 
 def _link_list(scene: Scene, limit: int = 12) -> str:

@@ -86,7 +86,8 @@ class GliClient:
             dst, payload = wire.decode_send(body)
             try:
                 self.link.from_client(payload, dst)
-            except PacketError as exc:
+            except PacketError as exc:  # refused: counted and traced like a bad frame from a queue
+                self.link.bad_frame(exc.reason, len(payload))
                 self.connection.write(wire.encode_json(wire.ERROR, {"error": str(exc)}))
         elif kind == wire.COMMAND:
             if self.link is None:
