@@ -174,7 +174,7 @@ def base_dir(node: Node) -> str:
     """The directory a relative path written in ``node`` is taken from: that of the file it was
     written in (a scene travels with the files it names, and under systemd the working directory is
     /var/lib/hilgate), or the working directory for a value given on the command line (``--set``)."""
-    if not node.file or node.file == "--set" or node.file.startswith("<"):
+    if not node.file or node.file.startswith(("<", "-")):  # "<scene>" text, "--set", "--plugin"
         return os.getcwd()
     return os.path.dirname(os.path.abspath(node.file))
 
