@@ -115,17 +115,21 @@ class Link:
         return self.inbox.popleft()
 
     def command(self, request: dict[str, Any], timeout: float = 5.0) -> Any:
-        """Ask hilgate something about this link or its vehicle (a JSON object with a ``class``)."""
+        """Ask hilgate something about this link or its vehicle (a JSON object with a ``class``).
+
+        hilgate answers in order, so an ERROR that came before the reply (a frame sent earlier was
+        refused) is raised here, after the reply is taken off the queue."""
         self._sendall(wire.encode_json(wire.COMMAND, request), timeout)
         deadline = time.monotonic() + timeout
-        while not self.replies:
-            if self.errors:
-                raise GliError(self.errors.popleft())
+        while not self.replies:  # (a connection hilgate closes ends this with a GliError)
             remaining = deadline - time.monotonic()
             if remaining <= 0:
-                raise GliError("no reply from hilgate")
+                raise GliError(self.errors.popleft() if self.errors else "no reply from hilgate")
             self._pump(remaining)
-        return self.replies.popleft()
+        reply = self.replies.popleft()
+        if self.errors:
+            raise GliError(self.errors.popleft())
+        return reply
 
     def _pump(self, timeout: float | None) -> bool:
         self.sock.settimeout(timeout)
