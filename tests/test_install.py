@@ -258,3 +258,71 @@ def test_make_targets_run_what_the_readme_says():
     assert last_line("fuzz") == "HILGATE_FUZZ=1 .venv/bin/python -m pytest -q -k fuzz"
     assert last_line("test") == ".venv/bin/python -m pytest -q"
     assert last_line("run") == ".venv/bin/hilgate run scenes/demo.yaml"
+
+
+STUB = """#!/bin/sh
+echo "$(basename "$0") $*" >>"{log}"
+case "$(basename "$0") $*" in
+    "id -u") echo 0 ;;
+    "getent group dialout") echo "dialout:x:20:" ;;
+    "getent passwd hilgate") test -e "{accounts}.user" || exit 2 ;;
+    "getent group hilgate") test -e "{accounts}.group" || exit 2 ;;
+    "useradd "*) touch "{accounts}.user" ;;
+    "groupadd "*) touch "{accounts}.group" ;;
+    "userdel "*) rm "{accounts}.user" ;;
+    "groupdel "*) rm "{accounts}.group" ;;
+    "getent "*) exit 2 ;;
+    "systemctl is-active "*) exit 3 ;;
+esac
+exit 0
+"""
+
+
+def test_root_steps_on_a_real_system(tmp_path):
+    """Without DESTDIR, as root and under systemd: the account, dialout and systemctl steps, run against
+    stub commands (id says root) and paths under tmp_path, so the test needs no root and changes nothing."""
+    before = system_state()
+    stubs, log = tmp_path / "stubs", tmp_path / "commands.log"
+    stubs.mkdir()
+    for name in ("id", "getent", "groupadd", "useradd", "usermod", "userdel", "groupdel", "systemctl"):
+        (stubs / name).write_text(STUB.format(log=log, accounts=tmp_path / "accounts"))
+        (stubs / name).chmod(0o755)
+    (tmp_path / "systemd-running").mkdir()
+    places = [f"PREFIX={tmp_path}/opt/hilgate", f"SYSCONFDIR={tmp_path}/etc", f"UNITDIR={tmp_path}/units",
+              f"LOGROTATEDIR={tmp_path}/logrotate.d", f"BINDIR={tmp_path}/bin", "PIP_ARGS=--no-deps"]
+    env = dict(os.environ, PATH=f"{stubs}:{os.environ['PATH']}", HILGATE_SYSTEMD_RUN_DIR=str(tmp_path / "systemd-running"))
+
+    def run(*args: str) -> str:
+        result = subprocess.run(["make", "--no-print-directory", "-C", str(REPO), *args, *places,
+                                 f"PYTHON={sys.executable}"], capture_output=True, text=True, env=env)
+        assert result.returncode == 0, result.stdout + result.stderr
+        return result.stdout
+
+    output = run("install")
+    commands = log.read_text().splitlines()
+    assert "groupadd --system hilgate" in commands
+    assert ("useradd --system --gid hilgate --home-dir /var/lib/hilgate --no-create-home --shell /usr/sbin/nologin "
+            "--comment hilgate daemon hilgate") in commands
+    assert "usermod -a -G dialout hilgate" in commands
+    assert "systemctl daemon-reload" in commands and "systemctl enable --now hilgate" in output
+    unit = unit_settings(tmp_path / "units" / "hilgate.service")  # the chosen paths, consistently
+    assert unit["ExecStart"][0].startswith(f"{tmp_path}/opt/hilgate/bin/hilgate run ")
+    assert unit["EnvironmentFile"] == [f"-{tmp_path}/etc/hilgate/hilgate.env"]
+    assert f"HILGATE_SCENE={tmp_path}/etc/hilgate/scene.yaml" in (tmp_path / "etc/hilgate/hilgate.env").read_text()
+
+    log.unlink()
+    output = run("uninstall")
+    commands = log.read_text().splitlines()
+    assert commands.index("systemctl disable --now hilgate") < commands.index("systemctl daemon-reload")
+    assert not any(c.startswith(("userdel", "groupdel")) for c in commands)  # kept without PURGE, and said
+    assert "kept the hilgate user and group" in output
+    assert files_under(tmp_path / "etc") == [] and not (tmp_path / "opt/hilgate").exists()
+    assert not (tmp_path / "units/hilgate.service").exists() and not (tmp_path / "bin/hilgate").exists()
+
+    log.unlink()
+    run("install")  # the accounts exist now: not created again
+    assert not any(c.startswith(("useradd", "groupadd")) for c in log.read_text().splitlines())
+    run("uninstall", "PURGE=1")
+    commands = log.read_text().splitlines()
+    assert "userdel hilgate" in commands and "groupdel hilgate" in commands
+    assert system_state() == before
