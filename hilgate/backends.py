@@ -128,10 +128,11 @@ class SimBackend(Backend):
 
     kind = "sim"
 
-    def __init__(self, modem: SimModem, link_names: Callable[[str, int], str]):
+    def __init__(self, modem: SimModem, link_names: Callable[[str, int], str], everyone_in_range: bool = False):
         super().__init__()
         self.modem = modem
         self._link_names = link_names
+        self.everyone_in_range = everyone_in_range  # see LinkSpec.everyone_in_range
         modem.upper = self._deliver
         modem.on_idle = self._idle
 
@@ -150,8 +151,10 @@ class SimBackend(Backend):
 
     def send(self, frame: AppFrame) -> bool:
         modem = self.modem
-        dst_name = "*" if frame.dst == BROADCAST else self._link_names(modem.tx_channel, frame.dst)
-        sim_frame = Frame(modem.medium.new_frame_id(), modem.id, dst_name, frame.dst, len(frame.real),
+        # (an emulated EvoLogics modem's frames, with meta, carry the modem's own acoustic addresses)
+        dst = BROADCAST if self.everyone_in_range and frame.meta is None else frame.dst
+        dst_name = "*" if dst == BROADCAST else self._link_names(modem.tx_channel, dst)
+        sim_frame = Frame(modem.medium.new_frame_id(), modem.id, dst_name, dst, len(frame.real),
                           modem.clock.now(), None, frame)
         return modem.send(sim_frame)
 

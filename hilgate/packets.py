@@ -65,6 +65,9 @@ class PacketClass(ABC):
     name = "?"
     max_real = 0
     max_payload = 0
+    addresses_on_air = False
+    """Whether the real packet carries its destination (DataLinkFrame does); the others keep it only
+    in the virtual area, so a real modem of that class cannot filter by it."""
 
     @property
     def body_size(self) -> int:
@@ -153,6 +156,8 @@ class VariableLength(PacketClass):
 
 class DataLinkFrame(PacketClass):
     """``55 55 | dst | src | len u16 BE | payload | FCS`` with the FCS over dst..payload."""
+
+    addresses_on_air = True
 
     def __init__(self, fcs_bytes: int):
         self.fcs_bytes = fcs_bytes

@@ -142,6 +142,13 @@ class Link:
         if backend is None:
             self.bad_frame("no_backend", len(frame.real))
             return
+        if (isinstance(backend, SimBackend) and not backend.everyone_in_range
+                and self.router.addressed_to_nobody(self.spec.params.tx_channel, frame.dst)):
+            # it still goes on air (and may spoil others' frames), but nobody will ever take it
+            self.gli_drops["no_receiver"] += 1
+            self.router.recorder.event({"t": round(self.router.scheduler.now(), 9), "ev": "err", "link": self.id,
+                                        "src": self.id, "dst": f"addr:{frame.dst}", "size": len(frame.real),
+                                        "cause": "no_receiver"})
         backend.send(frame)
         self.state_changed()
 
@@ -297,7 +304,10 @@ class Router:
 
     def _sim_backend(self, spec: LinkSpec) -> Backend:
         assert self.world is not None
-        return SimBackend(self.world.modems[spec.id], self.link_name)
+        return SimBackend(self.world.modems[spec.id], self.link_name, spec.everyone_in_range)
+
+    def addressed_to_nobody(self, channel: str, address: int) -> bool:
+        return address != BROADCAST and (channel, address) not in self._names
 
     def _driver_backend(self, spec: LinkSpec) -> Backend:
         from .drivers.evologics import EvologicsBackend, EvologicsOptions
@@ -354,6 +364,7 @@ class Router:
                 link.set_backend(self.backend_factories[spec.backend](spec))
             elif isinstance(link.backend, SimBackend):
                 link.backend.rebind(self.world.modems[spec.id])
+                link.backend.everyone_in_range = spec.everyone_in_range
                 if before != spec:
                     log.info("link %s reconfigured", spec.id)
             link.state_changed()

@@ -53,7 +53,8 @@ DRIVER_KEYS = {
 }
 ALL_DRIVER_KEYS = tuple(dict.fromkeys(k for keys in DRIVER_KEYS.values() for k in keys))
 LINK_KEYS = ("vehicle", "backend", "model", "address", "channel", "tx_channel", "rx_channel") + MODEM_KEYS + \
-    ALL_DRIVER_KEYS + ("emulate",)
+    ALL_DRIVER_KEYS + ("emulate", "addressing")
+ADDRESSING = ("auto", "strict")
 FLOW_KEYS = ("from", "to", "size_bytes", "interval_s", "rate_hz", "poisson", "start_s", "stop_s")
 BACKENDS = ("sim", "evologics", "s100")
 PACKET_CLASSES = ("raw", "vl1b", "vl2b", "dlf16", "dlf32", "simple:N")
@@ -134,6 +135,16 @@ class LinkSpec:
     line: int = field(default=0, compare=False)
     options: tuple[tuple[str, Any], ...] = ()  # the driver's keys (port, baud…) for real backends
     emulate: tuple[tuple[str, Any], ...] = ()  # emulated modem in front of a sim link
+    addressing: str = "auto"  # auto: address-less packet classes without a MAC reach everyone in range
+
+    @property
+    def everyone_in_range(self) -> bool:
+        """Frames from applications reach every modem in range whatever their virtual destination:
+        UWSim-NET's behaviour for packet classes that carry no address on air, without a MAC."""
+        from .packets import packet_class
+
+        return (self.addressing == "auto" and self.mac.protocol == "none"
+                and not packet_class(self.packet).addresses_on_air)
 
 
 @dataclass
@@ -744,7 +755,9 @@ def _link(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: _Cont
         if backend != "sim":
             raise f.child("emulate").error(f.sub("emulate"), "only a backend: sim link can emulate a modem")
         emulate = f.get("emulate", _emulate)
-    return LinkSpec(link_id, vehicle, backend, model, params, mac, packet, node.file, node.line, options, emulate)
+    addressing = f.get("addressing", choice(*ADDRESSING), "auto")
+    return LinkSpec(link_id, vehicle, backend, model, params, mac, packet, node.file, node.line, options, emulate,
+                    addressing)
 
 
 _DRIVER_CHECKS: dict[str, Callable[[Node, str], Any]] = {
