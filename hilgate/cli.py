@@ -272,11 +272,17 @@ def cmd_emulate(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from .report import ReportError, report
+    from .report import ReportError, pick_run, report, trace_runs
 
     try:
+        runs = trace_runs(args.trace)
+        run = pick_run(runs, args.run)
+        if len(runs) > 1:
+            which = "the last" if args.run is None else f"number {run.index}"
+            print(f"{args.trace} holds {len(runs)} runs of the daemon; showing {which}: run {run.id} started "
+                  f"{run.start} (scene {run.scene}); choose another with --run ID or --run N", file=sys.stderr)
         written = report(args.trace, args.summaries, args.out, args.vehicles, args.csv, args.title,
-                         tuple(args.window) if args.window else None)
+                         tuple(args.window) if args.window else None, run if len(runs) > 1 else None)
     except ReportError as exc:
         print(f"hilgate: {exc}", file=sys.stderr)
         return 1
@@ -380,6 +386,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--csv", action="store_true", help="also write the tables behind the figures")
     p.add_argument("--title", help="the page's title")
     p.add_argument("--window", type=float, nargs=2, metavar=("START", "END"), help="only these seconds of the trace")
+    p.add_argument("--run", metavar="ID|N", help="a trace the daemon appended to across restarts holds several runs: "
+                                                 "this one (its id, or 1 for the first, -1 the last; default the last)")
 
     p = sub.add_parser("send", help="send text to a link (arguments, or one frame per stdin line)")
     p.add_argument("link")

@@ -52,46 +52,111 @@ class Trace:
         return sorted({(p.src, p.dst) for p in self.packets.values()})
 
 
-def load_trace(path: str, window: tuple[float, float] | None = None) -> Trace:
-    """Read a trace; with ``window`` only the events from ``window[0]`` to ``window[1]`` seconds."""
+@dataclass
+class Run:
+    """One start of the daemon in a trace: the ``run`` header line it wrote, and where its lines are."""
+
+    index: int
+    id: str
+    start: str
+    scene: str
+    first_line: int
+    last_line: int = 0
+
+
+def trace_runs(path: str) -> list[Run]:
+    """The runs in a trace file (the daemon appends one per start).  A trace without any header
+    (``hilgate sim``, or an older daemon) is one run."""
+    runs: list[Run] = []
+    try:
+        handle = open(path, encoding="utf-8")
+    except OSError as exc:
+        raise ReportError(f"cannot read trace {path}: {exc.strerror}") from None
+    number = 0
+    with handle:
+        for number, line in enumerate(handle, 1):
+            if '"ev": "run"' not in line:
+                continue
+            try:
+                event = json.loads(line)
+            except json.JSONDecodeError:
+                continue
+            if event.get("ev") == "run":
+                if runs:
+                    runs[-1].last_line = number - 1
+                runs.append(Run(len(runs) + 1, str(event.get("run", "?")), str(event.get("start", "?")),
+                                str(event.get("scene", "?")), number))
+    if not runs:
+        return [Run(1, "", "", "", 1, number)]
+    runs[-1].last_line = number
+    return runs
+
+
+def pick_run(runs: list[Run], wanted: str | None) -> Run:
+    """``wanted``: a run id (or its start), a number (1 is the first, -1 the last), or None (the last)."""
+    if wanted is None:
+        return runs[-1]
+    for run in runs:
+        if wanted and (run.id == wanted or run.id.startswith(wanted)):
+            return run
+    try:
+        number = int(wanted)
+        return runs[number - 1] if number > 0 else runs[number]
+    except (ValueError, IndexError):
+        listing = ", ".join(f"{r.index}: {r.id} ({r.start})" for r in runs)
+        raise ReportError(f"no run {wanted!r} in the trace; runs: {listing}") from None
+
+
+def load_trace(path: str, window: tuple[float, float] | None = None, run: Run | None = None) -> Trace:
+    """Read a trace; with ``window`` only the events from ``window[0]`` to ``window[1]`` seconds, with
+    ``run`` only that run's lines (packet ids and times start again at every run).  An unfinished
+    last line (the daemon was killed while writing it) is skipped."""
     trace = Trace()
     try:
         handle = open(path, encoding="utf-8")
     except OSError as exc:
         raise ReportError(f"cannot read trace {path}: {exc.strerror}") from None
     with handle:
-        for number, line in enumerate(handle, 1):
-            line = line.strip()
-            if not line:
-                continue
-            try:
-                event = json.loads(line)
-            except json.JSONDecodeError:
-                raise ReportError(f"{path}:{number}: not a JSON line") from None
-            t = float(event.get("t", 0.0))
-            if window is not None and not window[0] <= t <= window[1]:
-                continue
-            trace.end = max(trace.end, t)
-            ev = event.get("ev")
-            if ev == "pose":
-                trace.poses[event["vehicle"]].append((t, event.get("position")))
-                continue
-            if "pkt" not in event or event.get("kind") or ev not in ("enq", "drop", "tx", "rx", "err"):
-                continue  # MAC control frames, driver and GLI events: not part of a flow's story
-            packet = trace.packets.get(event["pkt"])
-            if packet is None:
-                packet = trace.packets[event["pkt"]] = Packet(event["pkt"], event["src"], event["dst"], event["size"])
-            if "fifo_bytes" in event and ev in ("enq", "drop", "tx"):
-                trace.fifo[event["link"]].append((t, event["fifo_bytes"]))
-            if ev == "enq":
-                packet.t_enq = t
-            elif ev == "drop":
-                packet.t_enq = t
-                packet.outcomes.append((t, event["link"], "drop", event.get("cause")))
-            elif ev == "tx":
-                packet.t_tx.append(t)
-            else:
-                packet.outcomes.append((t, event["link"], ev, event.get("cause")))
+        lines = list(enumerate(handle, 1))
+    for number, line in lines:
+        if run is not None and not run.first_line <= number <= run.last_line:
+            continue
+        finished = line.endswith("\n")
+        line = line.strip()
+        if not line:
+            continue
+        try:
+            event = json.loads(line)
+        except json.JSONDecodeError:
+            if number == len(lines) and not finished:
+                continue  # cut short by a SIGKILL
+            raise ReportError(f"{path}:{number}: not a JSON line") from None
+        t = float(event.get("t", 0.0))
+        if window is not None and not window[0] <= t <= window[1]:
+            continue
+        trace.end = max(trace.end, t)
+        ev = event.get("ev")
+        if ev == "run":
+            continue
+        if ev == "pose":
+            trace.poses[event["vehicle"]].append((t, event.get("position")))
+            continue
+        if "pkt" not in event or event.get("kind") or ev not in ("enq", "drop", "tx", "rx", "err"):
+            continue  # MAC control frames, driver and GLI events: not part of a flow's story
+        packet = trace.packets.get(event["pkt"])
+        if packet is None:
+            packet = trace.packets[event["pkt"]] = Packet(event["pkt"], event["src"], event["dst"], event["size"])
+        if "fifo_bytes" in event and ev in ("enq", "drop", "tx"):
+            trace.fifo[event["link"]].append((t, event["fifo_bytes"]))
+        if ev == "enq":
+            packet.t_enq = t
+        elif ev == "drop":
+            packet.t_enq = t
+            packet.outcomes.append((t, event["link"], "drop", event.get("cause")))
+        elif ev == "tx":
+            packet.t_tx.append(t)
+        else:
+            packet.outcomes.append((t, event["link"], ev, event.get("cause")))
     return trace
 
 
@@ -271,9 +336,9 @@ def write_index(out: str, written: list[tuple[str, str]], tables: list[str], tit
 
 def report(trace_path: str, summary_paths: list[str], out: str, vehicles: list[str] | None = None,
            csv_tables: bool = False, title: str | None = None,
-           window: tuple[float, float] | None = None) -> list[str]:
+           window: tuple[float, float] | None = None, run: Run | None = None) -> list[str]:
     """Everything ``hilgate report`` writes; returns the paths."""
-    trace = load_trace(trace_path, window)
+    trace = load_trace(trace_path, window, run)
     summaries = {os.path.splitext(os.path.basename(p))[0]: load_summary(p) for p in summary_paths}
     chosen = vehicles or sorted(trace.poses)[:4]
     os.makedirs(out, exist_ok=True)
