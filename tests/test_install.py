@@ -8,8 +8,8 @@ PyPI), the unit, /etc/hilgate and logrotate's file, all under a temporary DESTDI
 from __future__ import annotations
 
 import ast
-import configparser
 import importlib.metadata
+import marshal
 import os
 import re
 import shutil
@@ -124,6 +124,10 @@ def test_installed_venv_runs_its_own_hilgate_with_every_dependency(installed):
     leftovers = [p.name for p in (root / "opt/hilgate/bin").iterdir()
                  if not p.is_symlink() and str(root).encode() in p.read_bytes()]
     assert leftovers == []
+    # byte code names the sources where they will be (tracebacks show their lines)
+    compiled = next((root / "opt/hilgate/lib").glob("python3*/site-packages/hilgate/__pycache__/cli.*.pyc"))
+    code = marshal.loads(compiled.read_bytes()[16:])
+    assert code.co_filename.startswith(f"{PREFIX}/lib/python3"), code.co_filename
     probe = ("import hilgate, hilgate.packets, hilgate.gli_mq, hilgate.located, hilgate.drivers.port, "
              "hilgate.drivers.aruco, hilgate.drivers.mavlink_source; print(hilgate.__file__)")
     # run outside the checkout: `python -c` and `-m` put the working directory first on sys.path
