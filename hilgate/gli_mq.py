@@ -229,10 +229,10 @@ def drain(queue: posix_ipc.MessageQueue, limit: int = 100_000) -> list[bytes]:
 class MqEndpoint:
     """One link's pair of queues, attached to the real-time scheduler's loop.
 
-    Frames go into the application's queue only once an application has shown itself on the link
-    (dccomms applications say REQ_STATE when they start; any message counts): until then a frame
-    no application can read is not a drop of the queue's, and filling a queue nobody opened would
-    only hand stale frames to the next application.  Frames that an application left in the queues
+    Whether an application is there is known once it speaks (dccomms applications say REQ_STATE
+    when they start; any message counts).  Until then frames are kept only in the kernel queue, for
+    an application that starts late, and what does not fit is not an application's loss but a frame
+    nobody was there to read (see :meth:`deliver`).  Frames that an application left in the queues
     while no daemon ran are drained at start and reported (``on_stale``), never sent on air."""
 
     kind = "mq"
@@ -357,16 +357,31 @@ class MqEndpoint:
         else:
             self.on_bad("type", len(message))
 
-    def deliver(self, real: bytes, seq: int, src: int, dst: int) -> str | None:
-        """Hand a received frame to the application: None when it is in its queue (or the backlog),
-        ``no_reader`` when no application has shown itself on this link, ``app_full`` when its queue
-        and the backlog are full."""
+    def deliver(self, real: bytes, seq: int, src: int, dst: int) -> str:
+        """Hand a received frame to the application.
+
+        ``queued``: in its queue (or the backlog, while it is slow to read); ``app_full``: its queue
+        and the backlog are full.  Before any application has shown itself on this link, a frame is
+        ``kept`` in the kernel queue for one that starts late (at most the queue's few messages, no
+        backlog: nobody may ever come) and beyond that is ``no_reader``."""
+        message = bytes([FRAME]) + self.packet.encode_body(real, seq, src, dst)
         if not self.attended:
-            self.no_reader += 1
-            return "no_reader"
-        if self._put(bytes([FRAME]) + self.packet.encode_body(real, seq, src, dst)):
+            if self.backlog:
+                self.no_reader += 1
+                return "no_reader"
+            try:
+                self.to_app.send(message)
+            except posix_ipc.BusyError:
+                self.no_reader += 1
+                return "no_reader"
+            except (ValueError, posix_ipc.Error, OSError) as exc:
+                log.warning("link %s: cannot write %s: %s", self.link_id, self.to_app_name, exc)
+                self.no_reader += 1
+                return "no_reader"
+            return "kept"
+        if self._put(message):
             self.delivered += 1
-            return None
+            return "queued"
         self.app_full += 1
         return "app_full"
 

@@ -45,6 +45,7 @@ class Link:
         self.listener: Listener | None = None
         self.emulator: Any = None
         self.lock: LinkLock | None = None
+        self.unread_kept = 0  # frames nobody took, kept in the queue for an application that starts late
         self._state_pending = False
 
     # -- set-up ----------------------------------------------------------------------------------
@@ -167,6 +168,7 @@ class Link:
         one that an application could not take is a drop of that application's (``app_full``)."""
         t = self.router.scheduler.now()
         taken = False
+        outcome = None
         if self.mq is not None:
             real = frame.real
             if frame.packet.name != self.packet.name:
@@ -177,7 +179,7 @@ class Link:
                     self._lost("size", t, len(frame.real))
             if real is not None:
                 outcome = self.mq.deliver(real, frame.seq, frame.src, frame.dst)
-                if outcome is None:
+                if outcome == "queued":
                     taken = True
                 elif outcome == "app_full":
                     self._lost("app_full", t, len(frame.real))
@@ -189,8 +191,11 @@ class Link:
         if self.emulator is not None:
             self.emulator.deliver(frame, t)
             taken = True
-        if not taken and not (self.mq is not None and self.mq.attended):
-            self._lost("no_reader", t, len(frame.real))
+        if not taken and outcome != "app_full":  # no application at all took it
+            if outcome == "kept":
+                self.unread_kept += 1  # waits in the queue for an application that starts late
+            else:
+                self._lost("no_reader", t, len(frame.real))
         if frame.on_delivered is not None and frame.dst == self.address:
             frame.on_delivered(frame, self)
 
@@ -239,7 +244,7 @@ class Link:
             # what an application lost; a frame no application was there to read is counted apart
             "drops": figures["drops"] + sum(n for cause, n in causes.items() if cause not in UNREAD_CAUSES),
             "fifo_bytes": figures["fifo_bytes"],
-            "unread": causes.get("no_reader", 0),
+            "unread": causes.get("no_reader", 0) + self.unread_kept,
             "drop_causes": causes,
             "clients": len(self.clients),
         }

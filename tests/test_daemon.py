@@ -1,8 +1,9 @@
 """The daemon end to end: separate application processes, real POSIX queues and sockets.
 
 Timing assertions use the model's own arithmetic (exact, from the trace) and, for what the
-applications see on the wall clock, a window that CI noise cannot break: never earlier than the
-model minus 2 ms (the frame cannot arrive before it was sent plus its delay), at most 150 ms late.
+applications see on the wall clock, only what holds on any host however loaded: never earlier than
+the model minus 2 ms (the frame cannot arrive before it was sent plus its delay).  How late it may
+be is a benchmark's question (benchmarks/realtime_lateness.py), not a test's.
 """
 
 import json
@@ -73,7 +74,7 @@ def test_dccomms_peers_exchange_frames_through_the_queues(pair):
         assert r["crc_ok"] and r["body_len"] == 2065
         assert (r["seq"], r["src"], r["dst"]) == (s["seq"], 1, 2)
         seen = r["mono"] - s["mono"]
-        assert EXPECTED - 0.002 <= seen <= EXPECTED + 0.15, seen
+        assert EXPECTED - 0.002 <= seen, seen
     # the model's arithmetic in real time is exact
     events = daemon.trace_events()
     for pkt in {e["pkt"] for e in events if e.get("ev") == "rx"}:
@@ -108,7 +109,7 @@ def test_socket_clients_over_unix_and_tcp(tmp_path):
             seen = time.monotonic() - sent_at
             assert (message.src, message.dst, message.data) == (1, 2, b"over unix")
             expected = 0.05 + 14 * 8 / 1000 + 0.1  # a 9-byte payload is 14 bytes on air
-            assert expected - 0.002 <= seen <= expected + 0.15
+            assert expected - 0.002 <= seen
             lb.send(b"broadcast back")
             message = la.recv(timeout=5)
             assert (message.src, message.dst, message.data) == (2, 255, b"broadcast back")
@@ -271,10 +272,20 @@ def test_speed_paces_the_model(tmp_path):
         with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
             start = time.monotonic()
             la.send(b"fast forward", dst=2)  # 17 B at 100 bit/s + 0.1 s = 1.46 model s
-            message = lb.recv(timeout=5)
+            message = lb.recv(timeout=30)
             seen = time.monotonic() - start
+            # the model clock runs 4 times the wall clock: two STATUS stamps t1, t2 lie inside the
+            # outer wall interval and outside the inner one, whatever the load
+            outer_start = time.monotonic()
+            t1 = daemon.status()["time"]
+            inner_start = time.monotonic()
+            time.sleep(0.5)
+            inner = time.monotonic() - inner_start
+            t2 = daemon.status()["time"]
+            outer = time.monotonic() - outer_start
         assert message.data == b"fast forward"
-        assert 1.46 / 4 - 0.002 <= seen <= 1.46 / 4 + 0.15
+        assert 1.46 / 4 - 0.002 <= seen
+        assert 4 * inner - 0.001 <= t2 - t1 <= 4 * outer + 0.001
     finally:
         daemon.close()
 

@@ -21,8 +21,12 @@ def main() -> None:
     parser.add_argument("--autopilot", default="udpout:127.0.0.1:14570")
     parser.add_argument("--period", type=float, default=1.0)
     parser.add_argument("--runtime-dir")
+    parser.add_argument("--system-id", type=int, default=1, help="the vehicle's MAVLink system id")
     args = parser.parse_args()
-    autopilot = mavutil.mavlink_connection(args.autopilot, source_system=255, source_component=190)
+    # This application runs beside the autopilot, as the vehicle's companion computer does: it speaks as
+    # that (the vehicle's system id, MAV_COMP_ID_ONBOARD_COMPUTER), never as the pilot's ground station.
+    autopilot = mavutil.mavlink_connection(args.autopilot, source_system=args.system_id,
+                                           source_component=mavutil.mavlink.MAV_COMP_ID_ONBOARD_COMPUTER)
     with Link.open(args.link, runtime_dir=args.runtime_dir) as link:
         next_broadcast = time.monotonic()
         while True:

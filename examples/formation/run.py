@@ -15,12 +15,14 @@ import csv
 import json
 import math
 import os
+import re
 import signal
 import socket
 import subprocess
 import sys
 import tempfile
 import time
+import uuid
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SCENE = os.path.join(HERE, "..", "..", "scenes", "paper-exp3-formation.yaml")
@@ -47,15 +49,34 @@ def formation_errors(trace_path: str) -> list[tuple[float, str, float]]:
     return rows
 
 
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--mac", default="cs-aloha", choices=["cs-aloha", "s-fama", "none"])
     parser.add_argument("--legs", type=int, default=3, help="legs of the operator's route (3 m each)")
     parser.add_argument("--out", default="formation-out")
+    parser.add_argument("--prefix", default=None,
+                        help="prefix of this run's link ids (default: one of its own, so that several runs, and "
+                             "a daemon already serving the scene, can share the machine)")
     args = parser.parse_args()
     os.makedirs(args.out, exist_ok=True)
     runtime = tempfile.mkdtemp(prefix="hilgate-formation-")
+    prefix = args.prefix if args.prefix is not None else f"f{uuid.uuid4().hex[:6]}_"
+    links = {name: prefix + name for name in LINKS}
+    vehicle_port, autopilot_port = free_udp_port(), free_udp_port()
+    scene = os.path.join(runtime, "formation.yaml")
+    with open(SCENE, encoding="utf-8") as handle:
+        text = handle.read()
+    text = re.sub(r"\b(" + "|".join(LINKS) + r")\b", lambda m: links[m.group(1)], text)
+    text = text.replace("udpin:127.0.0.1:14560", f"udpin:127.0.0.1:{vehicle_port}")
+    with open(scene, "w", encoding="utf-8") as handle:
+        handle.write(text)
     trace = os.path.join(args.out, f"trace-{args.mac}.jsonl")
     summary = os.path.join(args.out, f"summary-{args.mac}.json")
     if os.path.exists(trace):
@@ -68,7 +89,7 @@ def main() -> int:
     notify.bind(notify_path)
     hilgate = [sys.executable, "-m", "hilgate"]
     daemon = subprocess.Popen(
-        [*hilgate, "run", SCENE, *(x for o in overrides for x in ("--set", o)), "--runtime-dir", runtime,
+        [*hilgate, "run", scene, *(x for o in overrides for x in ("--set", o)), "--runtime-dir", runtime,
          "--trace", trace, "--summary", summary, "--until", str(args.seconds), "--no-status-line"],
         env=dict(os.environ, NOTIFY_SOCKET=notify_path))
     notify.settimeout(30)
@@ -76,13 +97,17 @@ def main() -> int:
         pass
     python = sys.executable
     common = ["--runtime-dir", runtime]
-    apps = [subprocess.Popen([python, os.path.join(HERE, "fake_bluerov.py"), "--seconds", str(args.seconds + 5)])]
+    apps = [subprocess.Popen([python, os.path.join(HERE, "fake_bluerov.py"), "--seconds", str(args.seconds + 5),
+                              "--to", f"udpout:127.0.0.1:{vehicle_port}",
+                              "--listen", f"udpin:127.0.0.1:{autopilot_port}"])]
     for i, (name, slot) in enumerate(SLOTS.items(), 1):
-        apps.append(subprocess.Popen([python, os.path.join(HERE, "follower.py"), "--link", f"follower{i}_ac",
+        apps.append(subprocess.Popen([python, os.path.join(HERE, "follower.py"), "--link", links[f"follower{i}_ac"],
                                       "--slot", *map(str, slot), *common]))
-    apps.append(subprocess.Popen([python, os.path.join(HERE, "leader.py"), *common]))
+    apps.append(subprocess.Popen([python, os.path.join(HERE, "leader.py"), "--link", links["leader_ac"],
+                                  "--autopilot", f"udpout:127.0.0.1:{autopilot_port}", *common]))
     time.sleep(1.0)
-    apps.append(subprocess.Popen([python, os.path.join(HERE, "operator.py"), "--legs", str(args.legs), *common]))
+    apps.append(subprocess.Popen([python, os.path.join(HERE, "operator.py"), "--link", links["buoy_ac"],
+                                  "--legs", str(args.legs), *common]))
     try:
         daemon.wait(args.seconds + 60)
     finally:
@@ -93,7 +118,7 @@ def main() -> int:
                 app.wait(5)
             except subprocess.TimeoutExpired:
                 app.kill()
-        subprocess.run([*hilgate, "queues", SCENE, "--unlink"], capture_output=True)
+        subprocess.run([*hilgate, "queues", scene, "--unlink"], capture_output=True)  # this run's own
     rows = formation_errors(trace)
     with open(os.path.join(args.out, f"formation-{args.mac}.csv"), "w", newline="") as handle:
         writer = csv.writer(handle)
