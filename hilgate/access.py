@@ -24,6 +24,8 @@ import socket
 import stat
 import struct
 
+from .located import SceneError
+
 log = logging.getLogger(__name__)
 
 
@@ -32,7 +34,8 @@ class AccessError(OSError):
 
 
 def resolve_group(name: str | None) -> int | None:
-    """The gid of ``name`` (a group name or number), or None for the process's own group."""
+    """The gid of ``name`` (a group name or number), or None for the process's own group;
+    :class:`SceneError` (a configuration error) if there is no such group."""
     if not name:
         return None
     try:
@@ -40,7 +43,8 @@ def resolve_group(name: str | None) -> int | None:
     except KeyError:
         if name.isdigit():
             return int(name)
-        raise AccessError(f"--group {name}: no such group (create it, e.g. `groupadd --system {name}`)") from None
+        # a configuration error (exit status 2, which systemd does not restart), as a bad scene is
+        raise SceneError("--group", 0, "", f"no group {name!r} (create it, e.g. `groupadd --system {name}`)") from None
 
 
 def _describe_owner(uid: int) -> str:

@@ -220,3 +220,11 @@ def test_link_lock_names_its_holder():
     finally:
         held.release()
     LinkLock(name).release()  # free again once released
+
+
+def test_an_unknown_group_is_a_configuration_error(tmp_path):
+    a = unique("a")
+    daemon = Daemon(tmp_path, scene(a), [], "--group", "no-such-group-" + a)
+    code, output = failure(daemon)
+    assert code == 2 and "no group" in one_line_error(output)
+    daemon.close()
