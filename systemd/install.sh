@@ -18,6 +18,7 @@
 # kept, and the new version is written next to it as FILE.new. The list of what install wrote (with
 # checksums) is PREFIX/share/hilgate/installed.
 set -eu
+umask 022 # the daemon's user must read the venv, whatever umask root has
 
 usage="usage: $0 install|uninstall   (variables: DESTDIR PREFIX SYSCONFDIR UNITDIR LOGROTATEDIR BINDIR PYTHON PIP_ARGS PURGE)"
 action=${1:-}
@@ -60,7 +61,8 @@ LOGROTATE=$LOGROTATEDIR/hilgate
 COMMAND=$BINDIR/hilgate
 MANIFEST=$PREFIX/share/hilgate/installed
 WORK=$(mktemp -d)
-trap 'rm -rf "$WORK"' EXIT INT TERM
+trap 'rm -rf "$WORK"' EXIT
+trap 'exit 130' INT TERM
 
 # Why the root-only steps are skipped (empty: they run).
 system_steps_skipped() {
@@ -122,9 +124,12 @@ do_install() {
     if [ -e "$D$PREFIX" ] && ! [ -f "$D$PREFIX/pyvenv.cfg" ] && [ -n "$(ls -A "$D$PREFIX")" ]; then
         die "$D$PREFIX exists and is not a venv: will not install into it"
     fi
-    if ! [ -x "$D$PREFIX/bin/python" ]; then
+    if ! [ -e "$D$PREFIX/pyvenv.cfg" ]; then
         say "creating the venv $PREFIX"
         "$PYTHON" -m venv "$D$PREFIX"
+    elif ! "$D$PREFIX/bin/python" -c '' 2>/dev/null; then # its Python is gone (a distribution upgrade)
+        say "recreating the venv $PREFIX: its Python no longer runs"
+        "$PYTHON" -m venv --clear "$D$PREFIX"
     fi
     mkdir "$WORK/src"
     (cd "$SRC" && tar -cf - --exclude=__pycache__ --exclude='*.pyc' \

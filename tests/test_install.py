@@ -32,10 +32,11 @@ MANIFEST = "opt/hilgate/share/hilgate/installed"
 SYSTEM_PATHS = ["/opt/hilgate", "/etc/hilgate", "/etc/systemd/system/hilgate.service", "/etc/logrotate.d/hilgate"]
 
 
-def make(*args: str) -> subprocess.CompletedProcess:
+def make(*args: str, umask: int | None = None) -> subprocess.CompletedProcess:
     # PYTHON: the interpreter running the tests builds the venv (any Python >= 3.11 with venv would)
     result = subprocess.run(["make", "--no-print-directory", "-C", str(REPO), *args, f"PYTHON={sys.executable}"],
-                            capture_output=True, text=True, stdin=subprocess.DEVNULL)
+                            capture_output=True, text=True, stdin=subprocess.DEVNULL,
+                            preexec_fn=None if umask is None else (lambda: os.umask(umask)))
     assert result.returncode == 0, f"make {' '.join(args)}:\n{result.stdout}\n{result.stderr}"
     return result
 
@@ -161,7 +162,9 @@ def test_reinstall_keeps_changed_configuration_and_uninstall_leaves_it_clean(tmp
     before = system_state()
     root = tmp_path / "destdir"
     fast = "PIP_ARGS=--no-deps"  # this test is about the files; the full venv is the fixture's
-    make("install", f"DESTDIR={root}", fast)
+    make("install", f"DESTDIR={root}", fast, umask=0o077)  # root's umask may be strict: the daemon must read
+    for path in [root / UNIT, root / SCENE, *(root / "opt/hilgate/lib").rglob("hilgate/*.py")]:
+        assert stat.S_IMODE(path.stat().st_mode) & 0o044 == 0o044, path
     (root / SCENE).write_text((root / SCENE).read_text() + "# our lab\n")
     (root / ENV).write_text((root / ENV).read_text() + "HILGATE_LOG_LEVEL=debug\n")
     unchanged_logrotate = (root / LOGROTATE).read_text()
