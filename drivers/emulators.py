@@ -42,12 +42,19 @@ BURST_MAX = 1024
 class PtyHost:
     """The modem side of a pseudo-terminal; the slave end is linked at ``path`` for the application."""
 
-    def __init__(self, path: str, scheduler: Any, on_data, name: str):
+    def __init__(self, path: str, scheduler: Any, on_data, name: str, group: int | None = None):
         self.path = path
         self.scheduler = scheduler
         self.on_data = on_data
         self.master, self.slave = os.openpty()
         tty.setraw(self.slave)  # no echo, no line discipline: a serial line carries bytes
+        # /dev/pts/N is the daemon user's with group tty, 0620: give it to the daemon's group instead,
+        # so the lab's software (members of that group, as for the GLI) can open it, and nobody else
+        try:
+            os.fchown(self.slave, -1, os.getegid() if group is None else group)
+            os.fchmod(self.slave, 0o660)
+        except OSError as exc:
+            log.warning("%s: cannot give the pty to the daemon's group: %s", name, exc)
         os.set_blocking(self.master, False)
         if os.path.islink(path):
             os.unlink(path)

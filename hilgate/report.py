@@ -73,15 +73,19 @@ def trace_runs(path: str) -> list[Run]:
     except OSError as exc:
         raise ReportError(f"cannot read trace {path}: {exc.strerror}") from None
     number = 0
+    before = False  # lines before the first header: a trace that logrotate cut in the middle of a run
     with handle:
         for number, line in enumerate(handle, 1):
             if '"ev": "run"' not in line:
+                before = before or (not runs and bool(line.strip()))
                 continue
             try:
                 event = json.loads(line)
             except json.JSONDecodeError:
                 continue
             if event.get("ev") == "run":
+                if not runs and before:
+                    runs.append(Run(1, "(before the first run line)", "?", "?", 1, number - 1))
                 if runs:
                     runs[-1].last_line = number - 1
                 runs.append(Run(len(runs) + 1, str(event.get("run", "?")), str(event.get("start", "?")),

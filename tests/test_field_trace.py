@@ -59,3 +59,15 @@ def test_report_takes_one_run_of_a_trace_with_several(tmp_path):
     wrong = subprocess.run([sys.executable, "-m", "hilgate", "report", str(trace), "--out", str(tmp_path / "r2"),
                             "--run", "zzzz"], capture_output=True, text=True, timeout=120)
     assert wrong.returncode == 1 and "no run 'zzzz'" in wrong.stderr and "Traceback" not in wrong.stderr
+
+
+def test_a_trace_cut_by_logrotate_keeps_its_headless_start_as_a_run(tmp_path):
+    trace = tmp_path / "trace.jsonl"
+    two_runs(trace)
+    text = trace.read_text()
+    tail_of_an_earlier_run = json.dumps({"t": 7.0, "ev": "enq", "link": "la", "pkt": 9, "src": "la", "dst": "lb",
+                                         "size": 99, "fifo_bytes": 0}) + "\n"
+    trace.write_text(tail_of_an_earlier_run + text)
+    runs = trace_runs(str(trace))
+    assert [r.id for r in runs] == ["(before the first run line)", "aaaa", "bbbb"]
+    assert [p.size for p in load_trace(str(trace), run=runs[0]).packets.values()] == [99]

@@ -6,6 +6,8 @@ application.  All in one daemon; nothing mocked: pyserial opens the pty slaves, 
 the bytes.
 """
 
+import os
+import stat
 import time
 
 import pytest
@@ -50,6 +52,8 @@ def test_application_to_application_through_real_drivers_and_emulators(tmp_path,
     try:
         daemon.wait_for("READY=1")
         wait_up(daemon, [a, b])
+        device = os.stat(os.path.realpath(tmp_path / "modem_a"))  # the emulated modem's pty: for the daemon's group
+        assert stat.S_IMODE(device.st_mode) == 0o660 and device.st_gid == os.getegid()
         expected = []
         with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
             for i in range(3):
