@@ -150,3 +150,23 @@ def classes_of(plugin: Plugin, base: type) -> dict[str, type]:
     return {attr: value for attr, value in vars(module).items()
             if isinstance(value, type) and issubclass(value, base) and value is not base
             and value.__module__ == module.__name__}
+
+
+def origin_of(cls: type) -> str:
+    """Where a plugin's class comes from, to find it again in another process: the plugin file's real
+    path (its module name is private to the process that loaded it), or the installed module's name."""
+    module = sys.modules.get(cls.__module__)
+    if cls.__module__.startswith(PRIVATE_PREFIX) and module is not None and getattr(module, "__file__", None):
+        return os.path.realpath(module.__file__)
+    return cls.__module__
+
+
+def class_from_origin(origin: str, qualname: str) -> type:
+    """The class :func:`origin_of` described, loaded (once) in this process the way the scene did."""
+    plugin = load_plugin(origin, "/") if os.path.isabs(origin) else load_plugin(origin, os.getcwd())
+    target: object = plugin.module
+    for part in qualname.split("."):
+        target = getattr(target, part, None)
+    if not isinstance(target, type):
+        raise PluginError(f"{origin} has no class {qualname}")
+    return target

@@ -20,7 +20,7 @@ from .fields import (
     Fields, boolean, choice, describe, integer, items, join_path, mapping, number, quote, text, vector,
 )
 from .located import MAX_DEPTH, MAX_FILE_BYTES, Node, SceneError, load_file, load_text, parse_scalar, read_limited, size_text
-from .plugins import Plugin, PluginError, classes_of, load_plugin
+from .plugins import Plugin, PluginError, class_from_origin, classes_of, load_plugin, origin_of
 from .models.errormodel import UNITS, ErrorModel
 from .models.expr import ExprError, compile_expression
 from .models.flows import FlowSpec
@@ -120,6 +120,20 @@ class MacSpec:
 
     def build(self) -> Mac:
         return self.mac_class(**dict(self.params))
+
+    def __reduce__(self):
+        """Pickled by name (a reload is validated in a worker process): a plugin's class is found again
+        from its file or module, which the daemon loads as the scene listed it."""
+        if self.cls is None or self.protocol in MAC_REGISTRY:
+            return (MacSpec, (self.protocol, self.params))
+        return (_plugin_mac_spec, (self.protocol, self.params, origin_of(self.cls), self.cls.__qualname__))
+
+
+def _plugin_mac_spec(protocol: str, params: tuple, origin: str, qualname: str) -> MacSpec:
+    cls = class_from_origin(origin, qualname)
+    if not (isinstance(cls, type) and issubclass(cls, Mac)):
+        raise TypeError(f"{origin}:{qualname} is not a MAC")
+    return MacSpec(protocol, params, cls)
 
 
 @dataclass(frozen=True)

@@ -328,3 +328,20 @@ def test_a_receive_timeout_does_not_become_the_send_timeout(pair):
         os.kill(daemon.process.pid, signal.SIGCONT)
     assert done.wait(120)
     assert errors == []
+
+
+def test_a_reload_of_a_scene_with_a_plugin_mac(tmp_path):
+    import shutil
+
+    a, b = unique("a"), unique("b")
+    shutil.copy(os.path.join(os.path.dirname(__file__), "example_mac.py"), tmp_path / "tdma_plugin.py")
+    text = scene(a, b).replace("packet: vl2b}", "packet: vl2b, mac: {protocol: tdma, slot_s: 0.5}}") + \
+        "plugins: [tdma_plugin.py]\n"
+    daemon = Daemon(tmp_path, text, [a, b])
+    try:
+        daemon.wait_for("READY=1")
+        daemon.scene.write_text(text.replace("slot_s: 0.5", "slot_s: 0.25"))
+        assert daemon.control({"class": "RELOAD"}) == {"class": "RELOAD", "ok": True}
+        assert "Traceback" not in daemon.output()
+    finally:
+        daemon.close()
