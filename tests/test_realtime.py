@@ -28,7 +28,8 @@ def test_readers_posts_from_threads_and_stop():
     got = []
     clock.add_reader(left.fileno(), lambda: got.append(left.recv(10)))
     clock.at(0.01, lambda: right.send(b"ping"))
-    threading.Timer(0.05, lambda: clock.post(got.append, "posted")).start()
+    # the thread starts from the loop, after the ping, so the order holds however late the loop starts
+    clock.at(0.02, lambda: threading.Timer(0.03, lambda: clock.post(got.append, "posted")).start())
     clock.at(0.2, clock.stop)
     clock.run()
     assert got == [b"ping", "posted"]

@@ -48,17 +48,18 @@ class FakeModem:
 
     def _serve(self) -> None:
         while not self.stop.is_set():
-            with self.lock:
-                master = self.master
-            if master is None:
-                time.sleep(0.01)
-                continue
-            try:
-                ready, _, _ = select.select([master], [], [], 0.05)
-                if not ready:
-                    continue
-                data = os.read(master, 4096)
-            except (OSError, ValueError):
+            with self.lock:  # held while the descriptor is used: unplug() must not close it meanwhile, or
+                master = self.master  # its number, reused by the test's next socket, would be read here
+                if master is None:
+                    data = b""
+                else:
+                    try:
+                        ready, _, _ = select.select([master], [], [], 0.02)
+                        data = os.read(master, 4096) if ready else b""
+                    except (OSError, ValueError):
+                        data = b""
+            if not data:
+                time.sleep(0.005)
                 continue
             with self.lock:
                 if self.master != master:
