@@ -23,7 +23,7 @@ import os
 from typing import Any, Callable
 
 from . import __version__, safejson
-from .streams import Connection, Listener, listen_unix
+from .streams import Connection, Listener, listen_unix, refuse
 
 log = logging.getLogger(__name__)
 
@@ -55,15 +55,14 @@ class ControlServer:
         self.extra = extra or {}
         self.max_clients = max_clients
         self.clients: set[_ControlClient] = set()
-        self.refused = 0
-        self.disconnected_slow = 0
         os.makedirs(os.path.dirname(path), exist_ok=True)
         self.listener = Listener(listen_unix(path, group=group), scheduler, self._accept, path)
 
     def _accept(self, sock) -> None:
         if len(self.clients) >= self.max_clients:
-            self.refused += 1
-            refuse(sock, {"class": "ERROR", "message": f"too many control clients ({self.max_clients})"})
+            log.info("control client refused: %d connected already", len(self.clients))
+            refuse(sock, (json.dumps({"class": "ERROR", "message": f"too many control clients ({self.max_clients})"})
+                          + "\n").encode())
             return
         client = _ControlClient(sock, self)
         self.clients.add(client)
@@ -72,16 +71,6 @@ class ControlServer:
         for client in list(self.clients):
             client.connection.close()
         self.listener.close()
-
-
-def refuse(sock: Any, answer: dict) -> None:
-    """Say why in one line, without waiting for the peer, and close."""
-    try:
-        sock.setblocking(False)
-        sock.send((json.dumps(answer) + "\n").encode())
-    except OSError:
-        pass
-    sock.close()
 
 
 class _ControlClient:
@@ -97,7 +86,6 @@ class _ControlClient:
     def send(self, obj: dict) -> None:
         if not self.connection.write((json.dumps(obj) + "\n").encode()) and not self.connection.closed:
             # it stopped reading (a WATCH nobody consumes): it would only cost memory
-            self.server.disconnected_slow += 1
             log.info("control client stopped reading; disconnected")
             self.connection.close()
 

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 from . import gli_wire as wire
 from .packets import PacketError
-from .streams import Connection
+from .streams import Connection, refuse
 
 if TYPE_CHECKING:
     from .router import Link, Router
@@ -130,10 +130,5 @@ class GliClient:
 
 
 def refuse_client(sock: socket.socket, message: str) -> None:
-    """Tell a client why it cannot stay (one ERROR message, without waiting for it) and close."""
-    try:
-        sock.setblocking(False)
-        sock.send(wire.encode_json(wire.ERROR, {"error": message}))
-    except OSError:
-        pass
-    sock.close()
+    """Tell a client why it cannot stay (one ERROR) and close."""
+    refuse(sock, wire.encode_json(wire.ERROR, {"error": message}))

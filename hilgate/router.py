@@ -61,9 +61,7 @@ class Link:
 
     def _stale(self, origin: str, size: int) -> None:
         """A frame left in a queue while no daemon ran: never sent, counted and traced."""
-        self.gli_drops["stale"] += 1
-        self.router.recorder.event({"t": round(self.router.scheduler.now(), 9), "ev": "drop", "link": self.id,
-                                    "src": origin, "size": size, "cause": "stale"})
+        self._lost("stale", size, src=origin)
 
     def open_emulator(self, scheduler: Any) -> None:
         """An emulated EvoLogics/S100 device in front of this (simulated) link, if the scene asks."""
@@ -146,19 +144,14 @@ class Link:
         if (isinstance(backend, SimBackend) and not backend.everyone_in_range
                 and self.router.addressed_to_nobody(self.spec.params.tx_channel, frame.dst)):
             # it still goes on air (and may spoil others' frames), but nobody will ever take it
-            self.gli_drops["no_receiver"] += 1
-            self.router.recorder.event({"t": round(self.router.scheduler.now(), 9), "ev": "err", "link": self.id,
-                                        "src": self.id, "dst": f"addr:{frame.dst}", "size": len(frame.real),
-                                        "cause": "no_receiver"})
+            self._lost("no_receiver", len(frame.real), ev="err", src=self.id, dst=f"addr:{frame.dst}")
         backend.send(frame)
         self.state_changed()
 
     def bad_frame(self, reason: str, size: int) -> None:
         """A frame from an application that could not be accepted: counted and traced, then dropped."""
-        self.gli_drops[reason] += 1
         log.debug("link %s: dropped a frame from an application (%s, %d bytes)", self.id, reason, size)
-        self.router.recorder.event({"t": round(self.router.scheduler.now(), 9), "ev": "drop", "link": self.id,
-                                    "src": "app", "size": size, "cause": reason})
+        self._lost(reason, size, src="app")
 
     # -- medium → applications -------------------------------------------------------------------
 
@@ -176,18 +169,18 @@ class Link:
                     real = self.packet.encode(frame.payload, src=frame.src, dst=frame.dst)
                 except PacketError:
                     real = None
-                    self._lost("size", t, len(frame.real))
+                    self._lost("size", len(frame.real))
             if real is not None:
                 outcome = self.mq.deliver(real, frame.seq, frame.src, frame.dst)
                 if outcome == "queued":
                     taken = True
                 elif outcome == "app_full":
-                    self._lost("app_full", t, len(frame.real))
+                    self._lost("app_full", len(frame.real))
         for client in list(self.clients):
             if client.deliver(frame.src, frame.dst, t, frame.payload):
                 taken = True
             else:  # it stopped reading: past its output cap it is disconnected
-                self._lost("client_slow", t, len(frame.real))
+                self._lost("client_slow", len(frame.real))
         if self.emulator is not None:
             self.emulator.deliver(frame, t)
             taken = True
@@ -195,14 +188,15 @@ class Link:
             if outcome == "kept":
                 self.unread_kept += 1  # waits in the queue for an application that starts late
             else:
-                self._lost("no_reader", t, len(frame.real))
+                self._lost("no_reader", len(frame.real))
         if frame.on_delivered is not None and frame.dst == self.address:
             frame.on_delivered(frame, self)
 
-    def _lost(self, cause: str, t: float, size: int) -> None:
+    def _lost(self, cause: str, size: int, ev: str = "drop", src: str = "medium", **fields: Any) -> None:
+        """A frame the GLI lost (or that nobody will take): counted by cause and traced."""
         self.gli_drops[cause] += 1
-        self.router.recorder.event({"t": round(t, 9), "ev": "drop", "link": self.id, "src": "medium",
-                                    "size": size, "cause": cause})
+        self.router.recorder.event({"t": round(self.router.scheduler.now(), 9), "ev": ev, "link": self.id,
+                                    "src": src, **fields, "size": size, "cause": cause})
 
     def state_changed(self) -> None:
         """READY/BUSY may have changed: tell the applications once the events due now have fired, so
@@ -288,7 +282,6 @@ class Router:
         self.max_link_clients = max_link_clients
         self.client_output_cap = client_output_cap
         self.clients: set[GliClient] = set()  # every socket client, on a link or not yet (TCP before HELLO)
-        self.clients_refused = 0
         if socket_dir is not None:
             os.makedirs(socket_dir, mode=0o750, exist_ok=True)
 
@@ -296,7 +289,6 @@ class Router:
         """A new socket client (on a link's Unix socket, or on the TCP listener before its HELLO),
         unless the daemon has as many as it may: then it is told why and closed."""
         if len(self.clients) >= self.max_clients:
-            self.clients_refused += 1
             log.info("GLI client refused: %d clients already (--max-clients)", len(self.clients))
             refuse_client(sock, f"too many clients ({self.max_clients})")
             return

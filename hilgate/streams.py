@@ -164,6 +164,16 @@ def listen_unix(path: str, backlog: int | None = None, group: int | None = None,
     return sock
 
 
+def refuse(sock: socket.socket, answer: bytes) -> None:
+    """Tell a client why it cannot stay (one message, sent without waiting for it) and close."""
+    try:
+        sock.setblocking(False)
+        sock.send(answer)
+    except OSError:
+        pass
+    sock.close()
+
+
 class Listener:
     """Accepts connections on a listening socket and hands each to ``on_accept``."""
 
