@@ -22,7 +22,7 @@ from .live import LiveSources
 from .realtime import RealtimeScheduler
 from .recorder import Recorder
 from .router import Router
-from .scene import Scene, SceneError, load_scene
+from .scene import Scene, load_scene
 from .scene_worker import SceneJob, request_for
 from .sdnotify import notify, watchdog_interval
 from .simulate import write_summary

@@ -8,7 +8,6 @@ keeps getting its frames.  Bounded to seconds in CI; ``make fuzz`` runs them for
 import json
 import os
 import socket
-import time
 
 import posix_ipc
 import pytest

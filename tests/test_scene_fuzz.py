@@ -16,7 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hilgate.scene import (
-    CAMERA_KEYS, FLOW_KEYS, LINK_KEYS, TOP_KEYS, VEHICLE_KEYS, Scene, SceneError, load_scene_text,
+    FLOW_KEYS, LINK_KEYS, TOP_KEYS, VEHICLE_KEYS, Scene, SceneError, load_scene_text,
 )
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

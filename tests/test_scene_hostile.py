@@ -103,7 +103,7 @@ def test_preset_that_is_not_a_regular_file_fails_check_at_once(tmp_path):
     for name in ("fifo.yaml", "dir.yaml"):
         status, out, err = check("check", write_scene(folder, f", model: {name}"), timeout=60)
         assert status == 2 and "Traceback" not in err, err
-        assert f"scene.yaml:4: links.x.model: " in err and "regular file" in err, err
+        assert "scene.yaml:4: links.x.model: " in err and "regular file" in err, err
 
 
 def test_oversized_preset_is_refused(tmp_path):

@@ -9,7 +9,6 @@ group, one not); without root it is skipped.
 import json
 import os
 import shutil
-import socket
 import stat
 import subprocess
 import sys
