@@ -124,6 +124,14 @@ def cmd_status(args: argparse.Namespace) -> int:
     return 0
 
 
+def _link_note(link: dict) -> str:
+    """Why a link is down, else what it lost by cause (the table has one line per link)."""
+    if link.get("reason"):
+        return link["reason"]
+    causes = link.get("drop_causes") or {}
+    return ", ".join(f"{cause} {n}" for cause, n in sorted(causes.items()))
+
+
 def _print_status(status: dict, as_json: bool) -> None:
     import json
 
@@ -133,9 +141,9 @@ def _print_status(status: dict, as_json: bool) -> None:
     from .table import _render
 
     print(f"t = {status.get('time', 0):.3f} s")
-    print(_render(["link", "backend", "state", "tx", "rx", "drops", "fifo B"],
+    print(_render(["link", "backend", "state", "tx", "rx", "drops", "unread", "fifo B", "note"],
                   [[l["id"], l["backend"], l["state"], str(l["tx_packets"]), str(l["rx_packets"]), str(l["drops"]),
-                    str(l["fifo_bytes"])] for l in status["links"]]))
+                    str(l.get("unread", 0)), str(l["fifo_bytes"]), _link_note(l)] for l in status["links"]]))
     print()
     print(_render(["vehicle", "source", "x", "y", "z", "age s"],
                   [[v["name"], v["source"], *(f"{c:.3f}" for c in (v["position"] or [float("nan")] * 3)),

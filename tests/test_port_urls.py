@@ -9,6 +9,8 @@ ports picked by the kernel.  Nothing of pyserial is mocked.
 import logging
 import os
 import socket
+import subprocess
+import sys
 import threading
 import time
 import tty
@@ -309,6 +311,11 @@ def test_a_port_that_cannot_be_opened_shows_down_and_is_warned_once(tmp_path):
         warnings = [line for line in lines("WARNING") if "cannot open" in line]
         assert len(warnings) == 1 and "Connection refused" in warnings[0], daemon.output()
         assert not any("cannot open" in line for line in lines("INFO")), daemon.output()
+        assert "Connection refused" in daemon.link_status(link)["reason"]
+        table = subprocess.run([sys.executable, "-m", "hilgate", "status", "--runtime-dir", daemon.runtime],
+                               capture_output=True, text=True, timeout=60)
+        row = next(line for line in table.stdout.splitlines() if line.startswith(link))
+        assert " down " in row and "Connection refused" in row  # hilgate status says why
     finally:
         daemon.close()
         refusing.close()
