@@ -29,7 +29,7 @@ import time
 
 import posix_ipc
 
-from hilgate.gli_mq import unlink_queues
+from hilgate.gli.queues import unlink_queues
 
 MESSAGE = 2066
 MAX_REAL = 2053

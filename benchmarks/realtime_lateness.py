@@ -22,8 +22,8 @@ import os
 import tempfile
 import time
 
-from hilgate.realtime import RealtimeScheduler
-from hilgate.recorder import Recorder
+from hilgate.core.realtime import RealtimeScheduler
+from hilgate.sim.recorder import Recorder
 from hilgate.scene import load_scene_text
 
 TARGET_P99_MS, TARGET_MAX_MS = 0.25, 1.0
@@ -61,7 +61,7 @@ def machine_floor(seconds: float) -> list[float]:
     import random
     import select
 
-    from hilgate.realtime import lower_timer_slack
+    from hilgate.core.realtime import lower_timer_slack
 
     lower_timer_slack()
     epoll = select.epoll()
@@ -100,7 +100,7 @@ def main() -> None:
     args = parser.parse_args()
     setup = "normal scheduling"
     if args.realtime_priority:
-        from hilgate.realtime import make_realtime
+        from hilgate.core.realtime import make_realtime
 
         setup = make_realtime(args.realtime_priority)
 
@@ -114,15 +114,15 @@ def main() -> None:
     recorder = LatenessRecorder(clock)
     runtime = tempfile.mkdtemp(prefix="hilgate-bench-")
     if args.gli:
-        from hilgate.gli_mq import raise_queue_budget
-        from hilgate.router import Router
+        from hilgate.gli.queues import raise_queue_budget
+        from hilgate.daemon.router import Router
 
         raise_queue_budget()
         router = Router(clock, recorder, os.path.join(runtime, "gli"))
         router.apply(scene)
         world = router.world
     else:
-        from hilgate.world import World
+        from hilgate.sim.world import World
 
         router = None
         world = World(scene, clock, recorder)
@@ -135,7 +135,7 @@ def main() -> None:
     finally:
         cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
         if router is not None:
-            from hilgate.gli_mq import unlink_queues
+            from hilgate.gli.queues import unlink_queues
 
             router.close()
             unlink_queues(scene.links)

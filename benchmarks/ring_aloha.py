@@ -23,7 +23,7 @@ import pstats
 import time
 
 from hilgate.scene import load_scene_text
-from hilgate.simulate import Simulation
+from hilgate.sim.simulate import Simulation
 
 # ns-3 3.44 UAN on the same kind of 2-core machine (../shared/peers/README.md)
 NS3 = {10: (0.789, 0.27, 478_000), 50: (0.257, 6.3, 343_000), 100: (0.064, 24.1, 182_000)}

@@ -22,15 +22,15 @@ import socket
 import tty
 from typing import TYPE_CHECKING, Any
 
-from hilgate.backends import AppFrame
-from hilgate.packets import Raw
-from hilgate.streams import Connection, Listener
+from hilgate.core.backend import AppFrame
+from hilgate.core.packets import Raw
+from hilgate.core.streams import Connection, Listener
 
 from .evologics_codec import BadCommand, Command, Data, ModemCodec
 from .s100_codec import CRLF, FrameHunter, Notice, Skipped, wire_class
 
 if TYPE_CHECKING:
-    from hilgate.router import Link
+    from hilgate.daemon.router import Link
 
 log = logging.getLogger(__name__)
 

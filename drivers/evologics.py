@@ -19,8 +19,8 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from hilgate.backends import AppFrame, QueuedBackend
-from hilgate.packets import PacketClass, PacketError, Raw
+from hilgate.core.backend import AppFrame, QueuedBackend
+from hilgate.core.packets import PacketClass, PacketError, Raw
 
 from .evologics_codec import AsyncError, AtProtocolError, HostCodec, Notification, Reply, Unexpected
 from .port import Port

@@ -31,7 +31,7 @@ import serial
 import serial.serialposix
 from serial.urlhandler import protocol_socket
 
-from hilgate.streams import Outbox
+from hilgate.core.streams import Outbox
 
 log = logging.getLogger(__name__)
 

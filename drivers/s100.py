@@ -15,8 +15,8 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from hilgate.backends import AppFrame, QueuedBackend
-from hilgate.packets import Decoded, PacketClass, Raw
+from hilgate.core.backend import AppFrame, QueuedBackend
+from hilgate.core.packets import Decoded, PacketClass, Raw
 
 from .port import Port
 from .s100_codec import FrameHunter, Notice, Skipped, pieces, wire_class

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from hilgate.packets import Decoded, HilgateFrame, PacketClass, PacketError, Raw
+from hilgate.core.packets import Decoded, HilgateFrame, PacketClass, PacketError, Raw
 
 CRLF = b"\r\n"
 PIECE = 45

@@ -8,7 +8,7 @@ import sys
 from typing import Callable
 
 from . import __version__
-from .located import SceneError
+from .scene.yaml_nodes import SceneError
 
 log = logging.getLogger(__name__)
 
@@ -32,7 +32,7 @@ def _add_scene_args(parser: argparse.ArgumentParser, optional: bool = False) -> 
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    from .scene import load_scene, scene_summary
+    from .scene.load import load_scene, scene_summary
 
     scene = load_scene(args.scene, args.overrides, plugins=args.plugins, preset_dirs=args.preset_dirs)
     print(scene_summary(scene))
@@ -41,9 +41,9 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
-    from .scene import load_scene
-    from .simulate import simulate, write_summary
-    from .table import format_summary
+    from .scene.load import load_scene
+    from .sim.simulate import simulate, write_summary
+    from .report.tables import format_summary
 
     scene = load_scene(args.scene, args.overrides, plugins=args.plugins, preset_dirs=args.preset_dirs)
     if args.until is not None and args.until <= 0:
@@ -66,15 +66,15 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from .daemon import Daemon
-    from .paths import daemon_runtime_dir, default_scene
+    from .daemon.service import Daemon
+    from .core.paths import daemon_runtime_dir, default_scene
 
     scene = args.scene or default_scene()
     if args.speed <= 0:
         raise SceneError("--speed", 0, "", f"must be positive, not {args.speed:g}")
     status_line = args.status_line if args.status_line is not None else sys.stderr.isatty()
     if args.realtime_priority:
-        from .realtime import make_realtime
+        from .core.realtime import make_realtime
 
         log.info("real-time set-up: %s", make_realtime(args.realtime_priority))
     daemon = Daemon(scene, args.overrides, daemon_runtime_dir(args.runtime_dir), args.speed, args.tcp,
@@ -88,7 +88,7 @@ def _control(args: argparse.Namespace):
     import os
     import socket
 
-    from .paths import client_runtime_dir
+    from .core.paths import client_runtime_dir
 
     path = os.path.join(client_runtime_dir(args.runtime_dir), "control.sock")
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -138,7 +138,7 @@ def _print_status(status: dict, as_json: bool) -> None:
     if as_json:
         print(json.dumps({"links": status["links"], "vehicles": status["vehicles"]}), flush=True)
         return
-    from .table import _render
+    from .report.tables import _render
 
     print(f"t = {status.get('time', 0):.3f} s")
     print(_render(["link", "backend", "state", "tx", "rx", "drops", "unread", "fifo B", "note"],
@@ -178,8 +178,8 @@ def cmd_pose(args: argparse.Namespace) -> int:
 
 
 def _open_link(args: argparse.Namespace):
-    from .client import Link
-    from .daemon import parse_tcp
+    from .gli.client import Link
+    from .daemon.service import parse_tcp
 
     return Link.open(args.link, tcp=parse_tcp(args.tcp) if args.tcp else None, runtime_dir=args.runtime_dir)
 
@@ -187,7 +187,7 @@ def _open_link(args: argparse.Namespace):
 def cmd_send(args: argparse.Namespace) -> int:
     """Each frame is followed by a round trip to the daemon: an ERROR it answered the frame with
     arrives first, so a refused frame is reported (and the exit status is 1), not lost silently."""
-    from .client import GliError
+    from .gli.client import GliError
 
     refused = 0
     with _open_link(args) as link:
@@ -213,7 +213,7 @@ def _address(value: str) -> int:
 
 
 def _tcp_address(value: str) -> str:
-    from .daemon import parse_tcp
+    from .daemon.service import parse_tcp
 
     try:
         parse_tcp(value)
@@ -240,8 +240,8 @@ def cmd_queues(args: argparse.Namespace) -> int:
     """dccomms never unlinks its queues, and Linux charges them to their creator until someone does."""
     import posix_ipc
 
-    from .gli_mq import queue_names
-    from .scene import load_scene
+    from .gli.queues import queue_names
+    from .scene.load import load_scene
 
     scene = load_scene(args.scene, args.overrides, plugins=args.plugins, preset_dirs=args.preset_dirs)
     for link_id in scene.links:
@@ -273,14 +273,14 @@ def cmd_emulate(args: argparse.Namespace) -> int:
         raise SceneError("hilgate emulate", 0, "", "give --pty PATH or --tcp PORT")
     args.overrides = [*args.overrides, f"links.{args.link}.emulate={json.dumps({'protocol': args.protocol, **where})}"]
     args.tcp = None  # here --tcp is the emulated modem's port, not a GLI listener
-    from .paths import default_scene
+    from .core.paths import default_scene
 
     args.scene = args.scene or default_scene()
     return cmd_run(args)
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from .report import ReportError, pick_run, report, trace_runs
+    from .report.figures import ReportError, pick_run, report, trace_runs
 
     try:
         runs = trace_runs(args.trace)
@@ -438,7 +438,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"hilgate: {exc}", file=sys.stderr)
         return 1
     except Exception as exc:  # a client tool's error (GliError, …): one line, no traceback
-        from .client import GliError
+        from .gli.client import GliError
 
         if isinstance(exc, GliError):
             print(f"hilgate: {exc}", file=sys.stderr)

@@ -17,7 +17,7 @@ import sys
 import time
 import uuid
 
-from hilgate.gli_mq import unlink_queues
+from hilgate.gli.queues import unlink_queues
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 PEER = os.path.join(HERE, "peers", "dccomms_peer.py")

@@ -9,7 +9,7 @@ from hilgate.models.medium import Channel, Medium
 from hilgate.models.modem import ModemParams, SimModem
 from hilgate.models.observer import EventList
 from hilgate.models.trajectories import Static
-from hilgate.scheduler import VirtualScheduler
+from hilgate.core.scheduler import VirtualScheduler
 
 
 class Net:

@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hilgate import gli_wire as wire
-from hilgate.packets import PacketError, crc16, crc32, packet_class
+from hilgate.gli import wire
+from hilgate.core.packets import PacketError, crc16, crc32, packet_class
 
 
 def test_crc_check_values():

@@ -17,7 +17,7 @@ import time
 import pytest
 
 from daemon_kit import Daemon, peer_events, unique
-from hilgate import gli_wire as wire
+from hilgate.gli import wire
 from hilgate.client import GliError, Link
 
 # a and b are 150 m apart on a 1500 m/s channel (tau = 0.1 s), 1000 bit/s, tx delay 0.05 s:

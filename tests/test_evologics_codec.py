@@ -10,7 +10,7 @@ from hilgate.drivers.evologics_codec import (
     AsyncError, AtProtocolError, BadCommand, Command, Data, HostCodec, ModemCodec, Notification, Reply, Unexpected,
 )
 from hilgate.drivers.s100_codec import FrameHunter, Notice, Skipped, pieces, wire_class
-from hilgate.packets import Decoded, packet_class
+from hilgate.core.packets import Decoded, packet_class
 
 NASTY = b"a,b\r\n\x00+++AT:3:x\r\n"
 

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 from daemon_kit import Daemon, unique
 from fuzzkit import examples
-from hilgate import gli_wire as wire
+from hilgate.gli import wire
 from hilgate.client import Link
 
 SCENE = """\

@@ -125,7 +125,7 @@ def test_hostile_control_requests_each_get_an_error_and_the_connection_stays(pai
 
 
 def test_a_deeply_nested_hello_is_refused_without_a_traceback(pair):
-    from hilgate import gli_wire as wire
+    from hilgate.gli import wire
 
     daemon, a, b = pair
     sock = socket.create_connection(("127.0.0.1", 1), timeout=1) if False else socket.socket(socket.AF_UNIX)

@@ -3,7 +3,7 @@
 import socket
 import threading
 
-from hilgate import sdnotify
+from hilgate.core import notify as sdnotify
 
 
 def test_sd_notify_never_blocks_when_nobody_reads(tmp_path, monkeypatch):

@@ -129,8 +129,8 @@ def test_installed_venv_runs_its_own_hilgate_with_every_dependency(installed):
     compiled = next((root / "opt/hilgate/lib").glob("python3*/site-packages/hilgate/__pycache__/cli.*.pyc"))
     code = marshal.loads(compiled.read_bytes()[16:])
     assert code.co_filename.startswith(f"{PREFIX}/lib/python3"), code.co_filename
-    probe = ("import hilgate, hilgate.packets, hilgate.gli_mq, hilgate.located, hilgate.drivers.port, "
-             "hilgate.drivers.aruco, hilgate.drivers.mavlink_source; print(hilgate.__file__)")
+    probe = ("import hilgate, hilgate.core.packets, hilgate.gli.queues, hilgate.scene.yaml_nodes, "
+             "hilgate.drivers.port, hilgate.drivers.aruco, hilgate.drivers.mavlink_source; print(hilgate.__file__)")
     # run outside the checkout: `python -c` and `-m` put the working directory first on sys.path
     result = subprocess.run([str(python), "-c", probe], capture_output=True, text=True, cwd=root,
                             env={"PATH": os.environ.get("PATH", ""), "HOME": os.environ.get("HOME", "/")})

@@ -7,7 +7,7 @@ import os
 import pytest
 
 from hilgate.scene import load_scene
-from hilgate.simulate import simulate
+from hilgate.sim.simulate import simulate
 
 SCENE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes", "intervention.yaml")
 

@@ -18,7 +18,7 @@ from daemon_kit import Daemon, unique
 from hilgate.client import Link
 from hilgate.models.controlled import Controlled
 from hilgate.models.medium import Channel
-from hilgate.poseboard import LiveVehicle
+from hilgate.sim.live_vehicle import LiveVehicle
 from netkit import Net
 from pymavlink import mavutil
 

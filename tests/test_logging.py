@@ -13,7 +13,7 @@ import sys
 import time
 
 from daemon_kit import unique
-from hilgate.gli_mq import unlink_queues
+from hilgate.gli.queues import unlink_queues
 
 LOG_EVERY_LEVEL = """
 import logging, sys

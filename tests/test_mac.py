@@ -12,7 +12,7 @@ from hilgate.models.errormodel import ErrorModel
 from hilgate.models.medium import Channel
 from hilgate.models.sfama import SFama
 from hilgate.scene import SceneError, load_scene_text
-from hilgate.simulate import simulate
+from hilgate.sim.simulate import simulate
 from netkit import Net
 
 R = dict(abs=1e-9)

@@ -14,7 +14,7 @@ import random
 import pytest
 
 from hilgate.scene import load_scene_text
-from hilgate.simulate import simulate
+from hilgate.sim.simulate import simulate
 
 EPS = 1e-9
 

@@ -8,7 +8,7 @@ import os
 import pytest
 
 from hilgate.scene import load_scene
-from hilgate.simulate import simulate
+from hilgate.sim.simulate import simulate
 
 SCENES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes")
 BOTH = (37.0, 58.0)  # rov1 transmits too

@@ -20,12 +20,12 @@ import serial
 import serial.rfc2217
 
 from daemon_kit import Daemon, unique
-from hilgate.backends import AppFrame
+from hilgate.core.backend import AppFrame
 from hilgate.client import Link
 from hilgate.drivers.port import port_problem
 from hilgate.drivers.s100 import S100Backend, S100Options
-from hilgate.packets import packet_class
-from hilgate.realtime import RealtimeScheduler
+from hilgate.core.packets import packet_class
+from hilgate.core.realtime import RealtimeScheduler
 
 # -- what is refused when the scene is loaded --------------------------------------------------------
 

@@ -6,8 +6,8 @@ import signal
 import socket
 import threading
 
-from hilgate.realtime import RealtimeScheduler
-from hilgate.sdnotify import notify
+from hilgate.core.realtime import RealtimeScheduler
+from hilgate.core.notify import notify
 
 
 def test_timers_fire_in_order_with_their_exact_model_times():

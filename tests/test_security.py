@@ -19,7 +19,7 @@ import posix_ipc
 import pytest
 
 from daemon_kit import Daemon, unique
-from hilgate.access import AccessError, LinkLock, prepare_private_dir
+from hilgate.daemon.access import AccessError, LinkLock, prepare_private_dir
 
 OUTSIDER = (65534, 65534)
 MEMBER = (65533, 65533)
@@ -126,16 +126,18 @@ def one_line_error(output: str) -> str:
 
 def test_a_queue_made_too_small_by_someone_first_is_refused_in_one_line(tmp_path):
     a = unique("a")
-    squat = posix_ipc.MessageQueue(f"/{a}_tx_dlnk_phy", posix_ipc.O_CREX, mode=0o600, max_messages=1,
+    squat = posix_ipc.MessageQueue(f"/{a}_rx_dlnk_phy", posix_ipc.O_CREX, mode=0o600, max_messages=1,
                                    max_message_size=1)
     try:
         daemon = Daemon(tmp_path, scene(a), [])  # its queues are the test's: the kit must not unlink them
         code, output = failure(daemon)
         line = one_line_error(output)
         assert code == 1
-        assert f"/{a}_tx_dlnk_phy" in line and "at most 1 bytes" in line and "hilgate queues" in line
+        assert f"/{a}_rx_dlnk_phy" in line and "at most 1 bytes" in line and "hilgate queues" in line
         assert "ulimit" not in line  # the budget hint only when the budget is the problem
         daemon.close()
+        with pytest.raises(posix_ipc.ExistentialError):  # the tx queue it had made is removed again
+            posix_ipc.MessageQueue(f"/{a}_tx_dlnk_phy")
     finally:
         squat.close()
         squat.unlink()

@@ -9,7 +9,7 @@ import sys
 import pytest
 
 from hilgate.scene import load_scene_text
-from hilgate.simulate import simulate
+from hilgate.sim.simulate import simulate
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DEMO = os.path.join(REPO, "scenes", "demo.yaml")

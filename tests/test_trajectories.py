@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from hilgate.poses import build_pose
+from hilgate.sim.pose_sources import build_pose
 from hilgate.scene import load_scene_text
 
 EXACT = dict(abs=1e-12)

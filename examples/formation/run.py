@@ -49,6 +49,18 @@ def formation_errors(trace_path: str) -> list[tuple[float, str, float]]:
     return rows
 
 
+def wait_ready(notify: socket.socket, daemon: subprocess.Popen) -> bool:
+    """Wait for the daemon's READY=1 (as systemd would), or for it to exit."""
+    notify.settimeout(0.5)
+    while daemon.poll() is None:
+        try:
+            if b"READY=1" in notify.recv(4096):
+                return True
+        except socket.timeout:
+            continue
+    return False
+
+
 def free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
         probe.bind(("127.0.0.1", 0))
@@ -92,32 +104,34 @@ def main() -> int:
         [*hilgate, "run", scene, *(x for o in overrides for x in ("--set", o)), "--runtime-dir", runtime,
          "--trace", trace, "--summary", summary, "--until", str(args.seconds), "--no-status-line"],
         env=dict(os.environ, NOTIFY_SOCKET=notify_path))
-    notify.settimeout(30)
-    while b"READY=1" not in notify.recv(4096):
-        pass
-    python = sys.executable
-    common = ["--runtime-dir", runtime]
-    apps = [subprocess.Popen([python, os.path.join(HERE, "fake_bluerov.py"), "--seconds", str(args.seconds + 5),
-                              "--to", f"udpout:127.0.0.1:{vehicle_port}",
-                              "--listen", f"udpin:127.0.0.1:{autopilot_port}"])]
-    for i, (name, slot) in enumerate(SLOTS.items(), 1):
-        apps.append(subprocess.Popen([python, os.path.join(HERE, "follower.py"), "--link", links[f"follower{i}_ac"],
-                                      "--slot", *map(str, slot), *common]))
-    apps.append(subprocess.Popen([python, os.path.join(HERE, "leader.py"), "--link", links["leader_ac"],
-                                  "--autopilot", f"udpout:127.0.0.1:{autopilot_port}", *common]))
-    time.sleep(1.0)
-    apps.append(subprocess.Popen([python, os.path.join(HERE, "operator.py"), "--link", links["buoy_ac"],
-                                  "--legs", str(args.legs), *common]))
+    apps: list[subprocess.Popen] = []
     try:
+        if not wait_ready(notify, daemon):
+            print(f"hilgate did not start (exit status {daemon.returncode})", file=sys.stderr)
+            return 1
+        python = sys.executable
+        common = ["--runtime-dir", runtime]
+        apps.append(subprocess.Popen([python, os.path.join(HERE, "fake_bluerov.py"), "--seconds",
+                                      str(args.seconds + 5), "--to", f"udpout:127.0.0.1:{vehicle_port}",
+                                      "--listen", f"udpin:127.0.0.1:{autopilot_port}"]))
+        for i, (name, slot) in enumerate(SLOTS.items(), 1):
+            apps.append(subprocess.Popen([python, os.path.join(HERE, "follower.py"), "--link",
+                                          links[f"follower{i}_ac"], "--slot", *map(str, slot), *common]))
+        apps.append(subprocess.Popen([python, os.path.join(HERE, "leader.py"), "--link", links["leader_ac"],
+                                      "--autopilot", f"udpout:127.0.0.1:{autopilot_port}", *common]))
+        time.sleep(1.0)
+        apps.append(subprocess.Popen([python, os.path.join(HERE, "operator.py"), "--link", links["buoy_ac"],
+                                      "--legs", str(args.legs), *common]))
         daemon.wait(args.seconds + 60)
     finally:
-        for app in apps:
-            app.send_signal(signal.SIGTERM)
-        for app in apps:
+        for process in [*apps, daemon]:
+            if process.poll() is None:
+                process.send_signal(signal.SIGTERM)
+        for process in [*apps, daemon]:
             try:
-                app.wait(5)
+                process.wait(5)
             except subprocess.TimeoutExpired:
-                app.kill()
+                process.kill()
         subprocess.run([*hilgate, "queues", scene, "--unlink"], capture_output=True)  # this run's own
     rows = formation_errors(trace)
     with open(os.path.join(args.out, f"formation-{args.mac}.csv"), "w", newline="") as handle:

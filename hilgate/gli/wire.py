@@ -29,7 +29,7 @@ import json
 import struct
 from typing import Any
 
-from . import safejson
+from ..core import safejson
 
 HELLO, WELCOME, SEND, RECV, STATE, ERROR, COMMAND, REPLY = range(1, 9)
 NAMES = {HELLO: "HELLO", WELCOME: "WELCOME", SEND: "SEND", RECV: "RECV", STATE: "STATE", ERROR: "ERROR",

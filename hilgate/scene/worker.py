@@ -2,7 +2,7 @@
 
 A reload re-reads a file that anyone allowed to edit it may have made hostile or merely huge.  Parsed
 on the real-time loop, a 10 MB scene stopped every delivery for 11 s.  Here the daemon starts
-``python -m hilgate.scene_worker``, which limits its own memory and CPU time, loads and validates the
+``python -m hilgate.scene.worker``, which limits its own memory and CPU time, loads and validates the
 scene exactly as ``hilgate check`` does, and writes back one message on stdout:
 
     b"S" + pickle of the Scene       the scene is valid
@@ -49,8 +49,8 @@ def _limit_self() -> None:
 
 def work(request: dict[str, Any]) -> bytes:
     """What the worker writes for one request (also callable in-process, for tests)."""
-    from .located import SceneError
-    from .scene import load_scene
+    from .yaml_nodes import SceneError
+    from .load import load_scene
 
     try:
         scene = load_scene(request["path"], request.get("overrides", []), **request.get("options", {}))
@@ -119,7 +119,7 @@ class SceneJob:
         self.data = bytearray()
         self.done = False
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "hilgate.scene_worker"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+            [sys.executable, "-m", "hilgate.scene.worker"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
             stderr=subprocess.DEVNULL, close_fds=True, start_new_session=True)
         try:
             self.process.stdin.write(json.dumps(request).encode())

@@ -16,15 +16,16 @@ from collections import Counter
 from typing import Any, Callable
 
 from .access import LinkLock
-from .backends import AppFrame, Backend, SimBackend
-from .gli_mq import MqEndpoint, plan_message_size
-from .gli_socket import GliClient, refuse_client
-from .models.frame import BROADCAST
-from .packets import Decoded, PacketClass, PacketError, packet_class
-from .recorder import Recorder
-from .scene import LinkSpec, Scene
-from .streams import Listener, listen_unix
-from .world import World
+from ..core.backend import AppFrame, Backend
+from ..sim.backend import SimBackend
+from ..gli.queues import MqEndpoint, plan_message_size
+from ..gli.sockets import GliClient, refuse_client
+from ..models.frame import BROADCAST
+from ..core.packets import Decoded, PacketClass, PacketError, packet_class
+from ..sim.recorder import Recorder
+from ..scene import LinkSpec, Scene
+from ..core.streams import Listener, listen_unix
+from ..sim.world import World
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +70,7 @@ class Link:
             self.emulator.close()
             self.emulator = None
         if self.spec.emulate:
-            from .drivers.emulators import EMULATORS
+            from ..drivers.emulators import EMULATORS
 
             options = dict(self.spec.emulate)
             self.emulator = EMULATORS[options["protocol"]](self, options, scheduler)
@@ -109,7 +110,7 @@ class Link:
                 and not (self.emulator is not None and self.emulator.busy))
 
     def welcome(self) -> dict[str, Any]:
-        from .gli_wire import VERSION
+        from ..gli.wire import VERSION
 
         return {"link": self.id, "address": self.address, "packet": self.packet.name,
                 "max_payload": self.packet.max_payload, "version": VERSION}
@@ -307,8 +308,8 @@ class Router:
         return address != BROADCAST and (channel, address) not in self._names
 
     def _driver_backend(self, spec: LinkSpec) -> Backend:
-        from .drivers.evologics import EvologicsBackend, EvologicsOptions
-        from .drivers.s100 import S100Backend, S100Options
+        from ..drivers.evologics import EvologicsBackend, EvologicsOptions
+        from ..drivers.s100 import S100Backend, S100Options
 
         options = dict(spec.options)
         packet = packet_class(spec.packet)
@@ -375,7 +376,7 @@ class Router:
         - ``{"class": "POSE"}``: the vehicle's position now;
         - ``{"class": "GOTO", "position": [x, y, z]}``, ``{"class": "VELOCITY", "velocity": [vx, vy, vz]}``,
           ``{"class": "STOP"}``: steer a ``controlled`` vehicle (at most at its maximum speed)."""
-        from .models.controlled import Controlled
+        from ..models.controlled import Controlled
 
         if not isinstance(request, dict):
             return {"class": "ERROR", "error": "a request is a JSON object with a class"}

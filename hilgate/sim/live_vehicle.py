@@ -1,4 +1,4 @@
-"""The pose board: the latest pose of every vehicle whose position comes from the world (MAVLink,
+"""A live vehicle's pose (the pose board of the daemon): the latest pose of a vehicle whose position comes from the world (MAVLink,
 a camera), as the medium sees it.
 
 A :class:`LiveVehicle` is a pose source like the scripted ones.  Sources update it, possibly for only
@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from .models.trajectories import Vec3
+from ..models.trajectories import Vec3
 
 AXES = ("x", "y", "z")
 

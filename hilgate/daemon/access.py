@@ -24,7 +24,7 @@ import socket
 import stat
 import struct
 
-from .located import SceneError
+from ..scene.yaml_nodes import SceneError
 
 log = logging.getLogger(__name__)
 

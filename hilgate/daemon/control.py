@@ -22,8 +22,9 @@ import math
 import os
 from typing import Any, Callable
 
-from . import __version__, safejson
-from .streams import Connection, Listener, listen_unix, refuse
+from .. import __version__
+from ..core import safejson
+from ..core.streams import Connection, Listener, listen_unix, refuse
 
 log = logging.getLogger(__name__)
 

@@ -11,12 +11,12 @@ import logging
 import socket
 from typing import TYPE_CHECKING, Any
 
-from . import gli_wire as wire
-from .packets import PacketError
-from .streams import Connection, refuse
+from . import wire
+from ..core.packets import PacketError
+from ..core.streams import Connection, refuse
 
 if TYPE_CHECKING:
-    from .router import Link, Router
+    from ..daemon.router import Link, Router
 
 log = logging.getLogger(__name__)
 

@@ -11,7 +11,7 @@ import difflib
 import math
 from typing import Any, Callable, Iterable, Sequence
 
-from .located import Node, SceneError, one_line
+from .yaml_nodes import Node, SceneError, one_line
 
 MISSING: Any = object()
 

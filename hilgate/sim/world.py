@@ -13,14 +13,14 @@ import logging
 import random
 from typing import Any
 
-from .models.flows import FlowSource
-from .models.frame import BROADCAST
-from .models.medium import Medium
-from .models.modem import SimModem
-from .models.observer import Observer
-from .models.trajectories import PoseSource
-from .poses import build_pose
-from .scene import LinkSpec, Scene
+from ..models.flows import FlowSource
+from ..models.frame import BROADCAST
+from ..models.medium import Medium
+from ..models.modem import SimModem
+from ..models.observer import Observer
+from ..models.trajectories import PoseSource
+from .pose_sources import build_pose
+from ..scene import LinkSpec, Scene
 
 log = logging.getLogger(__name__)
 

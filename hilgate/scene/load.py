@@ -16,19 +16,19 @@ import stat
 from dataclasses import dataclass, field
 from typing import Any, Callable, Sequence
 
-from .fields import (
+from .checks import (
     Fields, boolean, choice, describe, integer, items, join_path, mapping, number, quote, text, vector,
 )
-from .located import MAX_DEPTH, MAX_FILE_BYTES, Node, SceneError, load_file, load_text, parse_scalar, read_limited, size_text
+from .yaml_nodes import MAX_DEPTH, MAX_FILE_BYTES, Node, SceneError, load_file, load_text, parse_scalar, read_limited, size_text
 from .plugins import Plugin, PluginError, class_from_origin, classes_of, load_plugin, origin_of
-from .models.errormodel import UNITS, ErrorModel
-from .models.expr import ExprError, compile_expression
-from .models.flows import FlowSpec
-from .models.frame import BROADCAST
-from .models.mac import Mac, Param
-from .models.macs import REGISTRY as MAC_REGISTRY
-from .models.medium import Channel
-from .models.modem import ModemParams
+from ..models.errormodel import UNITS, ErrorModel
+from ..models.expr import ExprError, compile_expression
+from ..models.flows import FlowSpec
+from ..models.frame import BROADCAST
+from ..models.mac import Mac, Param
+from ..models.macs import REGISTRY as MAC_REGISTRY
+from ..models.medium import Channel
+from ..models.modem import ModemParams
 
 __all__ = [
     "SceneError", "Scene", "VehicleSpec", "PoseSpec", "LinkSpec", "MacSpec", "load_scene", "load_scene_text",
@@ -155,7 +155,7 @@ class LinkSpec:
     def everyone_in_range(self) -> bool:
         """Frames from applications reach every modem in range whatever their virtual destination:
         UWSim-NET's behaviour for packet classes that carry no address on air, without a MAC."""
-        from .packets import packet_class
+        from ..core.packets import packet_class
 
         return (self.addressing == "auto" and self.mac.protocol == "none"
                 and not packet_class(self.packet).addresses_on_air)
@@ -492,7 +492,7 @@ def _path_pose(node: Node, path: str) -> Any:
     legs = [] if legs_node is None else [_leg(n, join_path(f.sub("legs"), i)) for i, n in enumerate(items(legs_node, f.sub("legs")))]
     loop = f.get("loop", boolean, False)
     if loop:
-        from .models.trajectories import path_segments
+        from ..models.trajectories import path_segments
 
         segments = path_segments(start, legs)
         if segments[-1].t1 <= 0:
@@ -534,7 +534,7 @@ def _mavlink_pose(node: Node, path: str) -> Any:
                       for name, value in mapping(rates_node, f.sub("message_rates")).items())
     # hilgate sends a vehicle nothing the scene did not ask for, and never as its ground station
     # (drivers/mavlink_identity.py says why): heartbeat: false (default) | true | {system_id, component_id, rate_hz}
-    from .drivers import mavlink_identity as ident
+    from ..drivers import mavlink_identity as ident
 
     hb_node, hb_path = f.child("heartbeat"), f.sub("heartbeat")
     heartbeat = None
@@ -641,7 +641,7 @@ def _camera(name: str, node: Node, path: str, vehicles: dict[str, VehicleSpec]) 
     if source_node is None:
         raise f.error("missing required key 'source' (a device index, a video file or a stream URL)")
     source = _camera_source(source_node, f.sub("source"))
-    from .drivers.aruco import DICTIONARIES
+    from ..drivers.aruco import DICTIONARIES
 
     dictionary = f.get("dictionary", choice(*DICTIONARIES), "DICT_4X4_50")
     if ("fixed" in f) == ("onboard" in f):
@@ -693,7 +693,7 @@ def _calibration(node: Node, path: str) -> str:
         read_limited(file, MAX_FILE_BYTES, "the calibration file")  # a regular, readable, small file
     except SceneError as exc:
         raise node.error(path, f"{file}: {exc.message}") from None
-    from .drivers.aruco import CameraError, load_calibration
+    from ..drivers.aruco import CameraError, load_calibration
 
     try:
         load_calibration(file)
@@ -703,7 +703,7 @@ def _calibration(node: Node, path: str) -> str:
 
 
 def unknown_pose(kind: str) -> str:
-    from .fields import unknown_key_message
+    from .checks import unknown_key_message
 
     return unknown_key_message(kind, list(POSE_KINDS)).replace("unknown key", "unknown pose source")
 
@@ -793,7 +793,7 @@ _DRIVER_CHECKS: dict[str, Callable[[Node, str], Any]] = {
 
 def _port(node: Node, path: str) -> str:
     """A device path (relative to the scene) or a pyserial URL that hilgate can open."""
-    from .drivers.port import port_problem
+    from ..drivers.port import port_problem
 
     value = node.value
     problem = port_problem(value) if isinstance(value, str) and value else None

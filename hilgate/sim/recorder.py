@@ -13,8 +13,8 @@ import math
 from array import array
 from typing import Any, Iterable, TextIO
 
-from .models.flows import FlowSpec
-from .models.frame import BROADCAST, DATA
+from ..models.flows import FlowSpec
+from ..models.frame import BROADCAST, DATA
 
 LOSS_CAUSES = ("prop", "col", "mult", "range")
 

@@ -14,19 +14,19 @@ import time
 import uuid
 from typing import Any, Callable
 
-from . import __version__
+from .. import __version__
 from .access import prepare_private_dir, raise_descriptor_limit, resolve_group
 from .control import ControlServer
-from .gli_mq import raise_queue_budget
-from .live import LiveSources
-from .realtime import RealtimeScheduler
-from .recorder import Recorder
+from ..gli.queues import forget_created, raise_queue_budget, unlink_created
+from .live_sources import LiveSources
+from ..core.realtime import RealtimeScheduler
+from ..sim.recorder import Recorder
 from .router import Router
-from .scene import Scene, load_scene
-from .scene_worker import SceneJob, request_for
-from .sdnotify import notify, watchdog_interval
-from .simulate import write_summary
-from .streams import Listener
+from ..scene import Scene, load_scene
+from ..scene.worker import SceneJob, request_for
+from ..core.notify import notify, watchdog_interval
+from ..sim.simulate import write_summary
+from ..core.streams import Listener
 
 log = logging.getLogger(__name__)
 
@@ -122,6 +122,14 @@ class Daemon:
                      __version__, scene.name, os.path.abspath(self.scene_path), len(scene.links),
                      _link_list(scene), self.runtime_dir,
                      f", TCP {self.tcp}" if self.tcp else "", self.runtime_dir, self.run_id)
+        except BaseException:
+            removed = unlink_created()  # it never said READY: its queues would only cost the user's budget
+            if removed:
+                log.info("start-up failed: removed the %d queues this daemon had created", len(removed))
+            self.shutdown()
+            raise
+        forget_created()  # from now on applications may hold them: never unlinked by the daemon
+        try:
             notify("READY=1", f"STATUS=running {scene.name!r}: {len(scene.links)} links",
                    f"MAINPID={os.getpid()}")
             scheduler.run(self.until if self.until is not None else float("inf"))
@@ -166,7 +174,7 @@ class Daemon:
 
     def reload(self, reply: Callable[[bool, str], Any] | None = None) -> None:
         """Re-read the scene (SIGHUP, ``systemctl reload``, a control RELOAD).  The file is loaded
-        and validated in a worker process (:mod:`hilgate.scene_worker`) while the loop keeps
+        and validated in a worker process (:mod:`hilgate.scene.worker`) while the loop keeps
         delivering; a valid scene is applied on the loop.  Every outcome is answered to ``reply``,
         logged in one line and followed by READY=1.  A reload asked while one runs is done once
         more after it, so the last version of the file always wins."""

@@ -9,10 +9,10 @@ from __future__ import annotations
 
 from typing import Any, Callable
 
-from .models.controlled import Controlled
-from .models.trajectories import Piecewise, PoseSource, Static, path_segments, waypoint_segments
-from .poseboard import LiveVehicle
-from .scene import VehicleSpec
+from ..models.controlled import Controlled
+from ..models.trajectories import Piecewise, PoseSource, Static, path_segments, waypoint_segments
+from .live_vehicle import LiveVehicle
+from ..scene import VehicleSpec
 
 
 def _static(params: Any) -> PoseSource:

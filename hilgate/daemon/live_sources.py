@@ -11,15 +11,15 @@ from __future__ import annotations
 import logging
 from typing import Any
 
-from .poseboard import LiveVehicle
-from .scene import Scene
+from ..sim.live_vehicle import LiveVehicle
+from ..scene import Scene
 
 log = logging.getLogger(__name__)
 
 
 def _identity(heartbeat: tuple | None) -> Any:
     """The scene's ``heartbeat`` identity (system_id, component_id), or None: send no heartbeat."""
-    from .drivers.mavlink_identity import Identity
+    from ..drivers.mavlink_identity import Identity
 
     if not heartbeat:
         return None
@@ -67,7 +67,7 @@ class LiveSources:
         return deliver
 
     def _start_mavlink(self, name: str, vehicle: LiveVehicle, params: dict) -> None:
-        from .drivers.mavlink_source import MavlinkSource
+        from ..drivers.mavlink_source import MavlinkSource
 
         heartbeat = dict(params["heartbeat"] or ())
         source = MavlinkSource(name, params["url"], self._deliver(vehicle, "mavlink"), params["system_id"],
@@ -77,7 +77,7 @@ class LiveSources:
         self.mavlink.append(source)
 
     def _start_feedback(self, name: str, pose: Any, params: dict, identity: Any) -> None:
-        from .drivers.mavlink_source import Feedback
+        from ..drivers.mavlink_source import Feedback
 
         now = self.scheduler.now
         try:
@@ -90,7 +90,7 @@ class LiveSources:
         self.feedback.append(feedback)
 
     def _start_camera(self, scene: Scene, camera: Any, poses: dict[str, Any]) -> None:
-        from .drivers.aruco import CameraThread, Estimator, FixedCameraTracker, OnboardTracker, load_calibration
+        from ..drivers.aruco import CameraThread, Estimator, FixedCameraTracker, OnboardTracker, load_calibration
 
         estimator = Estimator(load_calibration(camera.calibration), camera.marker_length_m, camera.dictionary)
         if camera.fixed is not None:

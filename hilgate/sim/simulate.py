@@ -9,8 +9,8 @@ import time
 from typing import Any, TextIO
 
 from .recorder import Recorder
-from .scene import Scene
-from .scheduler import VirtualScheduler
+from ..scene import Scene
+from ..core.scheduler import VirtualScheduler
 from .world import World
 
 log = logging.getLogger(__name__)

@@ -31,7 +31,7 @@ from typing import Any, Callable
 
 import posix_ipc
 
-from .packets import Decoded, PacketClass, PacketError
+from ..core.packets import Decoded, PacketClass, PacketError
 
 log = logging.getLogger(__name__)
 
@@ -76,23 +76,28 @@ def queue_cost(message_size: int) -> int:
 
 
 def plan_message_size(links: int, needed: list[int]) -> bool:
-    """Whether every link can have dccomms' 10 × 8192-byte queues within RLIMIT_MSGQUEUE; if not,
-    each link's queues are made just large enough for its packet class (one warning says so)."""
+    """Whether the links' queues get dccomms' 10 × 8192 bytes (only when this user's queue budget is
+    unlimited, as the systemd unit makes it) or just what the link's packet class needs.
+
+    The budget (``ulimit -q``, 819 200 bytes by default) is shared by every process of the user: the
+    user's own daemon, a test run, a second daemon on another scene, dccomms applications.  Queues the
+    size of what they carry (a vl2b queue is about 21 KB instead of 83 KB) let four times as many links
+    share it; a dccomms application uses an existing queue as it is."""
     soft = resource.getrlimit(resource.RLIMIT_MSGQUEUE)[0]
-    if soft == resource.RLIM_INFINITY or 2 * links * queue_cost(MAX_MESSAGE_SIZE) <= soft:
+    if soft == resource.RLIM_INFINITY:
         return True
-    _warn_compact(soft, f"{links} links need {2 * links * queue_cost(MAX_MESSAGE_SIZE)} bytes of POSIX queues "
-                        f"at dccomms' 10 × {MAX_MESSAGE_SIZE} bytes")
+    _note_compact(soft, f"{links} links would need {2 * links * queue_cost(MAX_MESSAGE_SIZE)} bytes of POSIX "
+                        f"queues at dccomms' 10 × {MAX_MESSAGE_SIZE} bytes")
     return False
 
 
-def _warn_compact(limit: int, why: str) -> None:
+def _note_compact(limit: int, why: str) -> None:
     global _warned
     if not _warned:
         _warned = True
-        log.warning("%s but this user may have %d (ulimit -q); queues are created just large enough for each "
-                    "link's packet class instead (dccomms uses an existing queue as it is). Raise LimitMSGQUEUE= "
-                    "(systemd) or ulimit -q to get dccomms' default size.", why, limit)
+        log.info("%s and this user's queue budget is %d bytes (ulimit -q), shared by all its processes: queues "
+                 "are created just large enough for each link's packet class (dccomms uses an existing queue as "
+                 "it is). LimitMSGQUEUE=infinity (the systemd unit) gives dccomms' default size.", why, limit)
 
 
 def open_queue(name: str, needed_size: int = MAX_MESSAGE_SIZE, full_size: bool = True,
@@ -136,14 +141,16 @@ def _create_queue(name: str, needed_size: int, full_size: bool) -> posix_ipc.Mes
     try:
         for size in dict.fromkeys(sizes):
             try:
-                return posix_ipc.MessageQueue(name, posix_ipc.O_CREX, mode=0o660, max_messages=MAX_MESSAGES,
-                                              max_message_size=size)
+                queue = posix_ipc.MessageQueue(name, posix_ipc.O_CREX, mode=0o660, max_messages=MAX_MESSAGES,
+                                               max_message_size=size)
+                _created.append(name)
+                return queue
             except posix_ipc.ExistentialError:
                 return None
             except (posix_ipc.Error, OSError) as exc:
                 error = exc
                 if size != needed_size and _is_budget(exc):
-                    _warn_compact(resource.getrlimit(resource.RLIMIT_MSGQUEUE)[0],
+                    _note_compact(resource.getrlimit(resource.RLIMIT_MSGQUEUE)[0],
                                   "the POSIX queue budget is exhausted")
     finally:
         os.umask(old)
@@ -198,6 +205,30 @@ def _user(uid: int) -> str:
         return f"user {pwd.getpwuid(uid).pw_name} (uid {uid})"
     except KeyError:
         return f"uid {uid}"
+
+
+_created: list[str] = []
+"""Queues this process created (not opened): a daemon that fails to start removes them again."""
+
+
+def unlink_created() -> list[str]:
+    """Remove the queues this process created, for a daemon that failed to start: Linux charges them to
+    the user until they are unlinked, and no application can be using queues made a moment ago by a
+    daemon that never said READY.  (A running daemon never unlinks: applications may hold them.)"""
+    removed = []
+    while _created:
+        name = _created.pop()
+        try:
+            posix_ipc.unlink_message_queue(name)
+            removed.append(name)
+        except posix_ipc.Error:
+            pass
+    return removed
+
+
+def forget_created() -> None:
+    """The daemon is up: the queues it made are the applications' now."""
+    _created.clear()
 
 
 def unlink_queues(link_ids) -> list[str]:

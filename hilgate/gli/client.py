@@ -1,0 +1,163 @@
+"""A small client for hilgate's socket GLI: open a link by id, send with a destination, receive.
+
+    from hilgate.gli.client import Link
+
+    with Link.open("rov0_rf") as link:          # the link's Unix socket on this machine
+        link.send(b"hello", dst=2)               # dst 255 (the default) broadcasts
+        message = link.recv(timeout=5.0)         # None on timeout
+        print(message.src, message.data)
+
+    Link.open("rov0_rf", tcp=("topside", 4280))  # from another host (the daemon's --tcp listener)
+
+Blocking and single-threaded on purpose: one object per link per thread.  The framing is
+documented in :mod:`hilgate.gli_wire` for applications in other languages.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import time
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+from . import wire
+from ..core.paths import client_runtime_dir
+
+__all__ = ["Link", "Message", "GliError"]
+
+
+class GliError(RuntimeError):
+    """hilgate refused something (unknown link, payload too large, …)."""
+
+
+@dataclass(frozen=True)
+class Message:
+    src: int
+    dst: int
+    t: float
+    data: bytes
+
+
+class Link:
+    def __init__(self, sock: socket.socket, link_id: str):
+        self.sock = sock
+        self.id = link_id
+        self.decoder = wire.Decoder()
+        self.inbox: deque[Message] = deque()
+        self.replies: deque[Any] = deque()
+        self.errors: deque[str] = deque()
+        self.ready = False
+        self.info: dict[str, Any] = {}
+
+    @classmethod
+    def open(cls, link_id: str, *, tcp: tuple[str, int] | None = None, runtime_dir: str | None = None,
+             timeout: float = 5.0) -> "Link":
+        if tcp is not None:
+            sock = socket.create_connection(tcp, timeout=timeout)
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        else:
+            path = os.path.join(client_runtime_dir(runtime_dir), "gli", f"{link_id}.sock")
+            sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            sock.settimeout(timeout)
+            try:
+                sock.connect(path)
+            except OSError as exc:
+                sock.close()
+                raise GliError(f"cannot reach link {link_id!r} at {path}: {exc.strerror or exc}") from None
+        link = cls(sock, link_id)
+        try:
+            sock.sendall(wire.encode_json(wire.HELLO, {"link": link_id}))
+            deadline = time.monotonic() + timeout
+            while not link.info:
+                link._pump(max(0.0, deadline - time.monotonic()))
+                if link.errors:
+                    raise GliError(link.errors.popleft())
+                if time.monotonic() >= deadline and not link.info:
+                    raise GliError(f"no answer from hilgate for link {link_id!r}")
+        except BaseException:
+            sock.close()
+            raise
+        return link
+
+    @property
+    def address(self) -> int:
+        return int(self.info["address"])
+
+    @property
+    def max_payload(self) -> int:
+        return int(self.info["max_payload"])
+
+    def send(self, data: bytes, dst: int = 255, timeout: float | None = None) -> None:
+        """Send one frame; blocks while hilgate is not reading (or up to ``timeout`` seconds, then
+        TimeoutError).  Independent of any timeout an earlier :meth:`recv` used."""
+        if not 0 <= dst <= 255:
+            raise ValueError("dst must be 0..255 (255 broadcasts)")
+        self._sendall(wire.encode_send(dst, bytes(data)), timeout)
+
+    def _sendall(self, data: bytes, timeout: float | None) -> None:
+        self.sock.settimeout(timeout)
+        self.sock.sendall(data)
+
+    def recv(self, timeout: float | None = None) -> Message | None:
+        """The next frame for this link, or None if none came within ``timeout`` seconds."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while not self.inbox:
+            if self.errors:
+                raise GliError(self.errors.popleft())
+            remaining = None if deadline is None else deadline - time.monotonic()
+            if remaining is not None and remaining <= 0:
+                return None
+            if not self._pump(remaining):
+                if deadline is None:
+                    continue
+        return self.inbox.popleft()
+
+    def command(self, request: dict[str, Any], timeout: float = 5.0) -> Any:
+        """Ask hilgate something about this link or its vehicle (a JSON object with a ``class``).
+
+        hilgate answers in order, so an ERROR that came before the reply (a frame sent earlier was
+        refused) is raised here, after the reply is taken off the queue."""
+        self._sendall(wire.encode_json(wire.COMMAND, request), timeout)
+        deadline = time.monotonic() + timeout
+        while not self.replies:  # (a connection hilgate closes ends this with a GliError)
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise GliError(self.errors.popleft() if self.errors else "no reply from hilgate")
+            self._pump(remaining)
+        reply = self.replies.popleft()
+        if self.errors:
+            raise GliError(self.errors.popleft())
+        return reply
+
+    def _pump(self, timeout: float | None) -> bool:
+        self.sock.settimeout(timeout)
+        try:
+            data = self.sock.recv(65536)
+        except socket.timeout:
+            return False
+        if not data:
+            raise GliError("hilgate closed the connection")
+        for kind, body in self.decoder.feed(data):
+            if kind == wire.RECV:
+                src, dst, t, payload = wire.decode_recv(body)
+                self.inbox.append(Message(src, dst, t, payload))
+            elif kind == wire.STATE:
+                self.ready = body[:1] == b"\x01"
+            elif kind == wire.WELCOME:
+                self.info = wire.decode_json(body)
+            elif kind == wire.REPLY:
+                self.replies.append(wire.decode_json(body))
+            elif kind == wire.ERROR:
+                self.errors.append(str(wire.decode_json(body).get("error")))
+        return True
+
+    def close(self) -> None:
+        self.sock.close()
+
+    def __enter__(self) -> "Link":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,5 @@
+"""``hilgate report``: figures and tables of traces and summaries."""
+
+from .figures import ReportError, load_trace, pick_run, report, trace_runs
+
+__all__ = ["ReportError", "load_trace", "pick_run", "report", "trace_runs"]

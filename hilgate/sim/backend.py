@@ -1,0 +1,63 @@
+"""A link on the simulated medium, behind the same backend interface as a real modem's driver."""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+from ..core.backend import AppFrame, Backend
+from ..models.frame import BROADCAST, Frame
+from ..models.modem import SimModem
+
+
+class SimBackend(Backend):
+    """A link on the simulated medium: its :class:`SimModem` does the work."""
+
+    kind = "sim"
+
+    def __init__(self, modem: SimModem, link_names: Callable[[str, int], str], everyone_in_range: bool = False):
+        super().__init__()
+        self.modem = modem
+        self._link_names = link_names
+        self.everyone_in_range = everyone_in_range  # see LinkSpec.everyone_in_range
+        modem.upper = self._deliver
+        modem.on_idle = self._idle
+
+    def rebind(self, modem: SimModem) -> None:
+        self.modem = modem
+        modem.upper = self._deliver
+        modem.on_idle = self._idle
+
+    @property
+    def state(self) -> str:
+        return "up"
+
+    @property
+    def idle(self) -> bool:
+        return self.modem.idle
+
+    def send(self, frame: AppFrame) -> bool:
+        modem = self.modem
+        # (an emulated EvoLogics modem's frames, with meta, carry the modem's own acoustic addresses)
+        dst = BROADCAST if self.everyone_in_range and frame.meta is None else frame.dst
+        dst_name = "*" if dst == BROADCAST else self._link_names(modem.tx_channel, dst)
+        sim_frame = Frame(modem.medium.new_frame_id(), modem.id, dst_name, dst, len(frame.real),
+                          modem.clock.now(), None, frame)
+        return modem.send(sim_frame)
+
+    def _deliver(self, frame: Frame) -> None:
+        # Frames of built-in flows carry no application payload: they are background traffic.
+        if isinstance(frame.payload, AppFrame) and self.on_receive is not None:
+            self.on_receive(frame.payload)
+
+    def _idle(self) -> None:
+        if self.on_idle is not None:
+            self.on_idle()
+
+    def status(self) -> dict[str, Any]:
+        stats = self.modem.stats
+        return {"tx_packets": stats.tx_packets, "rx_packets": stats.rx_packets, "drops": stats.fifo_drops,
+                "fifo_bytes": self.modem.queued_bytes}
+
+    def close(self) -> None:
+        self.modem.upper = None
+        self.modem.on_idle = None
