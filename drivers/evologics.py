@@ -150,11 +150,7 @@ class EvologicsBackend(QueuedBackend):
         self.inflight = self.commands.popleft()
         name, args, payload, fields, _ = self.inflight
         self.port.write(self.codec.command(name, args, payload, fields))
-        self.inflight_timer = self.scheduler.at(
-            self.scheduler.now() + self.options.command_timeout_s * self.scheduler_speed(), self._command_timeout)
-
-    def scheduler_speed(self) -> float:
-        return getattr(self.scheduler, "speed", 1.0)
+        self.inflight_timer = self.scheduler.after_wall(self.options.command_timeout_s, self._command_timeout)
 
     def _command_timeout(self) -> None:
         if self.inflight is None:
@@ -193,9 +189,8 @@ class EvologicsBackend(QueuedBackend):
             self.tx_packets += 1
             self.trace({"t": now, "ev": "tx", "link": self.link_id, "dst": frame.dst, "size": len(frame.real)})
             if self.options.im and self.options.ack and frame.dst != 255:
-                self.delivery_timer = self.scheduler.at(
-                    self.scheduler.now() + self.options.delivery_timeout_s * self.scheduler_speed(),
-                    self._delivery_timeout)
+                self.delivery_timer = self.scheduler.after_wall(self.options.delivery_timeout_s,
+                                                                self._delivery_timeout)
                 return
             self._frame_done()
             return
@@ -225,7 +220,7 @@ class EvologicsBackend(QueuedBackend):
             self.retry_timer = None
             self.pump()
 
-        self.retry_timer = self.scheduler.at(self.scheduler.now() + delay * self.scheduler_speed(), again)
+        self.retry_timer = self.scheduler.after_wall(delay, again)
 
     def _frame_done(self) -> None:
         self.scheduler.cancel(self.delivery_timer)

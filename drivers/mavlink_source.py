@@ -195,11 +195,10 @@ class Feedback:
         self.sent = 0
         self.connection = mavutil.mavlink_connection(url, source_system=identity.system_id,
                                                      source_component=identity.component_id)
-        self.timer = scheduler.at(scheduler.now() + self.period * getattr(scheduler, "speed", 1.0), self._tick)
+        self.timer = scheduler.after_wall(self.period, self._tick)
 
     def _tick(self) -> None:
-        scheduler = self.scheduler
-        self.timer = scheduler.at(scheduler.now() + self.period * getattr(scheduler, "speed", 1.0), self._tick)
+        self.timer = self.scheduler.after_wall(self.period, self._tick)
         position = self.position()
         if position is None:
             return

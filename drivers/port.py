@@ -371,8 +371,7 @@ class Port:
     def _retry(self) -> None:
         delay = self.backoff
         self.backoff = min(self.backoff * 2, self.max_backoff_s)
-        self.reopen_timer = self.scheduler.at(self.scheduler.now() + delay * getattr(self.scheduler, "speed", 1.0),
-                                              self.open)
+        self.reopen_timer = self.scheduler.after_wall(delay, self.open)
 
     def _readable(self) -> None:
         try:

@@ -89,8 +89,7 @@ class S100Backend(QueuedBackend):
         if not self.port.write(piece):
             return  # the port went down; _on_port has cleared the pieces
         pace = 0.0 if self.options.rtscts else len(piece) * 8 / self.options.air_bitrate_bps
-        speed = getattr(self.scheduler, "speed", 1.0)
-        self.piece_timer = self.scheduler.at(self.scheduler.now() + pace * speed, self._write_piece)
+        self.piece_timer = self.scheduler.after_wall(pace, self._write_piece)
 
     def _on_data(self, data: bytes) -> None:
         for event in self.hunter.receive_data(data):

@@ -42,7 +42,6 @@ import select
 import signal
 import time
 from collections import deque
-from heapq import heappop
 from typing import Any, Callable
 
 from .scheduler import VirtualScheduler
@@ -102,7 +101,6 @@ class RealtimeScheduler(VirtualScheduler):
         self.add_reader(self._wake_r, self._drain_wakeups)
         self._running = False
         self._signals: dict[int, Callable[[int], Any]] = {}
-        self._deferred: list[Callable[[], Any]] = []
         self._fired = 0
         self._watch_end = 0.0  # model time at which the loop last stopped watching its descriptors
         self.input_lateness = 0.0
@@ -114,12 +112,12 @@ class RealtimeScheduler(VirtualScheduler):
     def start_clock(self) -> None:
         """Model time 0 is now (called by :meth:`run` if nobody did it before)."""
         if self._origin is None:
-            self._origin = time.perf_counter() - self._now / self.speed
+            self._origin = time.perf_counter() - self.now() / self.speed
 
     def model_time(self) -> float:
         """Where the wall clock is, in model seconds."""
         if self._origin is None:
-            return self._now
+            return self.now()
         return (time.perf_counter() - self._origin) * self.speed
 
     # -- inputs ---------------------------------------------------------------------------------
@@ -165,22 +163,6 @@ class RealtimeScheduler(VirtualScheduler):
         except BlockingIOError:
             pass  # the pipe is full of wake-ups already
 
-    def defer(self, fn: Callable[[], Any]) -> None:
-        """Call ``fn()`` once the events due now have all fired, before the loop waits again.
-        Used to coalesce notifications (READY/BUSY) that would otherwise flip within microseconds."""
-        self._deferred.append(fn)
-
-    def _run_deferred(self) -> None:
-        deferred = self._deferred
-        while deferred:
-            batch, self._deferred = deferred, []
-            for fn in batch:
-                try:
-                    fn()
-                except Exception:
-                    log.exception("deferred call %r failed", fn)
-            deferred = self._deferred
-
     def on_signal(self, signum: int, handler: Callable[[int], Any]) -> None:
         """Handle ``signum`` in the loop (not in the interrupted frame)."""
         self._signals[signum] = handler
@@ -216,40 +198,29 @@ class RealtimeScheduler(VirtualScheduler):
         watching its descriptors (``blind``: firing timers, or a preemption between two waits), and
         longer if the loop overslept or timers are overdue (a preemption during the wait).  That
         bound is kept in :attr:`input_lateness`; overdue timers then fire first, at their own times."""
-        heap = self._heap
         t = self.model_time()
-        late = blind
-        while heap and heap[0][2] is None:
-            heappop(heap)
-        if heap and heap[0][0] < t:
-            late = max(late, t - heap[0][0])
+        late = max(blind, t - self.peek())
         self.input_lateness = late if late > self.late_threshold else 0.0
         self._input_time()
 
     def _input_time(self) -> None:
         """Make the model clock read now for an input: overdue timers fire first, at their own times,
         then the clock moves to the wall clock's model time (never backwards)."""
-        heap = self._heap
         t = self.model_time()
-        if heap and heap[0][0] <= t:
-            self._fire_due(t)
-        if t > self._now:
-            self._now = t
+        self._fire_due(t)
+        self.advance(t)
 
     def _fire_due(self, now: float) -> None:
         """Fire every timer due at or before ``now``, each at its own time."""
-        heap = self._heap
-        while heap and heap[0][0] <= now:
-            entry = heappop(heap)
-            fn = entry[2]
-            if fn is None:
-                continue
-            self._now = entry[0]
-            try:
-                fn(*entry[3])
-            except Exception:
-                log.exception("timer callback %r failed", fn)
+        while self.peek() <= now:
+            self.step()
             self._fired += 1
+
+    def _fire(self, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
+        try:
+            fn(*args)
+        except Exception:  # one broken timer must not stop the daemon
+            log.exception("callback %r failed", fn)
 
     def _handle_inputs(self, timeout: float) -> None:
         entry = self.model_time()
@@ -312,7 +283,6 @@ class RealtimeScheduler(VirtualScheduler):
         finally:
             if gc_was_enabled:
                 gc.enable()
-        self.events += fired
         return fired
 
     def _collect_if_idle(self, wait: float) -> None:
@@ -329,24 +299,21 @@ class RealtimeScheduler(VirtualScheduler):
             gc.collect(0)
 
     def _loop(self, until: float, spin: float) -> int:
-        heap = self._heap
         self._fired = 0
         while self._running:
             now = self.model_time()
-            if heap and heap[0][0] <= now:
+            if self.peek() <= now:
                 self._fire_due(now)
                 now = self.model_time()
-                while heap and heap[0][0] <= now:  # firing took time: what became due meanwhile
+                while self.peek() <= now:  # firing took time: what became due meanwhile
                     self._fire_due(now)
                     now = self.model_time()
             if self._deferred:
-                self._run_deferred()
+                self.run_deferred()
             if now >= until:
-                self._now = max(self._now, until)
+                self.advance(until)
                 break
-            while heap and heap[0][2] is None:
-                heappop(heap)
-            next_t = heap[0][0] if heap else float("inf")
+            next_t = self.peek()
             wait = (min(next_t, until) - now) / self.speed
             if wait > spin and time.perf_counter() - self._last_input > self.linger_s:
                 self._collect_if_idle(wait)

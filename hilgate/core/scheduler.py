@@ -5,8 +5,15 @@ a virtual-time run reproducible bit for bit.  A handle is the heap entry itself;
 its callback and the loop skips it, so cancel is O(1).
 
 :class:`VirtualScheduler` runs as fast as the CPU allows (``hilgate sim``, tests).  The real-time
-scheduler of the daemon (``hilgate.realtime``) is a subclass that waits for the wall clock between
-events; the models cannot tell them apart.
+scheduler of the daemon (:mod:`hilgate.core.realtime`) is built on the same core, :meth:`peek` and
+:meth:`step`, and only adds waiting for the wall clock and for input; the models cannot tell them
+apart.  Two clocks, one meaning for every call:
+
+- :meth:`at` / :meth:`after` are model time;
+- :meth:`after_wall` is wall-clock seconds (model seconds × ``speed`` in real time; the same as
+  :meth:`after` in virtual time, where ``speed`` is 1): for what the operator or a device waits for
+  (timeouts, retries, periodic flushes), never for the model;
+- :meth:`defer` runs a call once the events due at the current instant have all fired.
 """
 
 from __future__ import annotations
@@ -17,13 +24,21 @@ from typing import Any, Callable
 
 __all__ = ["VirtualScheduler"]
 
+INF = float("inf")
+
 
 class VirtualScheduler:
+    speed = 1.0
+    """Model seconds per wall-clock second (the real-time scheduler's ``--speed``; 1 in virtual time)."""
+
     def __init__(self, start: float = 0.0):
         self._now = float(start)
         self._heap: list[list[Any]] = []
         self._sequence = itertools.count()
+        self._deferred: list[Callable[[], Any]] = []
         self.events = 0
+
+    # -- the clock ------------------------------------------------------------------------------
 
     def now(self) -> float:
         return self._now
@@ -38,16 +53,57 @@ class VirtualScheduler:
     def after(self, delay: float, fn: Callable[..., Any], *args: Any) -> list[Any]:
         return self.at(self._now + delay, fn, *args)
 
+    def after_wall(self, seconds: float, fn: Callable[..., Any], *args: Any) -> list[Any]:
+        """Call ``fn(*args)`` after ``seconds`` of wall-clock time."""
+        return self.at(self._now + seconds * self.speed, fn, *args)
+
     def cancel(self, handle: list[Any] | None) -> None:
         if handle is not None:
             handle[2] = None
 
-    def defer(self, fn: Callable[..., Any]) -> None:
-        """Run ``fn()`` after the events due now (in virtual time: at once, nothing waits)."""
-        fn()
+    def defer(self, fn: Callable[[], Any]) -> None:
+        """Call ``fn()`` once the events due now have all fired (used to coalesce notifications, such
+        as READY/BUSY, that would otherwise flip within one instant)."""
+        self._deferred.append(fn)
 
-    def run(self, until: float = float("inf")) -> int:
-        """Fire every event up to and including ``until``; the clock then reads ``until`` (if finite)."""
+    def advance(self, t: float) -> None:
+        """Move the clock to ``t`` for something that is not a timer (input read at ``t``); never back."""
+        if t > self._now:
+            self._now = t
+
+    # -- the core: look at the next event, fire it -----------------------------------------------
+
+    def peek(self) -> float:
+        """Time of the next event (cancelled ones are dropped), or infinity."""
+        heap = self._heap
+        while heap and heap[0][2] is None:
+            heappop(heap)
+        return heap[0][0] if heap else INF
+
+    def step(self) -> None:
+        """Fire the next event, at its own time (call :meth:`peek` first: there must be one)."""
+        entry = heappop(self._heap)
+        self._now = entry[0]
+        self.events += 1
+        self._fire(entry[2], entry[3])
+
+    def _fire(self, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
+        fn(*args)
+
+    def run_deferred(self) -> None:
+        deferred = self._deferred
+        while deferred:
+            batch, self._deferred = deferred, []
+            for fn in batch:
+                self._fire(fn, ())
+            deferred = self._deferred
+
+    # -- virtual time ------------------------------------------------------------------------------
+
+    def run(self, until: float = INF) -> int:
+        """Fire every event up to and including ``until``; the clock then reads ``until`` (if finite).
+
+        This is :meth:`peek` and :meth:`step` written out in one loop: it is the simulator's hot path."""
         heap = self._heap
         fired = 0
         while heap:
@@ -62,7 +118,11 @@ class VirtualScheduler:
             self._now = t
             fn(*entry[3])
             fired += 1
-        if until != float("inf") and until > self._now:
+            if self._deferred and (not heap or heap[0][0] > t):
+                self.run_deferred()
+        if self._deferred:
+            self.run_deferred()
+        if until != INF and until > self._now:
             self._now = until
         self.events += fired
         return fired

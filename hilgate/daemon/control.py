@@ -160,7 +160,7 @@ class _ControlClient:
             if self.connection.closed:
                 return
             self.send(self._status())
-            self.watch = scheduler.at(scheduler.now() + interval * scheduler.speed, tick)
+            self.watch = scheduler.after_wall(interval, tick)
 
         tick()
 

@@ -138,8 +138,9 @@ class Daemon:
         return 0
 
     def _periodic(self) -> None:
+        """Every half second of wall clock: flush the trace (a SIGKILL loses at most that) and redraw the
+        status line; the systemd watchdog at half its timeout."""
         scheduler = self.scheduler
-        every = 0.5 * self.speed
 
         def flush() -> None:
             if self.trace is not None:
@@ -147,14 +148,14 @@ class Daemon:
             if self.status_line:
                 sys.stderr.write("\r" + self.status_text() + "   ")
                 sys.stderr.flush()
-            scheduler.at(scheduler.now() + every, flush)
+            scheduler.after_wall(0.5, flush)
 
-        scheduler.at(every, flush)
+        scheduler.after_wall(0.5, flush)
         interval = watchdog_interval()
         if interval:
             def ping() -> None:
                 notify("WATCHDOG=1")
-                scheduler.at(scheduler.now() + interval * self.speed, ping)
+                scheduler.after_wall(interval, ping)
 
             ping()
 

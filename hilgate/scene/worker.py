@@ -129,8 +129,7 @@ class SceneJob:
         self.fd = self.process.stdout.fileno()
         os.set_blocking(self.fd, False)
         scheduler.add_reader(self.fd, self._readable)
-        speed = getattr(scheduler, "speed", 1.0)
-        self.timer = scheduler.at(scheduler.now() + timeout_s * speed, self._timeout, timeout_s)
+        self.timer = scheduler.after_wall(timeout_s, self._timeout, timeout_s)
 
     def _readable(self) -> None:
         try:
@@ -168,7 +167,7 @@ class SceneJob:
     def _reap(self) -> None:
         """Collect the worker (it has exited or been killed) without waiting on the loop for long."""
         if self.process.poll() is None:
-            self.scheduler.at(self.scheduler.now() + 0.05 * getattr(self.scheduler, "speed", 1.0), self._reap)
+            self.scheduler.after_wall(0.05, self._reap)
 
     def cancel(self) -> None:
         self._finish(None, "cancelled")
