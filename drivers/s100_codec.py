@@ -101,12 +101,19 @@ class FrameHunter:
             # a notice ends at its CR LF, or where a whole valid frame starts inside it (line noise
             # that merely begins with "+++" must not swallow the frame behind it)
             position = buffer.find(preamble, 3, limit)
+            arriving = False
             while position >= 0:
-                if self._frame_at(position) == "frame":
+                found = self._frame_at(position)
+                if found == "frame":
                     text = bytes(buffer[:position])
                     del buffer[:position]
                     return Notice(text)
+                arriving = arriving or found == "more"
                 position = buffer.find(preamble, position + 1, limit)
+            if end >= 0 and arriving and self._frame_at(end + 2) != "frame":
+                # a frame that starts before the CR LF is still arriving and nothing proves the CR LF
+                # ends the notice: it may be inside that frame's payload, so wait (one frame at most)
+                return None
             if end >= 0:
                 text = bytes(buffer[:end])
                 del buffer[: end + 2]

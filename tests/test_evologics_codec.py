@@ -190,6 +190,21 @@ def test_fuzz_modem_codec(data, chunk):
             assert isinstance(event, (Command, BadCommand, Data))
 
 
+def test_s100_hunter_does_not_end_a_notice_at_a_crlf_inside_a_frame_still_arriving():
+    """Found by the fuzz test below: ``+++AT`` noise, then a frame whose payload holds CR LF, read 5
+    bytes at a time.  The notice must not end at that CR LF while the frame is still arriving."""
+    packet = packet_class("simple:20")
+    wire = wire_class(packet)
+    frames = [wire.encode(b"\r\n"), wire.encode(b"\x00"), wire.encode(b"\x00")]
+    stream = b"+++AT" + b"\r\n".join(frames) + b"\r\n"
+    for chunk in (1, 5, len(stream)):
+        hunter = FrameHunter(packet)
+        found = []
+        for i in range(0, len(stream), chunk):
+            found += [e.real for e in hunter.receive_data(stream[i:i + chunk]) if isinstance(e, Decoded)]
+        assert found == frames, chunk
+
+
 @settings(max_examples=1000, deadline=None)
 @given(st.sampled_from(["simple:20", "vl1b", "vl2b", "dlf16", "dlf32", "raw"]), _streams, st.data())
 def test_fuzz_s100_hunter_finds_every_good_frame_in_noise(name, noise, data):

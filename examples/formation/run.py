@@ -16,6 +16,7 @@ import json
 import math
 import os
 import re
+import shutil
 import signal
 import socket
 import subprocess
@@ -133,6 +134,8 @@ def main() -> int:
             except subprocess.TimeoutExpired:
                 process.kill()
         subprocess.run([*hilgate, "queues", scene, "--unlink"], capture_output=True)  # this run's own
+        notify.close()
+        shutil.rmtree(runtime, ignore_errors=True)
     rows = formation_errors(trace)
     with open(os.path.join(args.out, f"formation-{args.mac}.csv"), "w", newline="") as handle:
         writer = csv.writer(handle)
