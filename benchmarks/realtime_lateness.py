@@ -114,11 +114,14 @@ def main() -> None:
     recorder = LatenessRecorder(clock)
     runtime = tempfile.mkdtemp(prefix="hilgate-bench-")
     if args.gli:
-        from hilgate.gli.queues import raise_queue_budget
         from hilgate.daemon.router import Router
+        from hilgate.gli.queues import QueueDoor, plan_message_size, raise_queue_budget
+        from hilgate.gli.sockets import ClientLimits, SocketDoor
 
         raise_queue_budget()
-        router = Router(clock, recorder, os.path.join(runtime, "gli"))
+        router = Router(clock, recorder)
+        router.doors = [QueueDoor(clock, plan_message_size(len(scene.links))),
+                        SocketDoor(os.path.join(runtime, "gli"), clock, ClientLimits(), router.port)]
         router.apply(scene)
         world = router.world
     else:

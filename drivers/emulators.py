@@ -20,17 +20,15 @@ import math
 import os
 import socket
 import tty
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from hilgate.core.backend import AppFrame
+from hilgate.core.endpoint import TAKEN, LinkPort
 from hilgate.core.packets import Raw
 from hilgate.core.streams import Connection, Listener
 
 from .evologics_codec import BadCommand, Command, Data, ModemCodec
 from .s100_codec import CRLF, FrameHunter, Notice, Skipped, wire_class
-
-if TYPE_CHECKING:
-    from hilgate.daemon.router import Link
 
 log = logging.getLogger(__name__)
 
@@ -142,11 +140,14 @@ def _open_hosts(spec: dict, scheduler: Any, on_data, on_connect, name: str):
 class EvologicsEmulator:
     """An EvoLogics S2C modem in front of a simulated link."""
 
-    def __init__(self, link: "Link", spec: dict, scheduler: Any):
-        self.link = link
+    kind = "emulator"
+
+    def __init__(self, port: LinkPort, spec: dict, scheduler: Any):
+        self.port = port
+        self.options = spec
         self.scheduler = scheduler
         self.codecs: dict[Any, ModemCodec] = {}
-        self.settings = {"AL": str(link.address), "AR": "0", "AM": "254", "L": "3", "LC": "0", "G": "0", "C": "0",
+        self.settings = {"AL": str(port.address), "AR": "0", "AM": "254", "L": "3", "LC": "0", "G": "0", "C": "0",
                          "ZC": "1", "ZP": "500", "RC": "3", "RT": "1000", "KO": "0", "ZI": "120", "ZH": "30",
                          "ZS": "0", "CA": "1500", "RI": "3", "RP": "0", "ZL": "16384", "ZX": "0", "ZF": "0", "ZU": "0"}
         self.pending_ack: AppFrame | None = None
@@ -154,7 +155,7 @@ class EvologicsEmulator:
         self.last_ptime_us = 0
         self.last_rssi = -50
         self.last_integrity = 150
-        self.hosts = _open_hosts(spec, scheduler, self._on_data, self._on_connect, link.id)
+        self.hosts = _open_hosts(spec, scheduler, self._on_data, self._on_connect, port.id)
 
     def _on_connect(self, host: Any) -> None:
         self.codecs[host] = ModemCodec()
@@ -259,25 +260,22 @@ class EvologicsEmulator:
         self._send(payload, dst, {"*SENDIMS": "ims", "*SENDPBM": "pbm"}.get(command.name, "im"), ack)
 
     def _send(self, payload: bytes, dst: int, kind: str, ack: bool) -> None:
-        frame = AppFrame(payload, payload, Raw(), 0, self.link.address, dst, self.scheduler.now())
+        frame = AppFrame(payload, payload, Raw(), 0, self.port.address, dst, self.scheduler.now())
         frame.meta = {"kind": kind, "ack": ack}
         if ack and dst != 255:
             self.pending_ack = frame
             frame.on_delivered = self._delivered
-            modem = self.link.sim_modem()
-            airtime = modem.airtime(len(payload)) if modem else 1.0
-            self.fail_timer = self.scheduler.at(self.scheduler.now() + 2 * airtime + 3.0, self._failed, frame)
-        self.link.send_frame(frame)
+            airtime = self.port.airtime(len(payload))
+            self.fail_timer = self.scheduler.at(self.scheduler.now() + 2 * (airtime or 1.0) + 3.0, self._failed,
+                                                frame)
+        self.port.send(frame)
 
     # -- delivery reports -------------------------------------------------------------------------------
 
-    def _delivered(self, frame: AppFrame, receiver: "Link") -> None:
+    def _delivered(self, frame: AppFrame, receiver: LinkPort) -> None:
         if frame is not self.pending_ack:
             return
-        mine, theirs = self.link.sim_modem(), receiver.sim_modem()
-        tau = None
-        if mine is not None and theirs is not None:
-            tau = mine.medium.propagation_delay(theirs, mine, self.scheduler.now())
+        tau = self.port.delay_from(receiver.address, self.scheduler.now())  # the acknowledgement's way back
         if tau is None:
             return  # the acknowledgement cannot come back: FAILEDIM when the timer fires
         self.last_ptime_us = round(tau * 1e6)
@@ -293,7 +291,7 @@ class EvologicsEmulator:
             return
         self.pending_ack = None
         self._notify(f"{what},{frame.dst}")
-        self.link.state_changed()
+        self.port.state_changed()
 
     def _notify(self, text: str, payload: bytes | None = None) -> None:
         for host, codec in list(self.codecs.items()):
@@ -301,27 +299,22 @@ class EvologicsEmulator:
 
     # -- medium → host ----------------------------------------------------------------------------------
 
-    def deliver(self, frame: AppFrame, t: float) -> None:
+    def deliver(self, frame: AppFrame, t: float) -> str:
         meta = getattr(frame, "meta", None) or {}
         kind = meta.get("kind", "im")
         payload = frame.real
-        modem = self.link.sim_modem()
-        d = 0.0
-        if modem is not None:
-            sender = modem.medium.modem_by_address(modem.rx_channel, frame.src)
-            if sender is not None:
-                a, b = sender.pose.position(t), modem.pose.position(t)
-                if a is not None and b is not None:
-                    d = math.dist(a, b)
+        d = self.port.distance_from(frame.src, t) or 0.0
         self.last_rssi = int(-20 - 20 * math.log10(max(d, 1.0)))
         self.last_integrity = 150
-        duration_us = round((modem.airtime(len(payload)) if modem else 0.0) * 1e6)
+        duration_us = round((self.port.airtime(len(payload)) or 0.0) * 1e6)
         for host, codec in list(self.codecs.items()):
             if kind == "burst":
                 if codec.data_mode:
                     host.write(payload)
                     continue
-                text, body = ModemCodec.recv_burst(frame.src, frame.dst, payload, int(modem.bitrate if modem else 0),
+                bit_time = self.port.airtime(1)
+                bitrate = round(8 / bit_time) if bit_time else 0
+                text, body = ModemCodec.recv_burst(frame.src, frame.dst, payload, bitrate,
                                                    self.last_rssi, self.last_integrity, round(d / 1500 * 1e6), 0.0)
             elif kind == "ims":
                 text = (f"RECVIMS,{len(payload)},{frame.src},{frame.dst},{round(t * 1e6)},{duration_us},"
@@ -335,6 +328,10 @@ class EvologicsEmulator:
                 text, body = ModemCodec.recvim(frame.src, frame.dst, payload, bool(meta.get("ack")), duration_us,
                                                self.last_rssi, self.last_integrity, 0.0)
             host.write(codec.notify_line(text, body))
+        return TAKEN
+
+    def state(self, ready: bool) -> None:
+        """A modem says nothing when its transmit buffer drains (AT?ZS / BUSY answers say it)."""
 
     @property
     def busy(self) -> bool:
@@ -344,44 +341,78 @@ class EvologicsEmulator:
 class S100Emulator:
     """A Seatooth S100 in front of a simulated link: frames of the link's packet class + CR LF."""
 
-    def __init__(self, link: "Link", spec: dict, scheduler: Any):
-        self.link = link
+    kind = "emulator"
+    busy = False
+
+    def __init__(self, port: LinkPort, spec: dict, scheduler: Any):
+        self.port = port
+        self.options = spec
         self.scheduler = scheduler
         self.hunters: dict[Any, FrameHunter] = {}
-        self.hosts = _open_hosts(spec, scheduler, self._on_data, self._on_connect, link.id)
+        self.hosts = _open_hosts(spec, scheduler, self._on_data, self._on_connect, port.id)
 
     def _on_connect(self, host: Any) -> None:
-        self.hunters[host] = FrameHunter(self.link.packet)
+        self.hunters[host] = FrameHunter(self.port.packet)
 
     def _on_data(self, host: Any, data: bytes) -> None:
-        hunter = self.hunters.setdefault(host, FrameHunter(self.link.packet))
+        hunter = self.hunters.setdefault(host, FrameHunter(self.port.packet))
         for event in hunter.receive_data(data):
             if isinstance(event, Skipped) and event.reason == "crc":
-                self.link.bad_frame("crc", event.count)
+                self.port.lost("crc", event.count, src="app")
             elif isinstance(event, Notice):
                 continue
             elif not isinstance(event, Skipped):
-                packet = self.link.packet
+                packet = self.port.packet
                 real = event.real if not isinstance(packet, Raw) else event.payload
                 # S100 frames carry no address of their own (a DataLinkFrame's header does): broadcast
-                frame = AppFrame(real, event.payload, packet, 0, self.link.address, event.dst, self.scheduler.now())
-                self.link.send_frame(frame)
+                frame = AppFrame(real, event.payload, packet, 0, self.port.address, event.dst, self.scheduler.now())
+                self.port.send(frame)
 
-    def deliver(self, frame: AppFrame, t: float) -> None:
-        wire = wire_class(self.link.packet)
-        if isinstance(self.link.packet, Raw):
+    def deliver(self, frame: AppFrame, t: float) -> str:
+        packet = self.port.packet
+        wire = wire_class(packet)
+        if isinstance(packet, Raw):
             data = wire.encode(frame.payload)
-        elif frame.packet.name == self.link.packet.name:
+        elif frame.packet.name == packet.name:
             data = frame.real
         else:
-            data = self.link.packet.encode(frame.payload, src=frame.src, dst=frame.dst)
+            data = packet.encode(frame.payload, src=frame.src, dst=frame.dst)
         for host in list(self.hunters):
             host.write(data + CRLF)
+        return TAKEN
 
-    busy = False
+    def state(self, ready: bool) -> None:
+        pass
 
     def close(self) -> None:
         self.hosts.close()
 
 
 EMULATORS = {"evologics": EvologicsEmulator, "s100": S100Emulator}
+
+
+class EmulatorDoor:
+    """Opens the emulated modem a link's ``emulate:`` asks for, and follows it across reloads."""
+
+    def __init__(self, scheduler: Any):
+        self.scheduler = scheduler
+
+    def open(self, port: LinkPort) -> Any:
+        options = port.emulate
+        if not options:
+            return None
+        emulator = EMULATORS[options["protocol"]](port, options, self.scheduler)
+        port.attach(emulator)
+        return emulator
+
+    def update(self, handle: Any, port: LinkPort) -> Any:
+        if (handle.options if handle is not None else {}) == port.emulate:
+            return handle
+        self.close(handle, port)
+        return self.open(port)
+
+    def close(self, handle: Any, port: LinkPort | None = None) -> None:
+        if handle is not None:
+            if port is not None:
+                port.detach(handle)
+            handle.close()

@@ -8,7 +8,6 @@ import gc
 import logging
 import os
 import signal
-import socket
 import sys
 import time
 import uuid
@@ -17,7 +16,9 @@ from typing import Any, Callable
 from .. import __version__
 from .access import prepare_private_dir, raise_descriptor_limit, resolve_group
 from .control import ControlServer
-from ..gli.queues import forget_created, raise_queue_budget, unlink_created
+from ..drivers.emulators import EmulatorDoor
+from ..gli.queues import QueueDoor, forget_created, plan_message_size, raise_queue_budget, unlink_created
+from ..gli.sockets import ClientLimits, SocketDoor, tcp_listener
 from .live_sources import LiveSources
 from ..core.realtime import RealtimeScheduler
 from ..sim.recorder import Recorder
@@ -26,7 +27,6 @@ from ..scene import Scene, load_scene
 from ..scene.worker import SceneJob, request_for
 from ..core.notify import notify, watchdog_interval
 from ..sim.simulate import write_summary
-from ..core.streams import Listener
 
 log = logging.getLogger(__name__)
 
@@ -94,8 +94,13 @@ class Daemon:
                              "start": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="milliseconds"),
                              "scene": scene.name, "path": os.path.abspath(self.scene_path), "version": __version__,
                              "speed": self.speed})
-        self.router = Router(scheduler, self.recorder, os.path.join(self.runtime_dir, "gli"), self.gli_backlog,
-                             group, self.max_clients, self.max_link_clients)
+        self.router = Router(scheduler, self.recorder, max_link_clients=self.max_link_clients)
+        self.clients = ClientLimits(self.max_clients, self.max_link_clients)
+        self.router.doors = [
+            QueueDoor(scheduler, plan_message_size(len(scene.links)), self.gli_backlog, group),
+            SocketDoor(os.path.join(self.runtime_dir, "gli"), scheduler, self.clients, self.router.port, group),
+            EmulatorDoor(scheduler),
+        ]
         self.tcp_listener = None
         self.control = None
         self.live = LiveSources(scheduler)
@@ -106,9 +111,7 @@ class Daemon:
                 self.router.world.sample_poses(scene.trace_poses_s * self.speed, self.recorder.event)
             if self.tcp:
                 host, port = parse_tcp(self.tcp)
-                sock = socket.create_server((host, port), reuse_port=False)
-                sock.setblocking(False)
-                self.tcp_listener = Listener(sock, scheduler, self.router.accept_client)
+                self.tcp_listener = tcp_listener(host, port, scheduler, self.clients, self.router.port)
             self.control = ControlServer(os.path.join(self.runtime_dir, "control.sock"), scheduler,
                                          self.status, self.reload, group=group)
             scheduler.on_signal(signal.SIGHUP, lambda s: self.reload())  # answered in the log only
@@ -169,7 +172,7 @@ class Daemon:
         tx = sum(link["tx_packets"] for link in links)
         rx = sum(link["rx_packets"] for link in links)
         drops = sum(link["drops"] for link in links)
-        clients = sum(len(link.clients) for link in self.router.links.values())
+        clients = sum(link.clients for link in self.router.links.values())
         return (f"hilgate t={self.scheduler.now():8.1f} s | {up}/{len(links)} links up | tx {tx} rx {rx} "
                 f"drops {drops} | {clients} socket clients")
 

@@ -1,4 +1,5 @@
-"""The GLI over POSIX message queues, byte for byte as dccomms' ``CommsDeviceService`` (PHY side).
+"""The GLI over POSIX message queues, byte for byte as dccomms' ``CommsDeviceService`` (PHY side);
+the protocol itself, without queues, is :mod:`hilgate.gli.queue_protocol`.
 
 For link id X: ``/X_tx_dlnk_phy`` carries application → hilgate, ``/X_rx_dlnk_phy`` hilgate →
 application (names from the application's view).  Both sides open with O_CREAT, so start order does
@@ -27,16 +28,17 @@ import os
 import pwd
 import resource
 from collections import deque
-from typing import Any, Callable
+from typing import Any
 
 import posix_ipc
 
-from ..core.packets import Decoded, PacketClass, PacketError
+from ..core.backend import AppFrame
+from ..core.endpoint import ABSENT, KEPT, TAKEN, LinkPort
+from ..core.packets import PacketClass, PacketError
+from .queue_protocol import FRAME, FrameIn, Ignored, QueueProtocol, Refused, StateRequest
 
 log = logging.getLogger(__name__)
 
-FRAME, REQ_STATE, CMD_STATE, NOTBUILT = 0, 1, 2, 3
-BUSY, READY = 0, 1
 MAX_MESSAGES = 10
 MAX_MESSAGE_SIZE = 8192
 
@@ -75,7 +77,7 @@ def queue_cost(message_size: int) -> int:
     return MAX_MESSAGES * (message_size + QUEUE_OVERHEAD)
 
 
-def plan_message_size(links: int, needed: list[int]) -> bool:
+def plan_message_size(links: int) -> bool:
     """Whether the links' queues get dccomms' 10 × 8192 bytes (only when this user's queue budget is
     unlimited, as the systemd unit makes it) or just what the link's packet class needs.
 
@@ -258,78 +260,116 @@ def drain(queue: posix_ipc.MessageQueue, limit: int = 100_000) -> list[bytes]:
 
 
 class MqEndpoint:
-    """One link's pair of queues, attached to the real-time scheduler's loop.
+    """One link's pair of queues, attached to the real-time scheduler's loop: an endpoint of the link.
 
-    Whether an application is there is known once it speaks (dccomms applications say REQ_STATE
-    when they start; any message counts).  Until then frames are kept only in the kernel queue, for
-    an application that starts late, and what does not fit is not an application's loss but a frame
-    nobody was there to read (see :meth:`deliver`).  Frames that an application left in the queues
-    while no daemon ran are drained at start and reported (``on_stale``), never sent on air."""
+    Whether an application is there is known once it speaks (:class:`QueueProtocol`).  Until then
+    frames are kept only in the kernel queue, for an application that starts late, and what does not
+    fit is not an application's loss but a frame nobody was there to read (see :meth:`deliver`).
+    Frames that an application left in the queues while no daemon ran are drained at start and
+    reported (``stale``), never sent on air."""
 
     kind = "mq"
+    busy = False
 
-    def __init__(
-        self,
-        link_id: str,
-        packet: PacketClass,
-        scheduler: Any,
-        on_frame: Callable[[Decoded], Any],
-        on_bad: Callable[[str, int], Any],
-        is_ready: Callable[[], bool],
-        full_size: bool = True,
-        backlog: int = 1000,
-        group: int | None = None,
-        on_stale: Callable[[str, int], Any] | None = None,
-    ):
-        self.link_id = link_id
-        self.packet = packet
+    def __init__(self, port: LinkPort, scheduler: Any, full_size: bool = True, backlog: int = 1000,
+                 group: int | None = None):
+        self.port = port
         self.scheduler = scheduler
-        self.on_frame = on_frame
-        self.on_bad = on_bad
-        self.is_ready = is_ready
-        self.from_app_name, self.to_app_name = queue_names(link_id)
-        needed = 1 + packet.body_size
+        self.protocol = QueueProtocol(port.packet)
+        self.from_app_name, self.to_app_name = queue_names(port.id)
+        needed = 1 + port.packet.body_size
         self.from_app = open_queue(self.from_app_name, needed, full_size, group)
         try:
             self.to_app = open_queue(self.to_app_name, needed, full_size, group)
         except BaseException:
             self.from_app.close()
             raise
-        self.attended = False  # an application has spoken on this link's queue
         self.stale = 0
         for origin, queue in (("app", self.from_app), ("medium", self.to_app)):
             for message in drain(queue):
-                if origin == "app" and message[:1] != bytes([FRAME]):
-                    self.attended = True  # its REQ_STATE came before the daemon: it is there
-                    continue
                 if message[:1] == bytes([FRAME]):
                     self.stale += 1
-                    if on_stale is not None:
-                        on_stale(origin, len(message))
+                    port.lost("stale", len(message), src=origin)
+                elif origin == "app":
+                    self.protocol.attended = True  # its REQ_STATE came before the daemon: it is there
         if self.stale:
             log.warning("link %s: %d stale frames left in its queues while no daemon ran were dropped",
-                        link_id, self.stale)
-        self.sent_state: int | None = None
-        self.app_full = 0
-        self.no_reader = 0
-        self.delivered = 0
+                        port.id, self.stale)
         self.backlog_limit = backlog
         self.backlog: deque[bytes] = deque()
-        self._send_state(BUSY)
+        self._tell(self.protocol.state_message(False))  # BUSY until the link is up
         scheduler.add_reader(self.from_app.mqd, self._readable)
 
-    def start(self) -> None:
-        """The backend is up: say READY (dccomms' bridge says it twice; once is enough for its apps)."""
-        self.state_changed()
+    @property
+    def attended(self) -> bool:
+        return self.protocol.attended
 
-    def state_changed(self) -> None:
-        state = READY if self.is_ready() else BUSY
-        if state != self.sent_state:
-            self._send_state(state)
+    def set_packet(self, packet: PacketClass) -> None:
+        """A reload changed the link's packet class."""
+        self.protocol.packet = packet
 
-    def _send_state(self, state: int) -> None:
-        if self._put(bytes([CMD_STATE, state])):
-            self.sent_state = state  # else the next change (or REQ_STATE) says it again
+    # -- application → link --------------------------------------------------------------------
+
+    def _readable(self) -> None:
+        # Bounded: a flood on one queue must not starve the other links' timers.
+        for _ in range(MAX_MESSAGES):
+            try:
+                message, _priority = self.from_app.receive()
+            except posix_ipc.BusyError:
+                return
+            self._handle(message)
+
+    def _handle(self, message: bytes) -> None:
+        match self.protocol.receive(message):
+            case FrameIn(decoded=decoded):
+                try:
+                    self.port.send_decoded(decoded)
+                except PacketError as exc:
+                    log.warning("link %s: %s", self.port.id, exc)
+                    self.port.lost(exc.reason, len(decoded.real), src="app")
+            case StateRequest():
+                self._tell(self.protocol.state_message(self.port.ready))
+            case Refused(reason=reason, size=size):
+                self.port.lost(reason, size, src="app")
+            case Ignored():
+                pass
+
+    # -- link → application (the endpoint) -----------------------------------------------------
+
+    def state(self, ready: bool) -> None:
+        message = self.protocol.state_change(ready)
+        if message is not None:
+            self._tell(message)
+
+    def _tell(self, message: bytes) -> None:
+        if self._put(message):
+            self.protocol.told(message)  # else the next change (or REQ_STATE) says it again
+
+    def deliver(self, frame: AppFrame, t: float) -> str:
+        """Hand a received frame to the application: ``taken`` (in its queue, or the backlog while it is
+        slow to read) or ``app_full`` (the queue and the backlog are full).  Before any application has
+        shown itself, the frame is ``kept`` in the kernel queue for one that starts late (at most the
+        queue's few messages, no backlog: nobody may ever come), or is ``absent``."""
+        real = frame.real
+        packet = self.protocol.packet
+        if frame.packet.name != packet.name:
+            try:
+                real = packet.encode(frame.payload, src=frame.src, dst=frame.dst)
+            except PacketError:
+                return "size"
+        message = self.protocol.frame_message(real, frame.seq, frame.src, frame.dst)
+        if not self.protocol.attended:
+            if self.backlog:
+                return ABSENT
+            try:
+                self.to_app.send(message)
+            except posix_ipc.BusyError:
+                return ABSENT
+            except (ValueError, posix_ipc.Error, OSError) as exc:
+                log.warning("link %s: cannot write %s: %s", self.port.id, self.to_app_name, exc)
+                return ABSENT
+            return KEPT
+        return TAKEN if self._put(message) else "app_full"
 
     def _put(self, message: bytes) -> bool:
         """Send now, or keep in the backlog; False if the backlog is full too."""
@@ -340,7 +380,7 @@ class MqEndpoint:
             except posix_ipc.BusyError:
                 self.scheduler.set_writer(self.to_app.mqd, self._flush)
             except (ValueError, posix_ipc.Error, OSError) as exc:  # checked at open; kept for safety
-                log.warning("link %s: cannot write %s: %s", self.link_id, self.to_app_name, exc)
+                log.warning("link %s: cannot write %s: %s", self.port.id, self.to_app_name, exc)
                 return False
         if len(self.backlog) >= self.backlog_limit:
             return False
@@ -355,66 +395,9 @@ class MqEndpoint:
             except posix_ipc.BusyError:
                 return
             except (ValueError, posix_ipc.Error, OSError) as exc:
-                log.warning("link %s: cannot write %s: %s", self.link_id, self.to_app_name, exc)
+                log.warning("link %s: cannot write %s: %s", self.port.id, self.to_app_name, exc)
             backlog.popleft()
         self.scheduler.set_writer(self.to_app.mqd, None)
-
-    def _readable(self) -> None:
-        # Bounded: a flood on one queue must not starve the other links' timers.
-        for _ in range(MAX_MESSAGES):
-            try:
-                message, _priority = self.from_app.receive()
-            except posix_ipc.BusyError:
-                return
-            self._handle(message)
-
-    def _handle(self, message: bytes) -> None:
-        self.attended = True
-        if not message:
-            self.on_bad("size", 0)
-            return
-        kind = message[0]
-        if kind == FRAME:
-            try:
-                decoded = self.packet.decode_body(message[1:])
-            except PacketError as exc:
-                self.on_bad(exc.reason, len(message))
-                return
-            self.on_frame(decoded)
-        elif kind == REQ_STATE:
-            self._send_state(READY if self.is_ready() else BUSY)
-        elif kind == NOTBUILT:
-            return
-        else:
-            self.on_bad("type", len(message))
-
-    def deliver(self, real: bytes, seq: int, src: int, dst: int) -> str:
-        """Hand a received frame to the application.
-
-        ``queued``: in its queue (or the backlog, while it is slow to read); ``app_full``: its queue
-        and the backlog are full.  Before any application has shown itself on this link, a frame is
-        ``kept`` in the kernel queue for one that starts late (at most the queue's few messages, no
-        backlog: nobody may ever come) and beyond that is ``no_reader``."""
-        message = bytes([FRAME]) + self.packet.encode_body(real, seq, src, dst)
-        if not self.attended:
-            if self.backlog:
-                self.no_reader += 1
-                return "no_reader"
-            try:
-                self.to_app.send(message)
-            except posix_ipc.BusyError:
-                self.no_reader += 1
-                return "no_reader"
-            except (ValueError, posix_ipc.Error, OSError) as exc:
-                log.warning("link %s: cannot write %s: %s", self.link_id, self.to_app_name, exc)
-                self.no_reader += 1
-                return "no_reader"
-            return "kept"
-        if self._put(message):
-            self.delivered += 1
-            return "queued"
-        self.app_full += 1
-        return "app_full"
 
     def close(self) -> None:
         self.scheduler.set_writer(self.to_app.mqd, None)
@@ -424,3 +407,25 @@ class MqEndpoint:
                 queue.close()
             except posix_ipc.Error:
                 pass
+
+
+class QueueDoor:
+    """Opens each link's dccomms queues (sized once for all links: see :func:`plan_message_size`)."""
+
+    def __init__(self, scheduler: Any, full_size: bool, backlog: int = 1000, group: int | None = None):
+        self.scheduler = scheduler
+        self.full_size = full_size
+        self.backlog = backlog
+        self.group = group
+
+    def open(self, port: LinkPort) -> MqEndpoint:
+        endpoint = MqEndpoint(port, self.scheduler, self.full_size, self.backlog, self.group)
+        port.attach(endpoint)
+        return endpoint
+
+    def update(self, handle: MqEndpoint, port: LinkPort) -> MqEndpoint:
+        handle.set_packet(port.packet)
+        return handle
+
+    def close(self, handle: MqEndpoint) -> None:
+        handle.close()

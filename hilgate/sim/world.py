@@ -21,6 +21,7 @@ from ..models.observer import Observer
 from ..models.trajectories import PoseSource
 from .pose_sources import build_pose
 from ..scene import LinkSpec, Scene
+from ..scene.diff import SceneDiff, diff
 
 log = logging.getLogger(__name__)
 
@@ -91,18 +92,19 @@ class World:
 
         clock.at(clock.now(), sample)
 
-    def reconfigure(self, scene: Scene) -> None:
-        """Apply ``scene`` in place: channels, vehicles, simulated modems and flows."""
-        old = self.scene
+    def reconfigure(self, scene: Scene, changes: SceneDiff | None = None) -> None:
+        """Apply ``scene`` in place: channels, vehicles, simulated modems and flows; ``changes`` (what
+        :func:`hilgate.scene.diff.diff` found, computed here when not given) says what to rebuild."""
+        changes = changes if changes is not None else diff(self.scene, scene)
         self.medium.channels.clear()
         self.medium.channels.update({c.name: c for c in scene.channels.values()})
-        for name, vehicle in scene.vehicles.items():
-            if name not in self.poses or old.vehicles.get(name) != vehicle:
-                self.poses[name] = build_pose(vehicle)
-        for name in [n for n in self.poses if n not in scene.vehicles]:
-            del self.poses[name]
-        for link_id in [i for i in self.modems if i not in scene.links or scene.links[i].backend != "sim"]:
-            self.remove_modem(link_id)
+        for name in changes.vehicles:
+            self.poses[name] = build_pose(scene.vehicles[name])
+        for name in changes.vehicles_removed:
+            self.poses.pop(name, None)
+        for change in changes.links.values():
+            if change.id in self.modems and (change.removed or change.after.backend != "sim"):
+                self.remove_modem(change.id)
         for link in scene.links.values():
             if link.backend != "sim":
                 continue
@@ -110,10 +112,10 @@ class World:
             if modem is None:
                 self.add_modem(link)
                 continue
-            before = old.links.get(link.id)
-            if before is None or before.params != link.params:
+            change = changes.links.get(link.id)
+            if change is not None and change.modem_changed:
                 modem.configure(link.params)
-            if before is None or before.mac != link.mac:
+            if change is not None and change.mac_changed:
                 modem.set_mac(link.mac.build())
             modem.vehicle = link.vehicle
             modem.set_pose(self.poses[link.vehicle])

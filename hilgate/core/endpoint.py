@@ -1,0 +1,110 @@
+"""The narrow interface between a link and the doors applications reach it through.
+
+A *link* (one DCComms id, :class:`hilgate.daemon.router.Link`) has a backend (a simulated modem or a
+real one) and endpoints in front: the dccomms POSIX queues, socket clients, an emulated modem, later
+Zenoh.  The two sides know each other only through this module:
+
+- an endpoint is handed a :class:`LinkPort`, what it may ask of the link: its id, address, packet
+  class, whether it is READY, to send a frame, to count and trace a frame it lost, the COMMAND answers
+  for socket clients, and, for an emulated modem, air time and propagation delays;
+- the link gets back an :class:`Endpoint`: it delivers received frames to it, tells it READY/BUSY,
+  and closes it.
+
+Delivering a frame and announcing the state are then one loop over the endpoints, and the router
+imports no endpoint class: the daemon gives it *doors* (:class:`Door`), factories that open a link's
+endpoints when the link appears and follow its changes on a reload.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+from .backend import AppFrame
+from .packets import Decoded, PacketClass
+
+TAKEN = "taken"
+"""An application has the frame (in its queue, on its socket, printed by the emulated modem)."""
+KEPT = "kept"
+"""Nobody has shown up to read it yet; kept for an application that starts late."""
+ABSENT = "absent"
+"""Nobody was there to take it (and it was not kept)."""
+# anything else an endpoint's deliver() returns is the cause of a loss: app_full, client_slow, size…
+
+
+class LinkPort(Protocol):
+    """What an endpoint may ask of its link."""
+
+    id: str
+    packet: PacketClass
+
+    @property
+    def address(self) -> int: ...
+
+    @property
+    def ready(self) -> bool:
+        """READY: the backend is up and idle, and no endpoint holds the link busy."""
+
+    @property
+    def emulate(self) -> dict[str, Any]:
+        """The scene's ``emulate:`` options for this link (empty when it emulates no modem)."""
+
+    def send(self, frame: AppFrame) -> None:
+        """Hand a frame to the backend; :class:`~hilgate.core.packets.PacketError` if it cannot carry it."""
+
+    def send_payload(self, payload: bytes, dst: int) -> None:
+        """Wrap ``payload`` in the link's packet class and send it (a socket client's SEND)."""
+
+    def send_decoded(self, decoded: Decoded) -> None:
+        """Send a frame a dccomms application wrote (real packet and virtual area, decoded)."""
+
+    def lost(self, cause: str, size: int, src: str = "medium") -> None:
+        """A frame this endpoint could not take or pass on: counted by cause and traced."""
+
+    def state_changed(self) -> None:
+        """Something that READY depends on changed (an emulated modem's pending acknowledgement)."""
+
+    def command(self, request: Any) -> dict[str, Any]:
+        """A socket client's request about the link or its vehicle (STATUS, POSE, GOTO…)."""
+
+    def attach(self, endpoint: "Endpoint") -> bool:
+        """Deliver to ``endpoint`` from now on; False when the link has as many clients as it may."""
+
+    def detach(self, endpoint: "Endpoint") -> None: ...
+
+    def airtime(self, size: int) -> float | None:
+        """Model seconds a frame of ``size`` bytes is on air (None when a real modem carries the link)."""
+
+    def delay_from(self, address: int, t: float) -> float | None:
+        """Propagation delay from the modem at ``address`` to this link's (None: out of range, unknown)."""
+
+    def distance_from(self, address: int, t: float) -> float | None: ...
+
+
+class Endpoint(Protocol):
+    """A way in and out of a link for applications."""
+
+    kind: str
+    busy: bool
+    """True while this endpoint holds the link BUSY (an emulated modem awaiting an acknowledgement)."""
+
+    def deliver(self, frame: AppFrame, t: float) -> str:
+        """Give an application a frame the link received; :data:`TAKEN`, :data:`KEPT`, :data:`ABSENT`
+        or the cause of a loss."""
+
+    def state(self, ready: bool) -> None:
+        """The link's READY/BUSY (the endpoint says it only when it changed for its applications)."""
+
+    def close(self) -> None: ...
+
+
+class Door(Protocol):
+    """Opens a link's endpoints of one kind when the link appears (``open``), follows a reload
+    (``update``: the packet class or the emulator's options may have changed) and closes them."""
+
+    def open(self, port: LinkPort) -> Any:
+        """Whatever must be kept to follow and close this link's endpoints (None: nothing opened)."""
+
+    def update(self, handle: Any, port: LinkPort) -> Any:
+        """The link's spec changed: return the (possibly new) handle."""
+
+    def close(self, handle: Any) -> None: ...

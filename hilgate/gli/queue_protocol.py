@@ -1,0 +1,81 @@
+"""dccomms' queue protocol, device side, without queues (h11's way): messages in, typed events out;
+READY/BUSY out without repeats.
+
+Every message is one type byte and a body: 0 FRAME (the whole fixed buffer of the link's packet
+class: real packet, then the 12-byte virtual area), 1 REQ_STATE (empty: "are you ready?"),
+2 CMD_STATE (one byte: 0 BUSY, 1 READY), 3 NOTBUILT (internal to dccomms, ignored).  Any message at
+all shows that an application is on the link (dccomms applications say REQ_STATE when they start).
+Tested without queues (``tests/test_gli_session.py``); :class:`hilgate.gli.queues.MqEndpoint` moves
+the bytes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..core.packets import Decoded, PacketClass, PacketError
+
+FRAME, REQ_STATE, CMD_STATE, NOTBUILT = 0, 1, 2, 3
+BUSY, READY = 0, 1
+
+
+@dataclass(frozen=True)
+class FrameIn:
+    decoded: Decoded
+
+
+@dataclass(frozen=True)
+class StateRequest:
+    pass
+
+
+@dataclass(frozen=True)
+class Refused:
+    """A message that cannot be accepted: ``reason`` (``size``, ``type``, a packet error) and its size."""
+
+    reason: str
+    size: int
+
+
+@dataclass(frozen=True)
+class Ignored:
+    pass
+
+
+class QueueProtocol:
+    def __init__(self, packet: PacketClass):
+        self.packet = packet
+        self.attended = False      # an application has spoken on the link
+        self.said: int | None = None  # the state the application was last told
+
+    def receive(self, message: bytes) -> FrameIn | StateRequest | Refused | Ignored:
+        self.attended = True
+        if not message:
+            return Refused("size", 0)
+        kind = message[0]
+        if kind == FRAME:
+            try:
+                return FrameIn(self.packet.decode_body(message[1:]))
+            except PacketError as exc:
+                return Refused(exc.reason, len(message))
+        if kind == REQ_STATE:
+            return StateRequest()
+        if kind == NOTBUILT:
+            return Ignored()
+        return Refused("type", len(message))
+
+    @staticmethod
+    def state_message(ready: bool) -> bytes:
+        return bytes([CMD_STATE, READY if ready else BUSY])
+
+    def state_change(self, ready: bool) -> bytes | None:
+        """CMD_STATE for ``ready`` if the application has not been told it yet, else None."""
+        state = READY if ready else BUSY
+        return None if state == self.said else bytes([CMD_STATE, state])
+
+    def told(self, message: bytes) -> None:
+        """``message`` (a CMD_STATE) reached the application's queue."""
+        self.said = message[1]
+
+    def frame_message(self, real: bytes, seq: int, src: int, dst: int) -> bytes:
+        return bytes([FRAME]) + self.packet.encode_body(real, seq, src, dst)
