@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import os
 from typing import Any, Callable, Iterable, Sequence
 
 from .yaml_nodes import Node, SceneError, one_line
@@ -174,3 +175,23 @@ def mapping(node: Node, path: str) -> dict[str, Node]:
     if not node.is_map:
         raise node.error(path, f"must be a mapping of keys, not {describe(node)}")
     return node.value
+
+
+# -- paths -----------------------------------------------------------------------------------------
+
+
+def base_dir(node: Node) -> str:
+    """The directory a relative path written in ``node`` is taken from: that of the file it was
+    written in (a scene travels with the files it names, and under systemd the working directory is
+    /var/lib/hilgate), or the working directory for a value given on the command line (``--set``)."""
+    if not node.file or node.file.startswith(("<", "-")):  # "<scene>" text, "--set", "--plugin"
+        return os.getcwd()
+    return os.path.dirname(os.path.abspath(node.file))
+
+
+def path_value(node: Node, path: str) -> str:
+    """Checker: a file path, made absolute relative to the file that names it (see :func:`base_dir`)."""
+    value = text(node, path)
+    if "\0" in value:
+        raise node.error(path, "a path cannot contain a NUL character")
+    return os.path.normpath(os.path.join(base_dir(node), value))

@@ -1,0 +1,238 @@
+"""Links: one modem each, simulated (``backend: sim``) or real, keyed by its DCComms id.
+
+A link's keys are its own (vehicle, backend, channels, address), the modem keys a preset may give
+(:mod:`.presets`), its MAC (:mod:`.mac`), a real driver's options, or an emulated modem in front of a
+simulated link.  Addresses left out are assigned once all links are read (:func:`assign_addresses`).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field, replace
+from typing import Any, Callable
+
+from ..models.errormodel import UNITS, ErrorModel
+from ..models.expr import ExprError, compile_expression
+from ..models.frame import BROADCAST
+from ..models.modem import ModemParams
+from .checks import Fields, boolean, choice, describe, integer, join_path, number, path_value, text
+from .mac import mac_spec
+from .plugins import Plugin
+from .presets import MODEM_KEYS, load_preset, merge
+from .specs import LinkSpec, MacSpec
+from .yaml_nodes import Node
+
+__all__ = ["LINK_KEYS", "BACKENDS", "Context", "link_spec", "assign_addresses"]
+
+DRIVER_KEYS = {
+    "evologics": ("port", "baud", "im", "ack", "source_level", "gain", "extended", "im_retries", "command_timeout_s",
+                  "delivery_timeout_s", "queue_frames", "eol"),
+    "s100": ("port", "baud", "rtscts", "queue_frames"),
+}
+ALL_DRIVER_KEYS = tuple(dict.fromkeys(k for keys in DRIVER_KEYS.values() for k in keys))
+LINK_KEYS = ("vehicle", "backend", "model", "address", "channel", "tx_channel", "rx_channel") + MODEM_KEYS + \
+    ALL_DRIVER_KEYS + ("emulate", "addressing")
+ADDRESSING = ("auto", "strict")
+BACKENDS = ("sim", "evologics", "s100")
+PACKET_CLASSES = ("raw", "vl1b", "vl2b", "dlf16", "dlf32", "simple:N")
+LINK_ID = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,200}")
+
+
+@dataclass(frozen=True)
+class Context:
+    """What reading a link needs besides its YAML: where the scene is, the extra preset directories the
+    user allowed (``--preset-dir``) and the loaded plugins by name (for ``mac:``)."""
+
+    scene_dir: str
+    preset_dirs: tuple[str, ...] = ()
+    plugins: dict[str, Plugin] = field(default_factory=dict)
+
+
+def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: Context) -> LinkSpec:
+    if not LINK_ID.fullmatch(link_id):
+        raise node.error(path, "a link id must be letters, digits, '_', '.' or '-' (it names POSIX queues)")
+    Fields(node, path, LINK_KEYS)  # unknown keys first, before the preset hides them
+    model_node = node.value.get("model")
+    merged = node
+    if model_node is not None:
+        merged = merge(load_preset(model_node, join_path(path, "model"), ctx.scene_dir, ctx.preset_dirs), node)
+    f = Fields(merged, path, LINK_KEYS)
+    vehicle = f.get("vehicle", text)
+    if vehicle not in scene["vehicles"]:
+        raise f.child("vehicle").error(f.sub("vehicle"), f"no vehicle {vehicle!r} in the scene")
+    backend = f.get("backend", choice(*BACKENDS), "sim")
+    channels = scene["channels"]
+    if "channel" in f:
+        if "tx_channel" in f or "rx_channel" in f:
+            raise f.error("give either channel or tx_channel + rx_channel, not both")
+        tx_channel = rx_channel = f.get("channel", text)
+    elif "tx_channel" in f or "rx_channel" in f:
+        tx_channel = f.get("tx_channel", text)
+        rx_channel = f.get("rx_channel", text)
+    elif len(channels) == 1:
+        tx_channel = rx_channel = next(iter(channels))
+    else:
+        raise f.error(f"missing 'channel' (the scene has several: {', '.join(channels)})")
+    for key, value in (("channel", tx_channel), ("tx_channel", tx_channel), ("rx_channel", rx_channel)):
+        if value not in channels and key in f:
+            raise f.child(key).error(f.sub(key), f"no channel {value!r} in the scene; channels: {', '.join(channels)}")
+    params = ModemParams(
+        address=f.get("address", integer(0, BROADCAST - 1), -1),
+        tx_channel=tx_channel,
+        rx_channel=rx_channel,
+        bitrate_bps=f.get("bitrate_bps", number(above=0), 1000.0),
+        tx_delay_s=f.get("tx_delay_s", number(0), 0.0),
+        rx_delay_s=f.get("rx_delay_s", number(0), 0.0),
+        tx_jitter_s=f.get("tx_jitter_s", number(0), 0.0),
+        rx_jitter_s=f.get("rx_jitter_s", number(0), 0.0),
+        fifo_bytes=f.get("fifo_bytes", integer(1), 500_000),
+        range_m=f.get("range_m", _range_pair, (0.0, math.inf)),
+        error=f.get("error", _error_model, ErrorModel("packet", "0")),
+        duplex=f.get("duplex", choice("half", "full"), "half"),
+        promiscuous=f.get("promiscuous", boolean, False),
+    )
+    mac = f.get("mac", lambda n, p: mac_spec(n, p, ctx.plugins), MacSpec("none"))
+    try:
+        problem = mac.mac_class.check(params, dict(mac.params))
+    except Exception as exc:  # a plugin's own check() failed
+        problem = f"the MAC's check failed: {type(exc).__name__}: {exc}"
+    if problem:
+        raise (f.child("mac") or f.node).error(f.sub("mac"), problem)
+    packet = f.get("packet", _packet_class, "vl2b")
+    model = None if model_node is None else str(model_node.value)
+    options = _driver_options(f, backend)
+    emulate = ()
+    if "emulate" in f:
+        if backend != "sim":
+            raise f.child("emulate").error(f.sub("emulate"), "only a backend: sim link can emulate a modem")
+        emulate = f.get("emulate", _emulate)
+    addressing = f.get("addressing", choice(*ADDRESSING), "auto")
+    return LinkSpec(link_id, vehicle, backend, model, params, mac, packet, node.file, node.line, options, emulate,
+                    addressing)
+
+
+_DRIVER_CHECKS: dict[str, Callable[[Node, str], Any]] = {
+    "port": lambda node, path: _port(node, path),
+    "baud": integer(50, 4_000_000),
+    "im": boolean,
+    "ack": boolean,
+    "extended": boolean,
+    "rtscts": boolean,
+    "source_level": integer(0, 3),
+    "gain": integer(0, 1),
+    "im_retries": integer(0, 255),
+    "command_timeout_s": number(above=0),
+    "delivery_timeout_s": number(above=0),
+    "queue_frames": integer(0, 100_000),
+    "eol": choice("auto", "cr", "lf", "crlf"),
+}
+
+
+def _port(node: Node, path: str) -> str:
+    """A device path (relative to the scene) or a pyserial URL that hilgate can open."""
+    from ..drivers.port import port_problem
+
+    value = node.value
+    problem = port_problem(value) if isinstance(value, str) and value else None
+    if problem:
+        raise node.error(path, problem)
+    value = text(node, path)
+    return value if "://" in value else path_value(node, path)
+
+
+def _driver_options(f: Fields, backend: str) -> tuple[tuple[str, Any], ...]:
+    allowed = DRIVER_KEYS.get(backend, ())
+    for key in ALL_DRIVER_KEYS:
+        if key in f and key not in allowed:
+            users = [b for b, keys in DRIVER_KEYS.items() if key in keys]
+            raise f.child(key).error(f.sub(key), f"only for backend {' or '.join(users)} (this link is {backend})")
+    if not allowed:
+        return ()
+    if "port" not in f:
+        raise f.error(f"backend {backend} needs 'port' (a device such as /dev/ttyUSB0"
+                      + (", or socket://HOST:9200)" if backend == "evologics" else ")"))
+    return tuple((key, f.get(key, _DRIVER_CHECKS[key])) for key in allowed if key in f)
+
+
+def _emulate(node: Node, path: str) -> tuple[tuple[str, Any], ...]:
+    f = Fields(node, path, ("protocol", "pty", "tcp"))
+    protocol = f.get("protocol", choice("evologics", "s100"))
+    if ("pty" in f) == ("tcp" in f):
+        raise f.error("give exactly one of pty (a path for the device link) or tcp (a loopback port)")
+    if "tcp" in f:
+        if protocol != "evologics":
+            raise f.child("tcp").error(f.sub("tcp"), "only the EvoLogics modem speaks TCP; the S100 is serial")
+        return (("protocol", protocol), ("tcp", f.get("tcp", integer(1, 65535))))
+    return (("protocol", protocol), ("pty", f.get("pty", path_value)))
+
+
+def assign_addresses(links: dict[str, LinkSpec], nodes: dict[str, Node]) -> dict[str, LinkSpec]:
+    """Links without ``address`` get the smallest free one; two simulated links that listen on one
+    channel must not share an address."""
+    used = {link.params.address for link in links.values() if link.params.address >= 0}
+    next_free = 1
+    result: dict[str, LinkSpec] = {}
+    owners: dict[tuple[str, int], str] = {}
+    for link_id, link in links.items():
+        if link.params.address < 0:
+            while next_free in used:
+                next_free += 1
+            if next_free >= BROADCAST:
+                raise nodes[link_id].error(f"links.{link_id}", "no free address left (0..254)")
+            used.add(next_free)
+            link = _replace_params(link, address=next_free)
+        key = (link.params.rx_channel, link.params.address)
+        if link.backend != "sim":
+            result[link_id] = link  # a real modem's address is the modem's own, not on the medium
+            continue
+        if key in owners:
+            raise nodes[link_id].error(
+                f"links.{link_id}.address",
+                f"address {link.params.address} is already used by link {owners[key]!r} on channel {key[0]!r}",
+            )
+        owners[key] = link_id
+        result[link_id] = link
+    return result
+
+
+def _replace_params(link: LinkSpec, **changes: Any) -> LinkSpec:
+    return replace(link, params=replace(link.params, **changes))
+
+
+# -- modem keys ------------------------------------------------------------------------------------
+
+
+def _range_pair(node: Node, path: str) -> tuple[float, float]:
+    if not node.is_list or len(node.value) != 2:
+        raise node.error(path, f"must be [min, max] in metres, not {describe(node)}")
+    low = number(0)(node.value[0], join_path(path, 0))
+    high = number(0, allow_inf=True)(node.value[1], join_path(path, 1))
+    if high < low:
+        raise node.error(path, f"max {high:g} is below min {low:g}")
+    return (low, high)
+
+
+def _error_model(node: Node, path: str) -> ErrorModel:
+    f = Fields(node, path, ("unit", "expr"))
+    unit = f.get("unit", choice(*UNITS), "packet")
+    expr_node = f.child("expr")
+    if expr_node is None:
+        raise f.error("missing required key 'expr' (e.g. \"6e-13 * d^13.7\")")
+    try:
+        expression = compile_expression(expr_node.value)
+    except ExprError as exc:
+        raise expr_node.error(f.sub("expr"), f"bad error-rate expression: {exc}") from None
+    return ErrorModel(unit, expression)
+
+
+def _packet_class(node: Node, path: str) -> str:
+    value = node.value
+    if isinstance(value, str):
+        if value in ("raw", "vl1b", "vl2b", "dlf16", "dlf32"):
+            return value
+        match = re.fullmatch(r"simple:([0-9]{1,5})", value)
+        if match and 4 <= int(match.group(1)) <= 8000:
+            return value
+    raise node.error(path, f"must be one of {', '.join(PACKET_CLASSES)} (N, the whole packet, from 4 to 8000 "
+                           f"bytes), not {describe(node)}")
