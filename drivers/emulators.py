@@ -20,7 +20,7 @@ import math
 import os
 import socket
 import tty
-from typing import Any
+from typing import Any, Callable
 
 from hilgate.core.backend import AppFrame
 from hilgate.core.endpoint import TAKEN, LinkPort
@@ -169,64 +169,88 @@ class EvologicsEmulator:
     def _on_data(self, host: Any, data: bytes) -> None:
         codec = self.codecs.setdefault(host, ModemCodec())
         for event in codec.receive_data(data):
-            if isinstance(event, Command):
-                self._command(host, codec, event)
-            elif isinstance(event, BadCommand):
-                host.write(codec.error(None, event.reason))
-            elif isinstance(event, Data):
-                self._send(event.payload, int(self.settings["AR"]), "burst", False)
+            match event:
+                case Command():
+                    self._command(host, codec, event)
+                case BadCommand(reason=reason):
+                    host.write(codec.error(None, reason))
+                case Data(payload=payload):
+                    self._send(payload, int(self.settings["AR"]), "burst", False)
 
     def _command(self, host: Any, codec: ModemCodec, command: Command) -> None:
+        """One AT command: a handler from :attr:`COMMANDS`, else a setting (``!X``/``@X`` to set,
+        ``?X`` to read), else ``ERROR UNKNOWN COMMAND``."""
+        def reply(text: str) -> None:
+            host.write(codec.reply(command, text))
+
+        handler = self.COMMANDS.get(command.name)
+        if handler is not None:
+            handler(self, host, codec, command, reply)
+            return
         name = command.name
-        reply = lambda text: host.write(codec.reply(command, text))  # noqa: E731
-        if name in ("*SENDIM", "*SENDIMS", "*SENDPBM", "*SEND"):
-            self._send_command(command, reply)
-        elif name == "O":
-            return  # data mode, no answer
-        elif name == "C" or name == "":
-            reply("OK")
-        elif name == "?T":
-            reply(str(self.last_ptime_us))
-        elif name == "?E":
-            reply(str(self.last_rssi))
-        elif name == "?I":
-            reply(str(self.last_integrity))
-        elif name == "?V":
-            reply("0.00")
-        elif name == "?MODE":
-            reply("AT")
-        elif name == "?PID":
-            reply(self.settings["ZS"])
-        elif name == "?S":
-            reply("ONLINE NORMAL" if self.pending_ack is None else "ONLINE DELIVERING")
-        elif name == "?DI":
-            reply("EMPTY" if self.pending_ack is None else "DELIVERING")
-        elif name == "&V":
-            lines = [f"{key}: {value}" for key, value in sorted(self.settings.items())]
-            host.write(codec.reply(command, "\r\n".join(lines) + "\r\n") if codec.data_mode else
-                       ("\r\n".join(lines) + "\r\n\r\n").encode())
-        elif name == "I":
-            reply({"0": "1.9 (" + VERSION + ")", "1": "phy: emulated, mac: hilgate", "7": "EvoLogics GmbH (emulated)"}
-                  .get(command.args, VERSION))
-        elif name == "Z":
-            if command.args == "0":  # reboot: no answer; a TCP host loses its connection
-                if isinstance(host, _TcpClient):
-                    host.close()
-                return
-            reply("OK")
-        elif name in ("H", "D", "A", "N", "S", "P", "&W", "&F", "@CTRL"):
-            reply("OK")
-        elif name[0] in "!@" and name[1:] in self.settings:
+        if name[:1] in ("!", "@") and name[1:] in self.settings:
             value = command.args.strip()
             if not value.lstrip("-").isdigit():
                 reply("ERROR WRONG FORMAT")
                 return
             self.settings[name[1:]] = value
             reply("OK")
-        elif name[0] == "?" and name[1:] in self.settings:
+        elif name[:1] == "?" and name[1:] in self.settings:
             reply(self.settings[name[1:]])
         else:
             reply("ERROR UNKNOWN COMMAND")
+
+    # -- the command table: name → handler(self, host, codec, command, reply) -------------------------
+
+    def _ok(self, host: Any, codec: ModemCodec, command: Command, reply) -> None:
+        reply("OK")
+
+    def _data_mode(self, host: Any, codec: ModemCodec, command: Command, reply) -> None:
+        """ATO: the codec has switched to data mode; a modem answers nothing."""
+
+    def _answer(value: Callable[["EvologicsEmulator"], str]) -> Callable[..., None]:  # noqa: N805
+        """A handler that answers ``value(emulator)``."""
+        def handler(self, host: Any, codec: ModemCodec, command: Command, reply) -> None:
+            reply(value(self))
+        return handler
+
+    def _settings(self, host: Any, codec: ModemCodec, command: Command, reply) -> None:
+        lines = [f"{key}: {value}" for key, value in sorted(self.settings.items())]
+        host.write(codec.reply(command, "\r\n".join(lines) + "\r\n") if codec.data_mode else
+                   ("\r\n".join(lines) + "\r\n\r\n").encode())
+
+    def _information(self, host: Any, codec: ModemCodec, command: Command, reply) -> None:
+        reply({"0": "1.9 (" + VERSION + ")", "1": "phy: emulated, mac: hilgate", "7": "EvoLogics GmbH (emulated)"}
+              .get(command.args, VERSION))
+
+    def _reset(self, host: Any, codec: ModemCodec, command: Command, reply) -> None:
+        if command.args == "0":  # reboot: no answer; a TCP host loses its connection
+            if isinstance(host, _TcpClient):
+                host.close()
+            return
+        reply("OK")
+
+    def _sending(self, host: Any, codec: ModemCodec, command: Command, reply) -> None:
+        self._send_command(command, reply)
+
+    COMMANDS: dict[str, Callable[..., None]] = {
+        "*SENDIM": _sending, "*SENDIMS": _sending, "*SENDPBM": _sending, "*SEND": _sending,
+        "O": _data_mode,
+        "": _ok, "C": _ok, "H": _ok, "D": _ok, "A": _ok, "N": _ok, "S": _ok, "P": _ok, "&W": _ok, "&F": _ok,
+        "@CTRL": _ok,
+        "?T": _answer(lambda self: str(self.last_ptime_us)),
+        "?E": _answer(lambda self: str(self.last_rssi)),
+        "?I": _answer(lambda self: str(self.last_integrity)),
+        "?V": _answer(lambda self: "0.00"),
+        "?MODE": _answer(lambda self: "AT"),
+        "?PID": _answer(lambda self: self.settings["ZS"]),
+        "?S": _answer(lambda self: "ONLINE NORMAL" if self.pending_ack is None else "ONLINE DELIVERING"),
+        "?DI": _answer(lambda self: "EMPTY" if self.pending_ack is None else "DELIVERING"),
+        "&V": _settings,
+        "I": _information,
+        "Z": _reset,
+    }
+    del _answer
 
     def _send_command(self, command: Command, reply) -> None:
         fields = command.fields

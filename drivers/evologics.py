@@ -22,7 +22,7 @@ from typing import Any, Callable
 from hilgate.core.backend import AppFrame, QueuedBackend
 from hilgate.core.packets import PacketClass, PacketError, Raw
 
-from .evologics_codec import AsyncError, AtProtocolError, HostCodec, Notification, Reply, Unexpected
+from .evologics_codec import AsyncError, AtProtocolError, Data, HostCodec, Notification, Reply, Unexpected
 from .port import Port
 
 log = logging.getLogger(__name__)
@@ -240,16 +240,19 @@ class EvologicsBackend(QueuedBackend):
 
     def _on_data(self, data: bytes) -> None:
         for event in self.codec.receive_data(data):
-            if isinstance(event, Reply):
-                if self.inflight is not None:
-                    self._finish_command(event)
-            elif isinstance(event, Notification):
-                self._notification(event)
-            elif isinstance(event, AsyncError):
-                self.trace({"t": round(self.scheduler.now(), 9), "ev": "modem_error", "link": self.link_id,
-                            "cause": event.reason})
-            elif isinstance(event, (Unexpected, AtProtocolError)):
-                log.info("%s: unexpected from the modem: %s", self.link_id, event)
+            match event:
+                case Reply():
+                    if self.inflight is not None:
+                        self._finish_command(event)
+                case Notification():
+                    self._notification(event)
+                case AsyncError(reason=reason):
+                    self.trace({"t": round(self.scheduler.now(), 9), "ev": "modem_error", "link": self.link_id,
+                                "cause": reason})
+                case Unexpected() | AtProtocolError():
+                    log.info("%s: unexpected from the modem: %s", self.link_id, event)
+                case Data():
+                    log.info("%s: %d bytes of burst data from the modem, ignored", self.link_id, len(event.payload))
 
     def _notification(self, n: Notification) -> None:
         now = round(self.scheduler.now(), 9)

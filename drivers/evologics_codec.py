@@ -123,6 +123,13 @@ class BadCommand:
     text: str
 
 
+HostEvent = Reply | Notification | AsyncError | Data | Unexpected | AtProtocolError
+"""What the host side (a driver) gets from the modem's bytes; consumed with ``match``."""
+
+ModemEvent = Command | BadCommand | Data
+"""What the modem side (an emulator) gets from the host's bytes; consumed with ``match``."""
+
+
 # -- helpers --------------------------------------------------------------------------------------
 
 _PID = re.compile(rb"p(\d+)$")
@@ -323,9 +330,9 @@ class HostCodec:
         self.pending = None
         self._lines = []
 
-    def receive_data(self, data: bytes) -> list[object]:
+    def receive_data(self, data: bytes) -> list[HostEvent]:
         self._buffer += data
-        events: list[object] = []
+        events: list = []
         while True:
             try:
                 event = self._next()
@@ -450,9 +457,9 @@ class ModemCodec:
     data_mode: bool = False
     _buffer: bytearray = field(default_factory=bytearray)
 
-    def receive_data(self, data: bytes) -> list[object]:
+    def receive_data(self, data: bytes) -> list[ModemEvent]:
         self._buffer += data
-        events: list[object] = []
+        events: list = []
         while True:
             event = self._next()
             if event is None:
