@@ -24,7 +24,7 @@ from typing import Any, Callable
 
 from hilgate.core.backend import AppFrame
 from hilgate.core.endpoint import TAKEN, LinkPort
-from hilgate.core.packets import Raw
+from hilgate.core.packets import BROADCAST, Raw
 from hilgate.core.streams import Connection, Listener
 
 from .evologics_codec import BadCommand, Command, Data, ModemCodec
@@ -286,7 +286,7 @@ class EvologicsEmulator:
     def _send(self, payload: bytes, dst: int, kind: str, ack: bool) -> None:
         frame = AppFrame(payload, payload, Raw(), 0, self.port.address, dst, self.scheduler.now())
         frame.meta = {"kind": kind, "ack": ack}
-        if ack and dst != 255:
+        if ack and dst != BROADCAST:
             self.pending_ack = frame
             frame.on_delivered = self._delivered
             airtime = self.port.airtime(len(payload))

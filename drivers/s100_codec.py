@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from hilgate.core.packets import Decoded, HilgateFrame, PacketClass, PacketError, Raw
+from hilgate.core.packets import BROADCAST, Decoded, HilgateFrame, PacketClass, PacketError, Raw
 
 CRLF = b"\r\n"
 PIECE = 45
@@ -149,4 +149,4 @@ class FrameHunter:
         except PacketError as exc:
             return self._skip(1, exc.reason)
         del buffer[:total]
-        return Decoded(real, payload, 0, 255 if src is None else src, 255 if dst is None else dst)
+        return Decoded(real, payload, 0, BROADCAST if src is None else src, BROADCAST if dst is None else dst)

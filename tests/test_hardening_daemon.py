@@ -111,7 +111,7 @@ def test_hostile_control_requests_each_get_an_error_and_the_connection_stays(pai
             sock.sendall(request + b"\n")
             if len(request) > 16384:  # a line longer than the limit ends the connection after its answer
                 answer = json.loads(reader.readline())
-                assert answer["class"] == "ERROR" and "longer than" in answer["message"]
+                assert answer["class"] == "ERROR" and "longer than" in answer["error"]
                 sock.close()
                 sock, reader = control_connection(daemon)
                 continue

@@ -1,6 +1,6 @@
 """The narrow interface between a link and the doors applications reach it through.
 
-A *link* (one DCComms id, :class:`hilgate.daemon.router.Link`) has a backend (a simulated modem or a
+A *link* (one DCComms id, :class:`hilgate.daemon.router.RoutedLink`) has a backend (a simulated modem or a
 real one) and endpoints in front: the dccomms POSIX queues, socket clients, an emulated modem, later
 Zenoh.  The two sides know each other only through this module:
 

@@ -23,7 +23,7 @@ import fastcrc
 
 VIRTUAL_AREA = 12
 PREAMBLE = 0x55
-BROADCAST = 255
+from ..models.frame import BROADCAST  # the one broadcast address, as the medium knows it
 MAX_QUEUE_MESSAGE = 8192
 
 

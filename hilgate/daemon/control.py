@@ -6,7 +6,7 @@ Requests and their replies:
 - ``{"class": "STATUS"}`` → ``{"class": "STATUS", "time": t, "scene": name, "links": [...], "vehicles": [...]}``
 - ``{"class": "RELOAD"}`` → ``{"class": "RELOAD", "ok": true}`` or ``{"ok": false, "error": "..."}``
 - ``{"class": "WATCH", "interval_s": 1.0}`` → a STATUS every interval until ``{"class": "WATCH", "enable": false}``
-- anything else, or a request with bad values → ``{"class": "ERROR", "message": "..."}``
+- anything else, or a request with bad values → ``{"class": "ERROR", "error": "..."}``
 
 Everything a client sends is checked: a line is at most 16 KB of JSON nested at most 32 deep, the
 ``class`` is a string, every value has its type.  At most ``max_clients`` are connected at once (the
@@ -62,7 +62,7 @@ class ControlServer:
     def _accept(self, sock) -> None:
         if len(self.clients) >= self.max_clients:
             log.info("control client refused: %d connected already", len(self.clients))
-            refuse(sock, (json.dumps({"class": "ERROR", "message": f"too many control clients ({self.max_clients})"})
+            refuse(sock, (json.dumps({"class": "ERROR", "error": f"too many control clients ({self.max_clients})"})
                           + "\n").encode())
             return
         client = _ControlClient(sock, self)
@@ -107,26 +107,26 @@ class _ControlClient:
             self._too_long()
 
     def _too_long(self) -> None:
-        self.send({"class": "ERROR", "message": f"line longer than {self.MAX_LINE} bytes"})
+        self.send({"class": "ERROR", "error": f"line longer than {self.MAX_LINE} bytes"})
         self.connection.close()
 
     def handle(self, line: bytes) -> None:
         try:
             request = safejson.loads(line, max_bytes=self.MAX_LINE)
         except safejson.JsonError as exc:
-            self.send({"class": "ERROR", "message": f"expected a JSON object with a 'class': {exc}"})
+            self.send({"class": "ERROR", "error": f"expected a JSON object with a 'class': {exc}"})
             return
         kind = request.get("class") if isinstance(request, dict) else None
         if not isinstance(kind, str):
-            self.send({"class": "ERROR", "message": "expected a JSON object with a 'class' (a string)"})
+            self.send({"class": "ERROR", "error": "expected a JSON object with a 'class' (a string)"})
             return
         try:
             self._dispatch(kind, request)
         except RequestError as exc:
-            self.send({"class": "ERROR", "message": f"{kind}: {exc}"})
+            self.send({"class": "ERROR", "error": f"{kind}: {exc}"})
         except Exception as exc:  # a bug must cost one answer, not the client or the daemon
             log.error("control request %s failed: %s: %s", kind[:40], type(exc).__name__, exc)
-            self.send({"class": "ERROR", "message": f"{kind}: internal error: {type(exc).__name__}"})
+            self.send({"class": "ERROR", "error": f"{kind}: internal error: {type(exc).__name__}"})
 
     def _dispatch(self, kind: str, request: dict) -> None:
         server = self.server
@@ -148,7 +148,7 @@ class _ControlClient:
         elif kind in server.extra:
             self.send(server.extra[kind](request))
         else:
-            self.send({"class": "ERROR", "message": f"unknown class {kind[:40]!r}"})
+            self.send({"class": "ERROR", "error": f"unknown class {kind[:40]!r}"})
 
     def _status(self) -> dict:
         return {"class": "STATUS", "time": round(self.server.scheduler.now(), 6), **self.server.status()}

@@ -1,6 +1,6 @@
 """Link id → backend, with the endpoints in front.
 
-A :class:`Link` has one backend and the endpoints its doors opened (the dccomms POSIX queues, its
+A :class:`RoutedLink` has one backend and the endpoints its doors opened (the dccomms POSIX queues, its
 Unix socket and the clients on it, an emulated modem), all behind the narrow interface of
 :mod:`hilgate.core.endpoint`: the router imports no endpoint class.  Endpoints live as long as the
 link id is in the scene; the backend behind them may be reconfigured or replaced by a reload, which
@@ -31,7 +31,7 @@ log = logging.getLogger(__name__)
 UNREAD_CAUSES = ("no_reader",)
 
 
-class Link:
+class RoutedLink:
     """One DCComms id: its backend and the endpoints in front of it.  To its endpoints it is a
     :class:`~hilgate.core.endpoint.LinkPort`; it never imports their classes."""
 
@@ -249,14 +249,14 @@ class Router:
         self.recorder = recorder
         self.doors: list[Door] = list(doors or [])
         self.max_link_clients = max_link_clients
-        self.links: dict[str, Link] = {}
+        self.links: dict[str, RoutedLink] = {}
         self.world: World | None = None
         self.scene: Scene | None = None
         self._names: dict[tuple[str, int], str] = {}
         self.backend_factories: dict[str, Callable[[LinkSpec], Backend]] = {
             "sim": self._sim_backend, "evologics": self._driver_backend, "s100": self._driver_backend}
 
-    def port(self, link_id: str) -> Link | None:
+    def port(self, link_id: str) -> RoutedLink | None:
         """The link a socket client names in its HELLO."""
         return self.links.get(link_id)
 
@@ -320,7 +320,7 @@ class Router:
 
     def _add(self, spec: LinkSpec, announce: bool) -> None:
         lock = LinkLock(spec.id)  # one daemon per link id on this host, or refused here
-        link = Link(spec, self)
+        link = RoutedLink(spec, self)
         link.lock = lock
         try:
             link.open_doors(self.doors)
@@ -332,7 +332,7 @@ class Router:
         if announce:
             log.info("link %s added (%s)", spec.id, spec.backend)
 
-    def command(self, link: Link, request: Any) -> dict[str, Any]:
+    def command(self, link: RoutedLink, request: Any) -> dict[str, Any]:
         """A client's request about its link or its vehicle:
 
         - ``{"class": "STATUS"}``: the link's status;

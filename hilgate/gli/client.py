@@ -1,6 +1,6 @@
 """A small client for hilgate's socket GLI: open a link by id, send with a destination, receive.
 
-    from hilgate.gli.client import Link
+    from hilgate.client import Link
 
     with Link.open("rov0_rf") as link:          # the link's Unix socket on this machine
         link.send(b"hello", dst=2)               # dst 255 (the default) broadcasts
@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from . import wire
+from ..core.packets import BROADCAST
 from ..core.paths import client_runtime_dir
 
 __all__ = ["Link", "Message", "GliError"]
@@ -89,7 +90,7 @@ class Link:
     def max_payload(self) -> int:
         return int(self.info["max_payload"])
 
-    def send(self, data: bytes, dst: int = 255, timeout: float | None = None) -> None:
+    def send(self, data: bytes, dst: int = BROADCAST, timeout: float | None = None) -> None:
         """Send one frame; blocks while hilgate is not reading (or up to ``timeout`` seconds, then
         TimeoutError).  Independent of any timeout an earlier :meth:`recv` used."""
         if not 0 <= dst <= 255:
