@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import logging
 from collections import deque
-from dataclasses import dataclass
 from typing import Any, Callable
 
 from hilgate.core.backend import AppFrame, QueuedBackend
@@ -24,33 +23,13 @@ from hilgate.core.packets import PacketClass, PacketError, Raw
 
 from .evologics_codec import AsyncError, AtProtocolError, Data, HostCodec, Notification, Reply, Unexpected
 from .port import Port
+from .table import EvologicsOptions  # declared in the backend table, with its scene checks
 
 log = logging.getLogger(__name__)
 
 IM_MAX = 64
 BURST_MAX = 1024
 SOUND_SPEED = 1500.0
-
-
-@dataclass(frozen=True)
-class EvologicsOptions:
-    port: str
-    baud: int = 19200
-    im: bool = True
-    ack: bool = True
-    source_level: int | None = None
-    gain: int | None = None
-    extended: bool = True
-    im_retries: int | None = None
-    command_timeout_s: float = 2.0
-    delivery_timeout_s: float = 30.0
-    queue_frames: int = 50
-    eol: str = "auto"
-
-    def eol_bytes(self) -> bytes:
-        if self.eol == "auto":
-            return b"\n" if self.port.startswith("socket://") else b"\r"
-        return {"cr": b"\r", "lf": b"\n", "crlf": b"\r\n"}[self.eol]
 
 
 class EvologicsBackend(QueuedBackend):

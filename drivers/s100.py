@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import logging
 from collections import deque
-from dataclasses import dataclass
 from typing import Any, Callable
 
 from hilgate.core.backend import AppFrame, QueuedBackend
@@ -20,17 +19,9 @@ from hilgate.core.packets import Decoded, PacketClass, Raw
 
 from .port import Port
 from .s100_codec import FrameHunter, Notice, Skipped, pieces, wire_class
+from .table import S100Options  # declared in the backend table, with its scene checks
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class S100Options:
-    port: str
-    baud: int = 9600
-    rtscts: bool = False
-    air_bitrate_bps: float = 1800.0
-    queue_frames: int = 50
 
 
 class S100Backend(QueuedBackend):

@@ -10,13 +10,14 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, field, replace
-from typing import Any, Callable
+from typing import Any
 
 from ..models.errormodel import UNITS, ErrorModel
 from ..models.expr import ExprError, compile_expression
 from ..models.frame import BROADCAST
 from ..models.modem import ModemParams
-from .checks import Fields, boolean, choice, describe, integer, join_path, number, path_value, text
+from .backends import SIM, backend_names, driver_keys, driver_options, emulated_device
+from .checks import Fields, boolean, choice, describe, integer, join_path, number, text
 from .mac import mac_spec
 from .plugins import Plugin
 from .presets import MODEM_KEYS, load_preset, merge
@@ -25,16 +26,18 @@ from .yaml_nodes import Node
 
 __all__ = ["LINK_KEYS", "BACKENDS", "Context", "link_spec", "assign_addresses"]
 
-DRIVER_KEYS = {
-    "evologics": ("port", "baud", "im", "ack", "source_level", "gain", "extended", "im_retries", "command_timeout_s",
-                  "delivery_timeout_s", "queue_frames", "eol"),
-    "s100": ("port", "baud", "rtscts", "queue_frames"),
-}
-ALL_DRIVER_KEYS = tuple(dict.fromkeys(k for keys in DRIVER_KEYS.values() for k in keys))
-LINK_KEYS = ("vehicle", "backend", "model", "address", "channel", "tx_channel", "rx_channel") + MODEM_KEYS + \
-    ALL_DRIVER_KEYS + ("emulate", "addressing")
+OWN_KEYS = ("vehicle", "backend", "model", "address", "channel", "tx_channel", "rx_channel")
+
+
+def link_keys() -> tuple[str, ...]:
+    """Every key a link may have: its own, the modem keys, every driver's options (from the backend
+    table, read now), ``emulate`` and ``addressing``."""
+    return OWN_KEYS + MODEM_KEYS + driver_keys() + ("emulate", "addressing")
+
+
+LINK_KEYS = link_keys()  # with the drivers of hilgate.drivers.table; the loader asks link_keys() each time
+BACKENDS = backend_names()
 ADDRESSING = ("auto", "strict")
-BACKENDS = ("sim", "evologics", "s100")
 PACKET_CLASSES = ("raw", "vl1b", "vl2b", "dlf16", "dlf32", "simple:N")
 LINK_ID = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,200}")
 
@@ -52,16 +55,17 @@ class Context:
 def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: Context) -> LinkSpec:
     if not LINK_ID.fullmatch(link_id):
         raise node.error(path, "a link id must be letters, digits, '_', '.' or '-' (it names POSIX queues)")
-    Fields(node, path, LINK_KEYS)  # unknown keys first, before the preset hides them
+    keys = link_keys()
+    Fields(node, path, keys)  # unknown keys first, before the preset hides them
     model_node = node.value.get("model")
     merged = node
     if model_node is not None:
         merged = merge(load_preset(model_node, join_path(path, "model"), ctx.scene_dir, ctx.preset_dirs), node)
-    f = Fields(merged, path, LINK_KEYS)
+    f = Fields(merged, path, keys)
     vehicle = f.get("vehicle", text)
     if vehicle not in scene["vehicles"]:
         raise f.child("vehicle").error(f.sub("vehicle"), f"no vehicle {vehicle!r} in the scene")
-    backend = f.get("backend", choice(*BACKENDS), "sim")
+    backend = f.get("backend", choice(*backend_names()), SIM)
     channels = scene["channels"]
     if "channel" in f:
         if "tx_channel" in f or "rx_channel" in f:
@@ -101,70 +105,15 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
         raise (f.child("mac") or f.node).error(f.sub("mac"), problem)
     packet = f.get("packet", _packet_class, "vl2b")
     model = None if model_node is None else str(model_node.value)
-    options = _driver_options(f, backend)
+    options = driver_options(f, backend)
     emulate = ()
     if "emulate" in f:
-        if backend != "sim":
+        if backend != SIM:
             raise f.child("emulate").error(f.sub("emulate"), "only a backend: sim link can emulate a modem")
-        emulate = f.get("emulate", _emulate)
+        emulate = f.get("emulate", emulated_device)
     addressing = f.get("addressing", choice(*ADDRESSING), "auto")
     return LinkSpec(link_id, vehicle, backend, model, params, mac, packet, node.file, node.line, options, emulate,
                     addressing)
-
-
-_DRIVER_CHECKS: dict[str, Callable[[Node, str], Any]] = {
-    "port": lambda node, path: _port(node, path),
-    "baud": integer(50, 4_000_000),
-    "im": boolean,
-    "ack": boolean,
-    "extended": boolean,
-    "rtscts": boolean,
-    "source_level": integer(0, 3),
-    "gain": integer(0, 1),
-    "im_retries": integer(0, 255),
-    "command_timeout_s": number(above=0),
-    "delivery_timeout_s": number(above=0),
-    "queue_frames": integer(0, 100_000),
-    "eol": choice("auto", "cr", "lf", "crlf"),
-}
-
-
-def _port(node: Node, path: str) -> str:
-    """A device path (relative to the scene) or a pyserial URL that hilgate can open."""
-    from ..drivers.port import port_problem
-
-    value = node.value
-    problem = port_problem(value) if isinstance(value, str) and value else None
-    if problem:
-        raise node.error(path, problem)
-    value = text(node, path)
-    return value if "://" in value else path_value(node, path)
-
-
-def _driver_options(f: Fields, backend: str) -> tuple[tuple[str, Any], ...]:
-    allowed = DRIVER_KEYS.get(backend, ())
-    for key in ALL_DRIVER_KEYS:
-        if key in f and key not in allowed:
-            users = [b for b, keys in DRIVER_KEYS.items() if key in keys]
-            raise f.child(key).error(f.sub(key), f"only for backend {' or '.join(users)} (this link is {backend})")
-    if not allowed:
-        return ()
-    if "port" not in f:
-        raise f.error(f"backend {backend} needs 'port' (a device such as /dev/ttyUSB0"
-                      + (", or socket://HOST:9200)" if backend == "evologics" else ")"))
-    return tuple((key, f.get(key, _DRIVER_CHECKS[key])) for key in allowed if key in f)
-
-
-def _emulate(node: Node, path: str) -> tuple[tuple[str, Any], ...]:
-    f = Fields(node, path, ("protocol", "pty", "tcp"))
-    protocol = f.get("protocol", choice("evologics", "s100"))
-    if ("pty" in f) == ("tcp" in f):
-        raise f.error("give exactly one of pty (a path for the device link) or tcp (a loopback port)")
-    if "tcp" in f:
-        if protocol != "evologics":
-            raise f.child("tcp").error(f.sub("tcp"), "only the EvoLogics modem speaks TCP; the S100 is serial")
-        return (("protocol", protocol), ("tcp", f.get("tcp", integer(1, 65535))))
-    return (("protocol", protocol), ("pty", f.get("pty", path_value)))
 
 
 def assign_addresses(links: dict[str, LinkSpec], nodes: dict[str, Node]) -> dict[str, LinkSpec]:
@@ -183,7 +132,7 @@ def assign_addresses(links: dict[str, LinkSpec], nodes: dict[str, Node]) -> dict
             used.add(next_free)
             link = _replace_params(link, address=next_free)
         key = (link.params.rx_channel, link.params.address)
-        if link.backend != "sim":
+        if link.backend != SIM:
             result[link_id] = link  # a real modem's address is the modem's own, not on the medium
             continue
         if key in owners:

@@ -1,0 +1,180 @@
+"""The backend table: every real-modem driver hilgate knows, declared once (as gpsd's driver table).
+
+One :class:`Driver` row per modem type says
+
+- its **name**, the scene's ``backend:`` (and ``emulate: {protocol:}``);
+- its **options**: a frozen dataclass whose fields are what the driver is given; a field made with
+  :func:`option` is a scene key, with its default and its check (an :class:`Option`) as metadata; a
+  field made with :func:`from_link` is filled from the link's own modem keys instead;
+- how to **open** it: ``"module:Class"`` of its backend, built as
+  ``Class(link_id, address, packet, options, scheduler, trace)`` by :func:`open_backend`;
+- its **emulator**: ``"module:Class"`` of the emulated device that a simulated link can show on a pty
+  (and, if ``emulator_tcp``, on a loopback TCP port), found by :func:`emulator_for`.
+
+The scene loader (:mod:`hilgate.scene.backends`) reads the keys, the checks, the "only for backend X"
+and the "did you mean" from this table, and the daemon opens backends and emulators through it:
+adding a modem type means adding one options class and one row here, and its driver module.
+
+Why here, and why by name: the scene loader must know every driver's keys to validate any scene
+(also in the reload worker and in ``hilgate check``), yet must not import the drivers to do so —
+they import pyserial and the codecs, and open ports.  This module imports only the standard library;
+driver and emulator classes are named as ``"module:attr"`` strings and imported only when the daemon
+opens a link.  Declarations inside each driver module would force that import; a table inside
+``hilgate/scene`` would make the daemon and the drivers depend on the loader's internals.  The checks
+are plain data (kind and bounds, like a MAC's ``PARAMETERS``) for the same reason: ``drivers/``
+imports only the core, and the scene turns the data into its own checkers.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import MISSING, Field, dataclass, field, fields
+from typing import Any, Callable, Iterator
+
+__all__ = [
+    "Option", "Driver", "DRIVERS", "EvologicsOptions", "S100Options", "option", "from_link", "scene_options",
+    "driver_names", "emulated_protocols", "open_backend", "emulator_for",
+]
+
+KINDS = ("port", "integer", "number", "boolean", "choice")
+
+
+@dataclass(frozen=True)
+class Option:
+    """How a scene gives one driver option: ``kind`` is port (a device path relative to the scene, or a
+    URL hilgate can open), integer, number, boolean or choice, with its bounds; ``hint`` says what to
+    give when a required option is missing."""
+
+    kind: str
+    minimum: float | None = None
+    maximum: float | None = None
+    above: float | None = None
+    choices: tuple[str, ...] = ()
+    hint: str = ""
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ValueError(f"option kind {self.kind!r}: one of {', '.join(KINDS)}")
+
+
+PORT = Option("port")
+BOOLEAN = Option("boolean")
+SCENE = "hilgate.scene"  # the metadata key of a field that is a scene option
+LINK = "hilgate.link"    # the metadata key of a field filled from the link's modem keys
+
+
+def option(check: Option, default: Any = MISSING) -> Any:
+    """A field of an options class that the scene sets under its own name (required without a default)."""
+    return field(default=default, metadata={SCENE: check})
+
+
+def from_link(attribute: str, default: Any) -> Any:
+    """A field that is no scene key of its own: the link's ``ModemParams.<attribute>`` fills it."""
+    return field(default=default, metadata={LINK: attribute})
+
+
+# -- the drivers ---------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class EvologicsOptions:
+    """``backend: evologics`` (:mod:`hilgate.drivers.evologics`)."""
+
+    port: str = option(Option("port", hint="a device such as /dev/ttyUSB0, or socket://HOST:9200"))
+    baud: int = option(Option("integer", 50, 4_000_000), 19200)
+    im: bool = option(BOOLEAN, True)
+    ack: bool = option(BOOLEAN, True)
+    source_level: int | None = option(Option("integer", 0, 3), None)
+    gain: int | None = option(Option("integer", 0, 1), None)
+    extended: bool = option(BOOLEAN, True)
+    im_retries: int | None = option(Option("integer", 0, 255), None)
+    command_timeout_s: float = option(Option("number", above=0), 2.0)
+    delivery_timeout_s: float = option(Option("number", above=0), 30.0)
+    queue_frames: int = option(Option("integer", 0, 100_000), 50)
+    eol: str = option(Option("choice", choices=("auto", "cr", "lf", "crlf")), "auto")
+
+    def eol_bytes(self) -> bytes:
+        if self.eol == "auto":
+            return b"\n" if self.port.startswith("socket://") else b"\r"
+        return {"cr": b"\r", "lf": b"\n", "crlf": b"\r\n"}[self.eol]
+
+
+@dataclass(frozen=True)
+class S100Options:
+    """``backend: s100`` (:mod:`hilgate.drivers.s100`)."""
+
+    port: str = option(Option("port", hint="a device such as /dev/ttyUSB0"))
+    baud: int = option(Option("integer", 50, 4_000_000), 9600)
+    rtscts: bool = option(BOOLEAN, False)
+    air_bitrate_bps: float = from_link("bitrate_bps", 1800.0)  # pacing without RTS/CTS: the link's bitrate
+    queue_frames: int = option(Option("integer", 0, 100_000), 50)
+
+
+@dataclass(frozen=True)
+class Driver:
+    """One row of the table (see the module's docstring)."""
+
+    name: str
+    title: str      # the device as messages name it: "the {title} is serial"
+    options: type   # a frozen dataclass made of option() and from_link() fields
+    backend: str    # "module:Class" of the backend
+    emulator: str | None = None  # "module:Class" of the emulated device, if there is one
+    emulator_tcp: bool = False   # the emulated device also listens on a loopback TCP port
+
+
+DRIVERS: dict[str, Driver] = {driver.name: driver for driver in (
+    Driver("evologics", "EvoLogics modem", EvologicsOptions, "hilgate.drivers.evologics:EvologicsBackend",
+           "hilgate.drivers.emulators:EvologicsEmulator", emulator_tcp=True),
+    Driver("s100", "S100", S100Options, "hilgate.drivers.s100:S100Backend",
+           "hilgate.drivers.emulators:S100Emulator"),
+)}
+
+
+# -- reading the table -----------------------------------------------------------------------------------
+
+
+def scene_options(driver: Driver) -> Iterator[tuple[str, Option, bool]]:
+    """(key, check, required) of each scene option of ``driver``, in the order its class declares them."""
+    for f in fields(driver.options):
+        if SCENE in f.metadata:
+            yield f.name, f.metadata[SCENE], _required(f)
+
+
+def _required(f: Field) -> bool:
+    return f.default is MISSING and f.default_factory is MISSING
+
+
+def driver_names() -> tuple[str, ...]:
+    return tuple(DRIVERS)
+
+
+def emulated_protocols() -> tuple[str, ...]:
+    """The ``emulate: {protocol:}`` values: drivers with an emulated device."""
+    return tuple(name for name, driver in DRIVERS.items() if driver.emulator)
+
+
+def _resolve(reference: str) -> Any:
+    module, _, attr = reference.partition(":")
+    return getattr(importlib.import_module(module), attr)
+
+
+def open_backend(spec: Any, scheduler: Any, trace: Callable[[dict], Any]) -> Any:
+    """The backend of a real-modem link (a validated ``LinkSpec``), opened: its driver module is
+    imported now, its options are the scene's (``spec.options``) plus those filled from the link."""
+    from hilgate.core.packets import packet_class
+
+    driver = DRIVERS[spec.backend]
+    options = dict(spec.options)
+    for f in fields(driver.options):
+        if LINK in f.metadata:
+            options.setdefault(f.name, getattr(spec.params, f.metadata[LINK]))
+    return _resolve(driver.backend)(spec.id, spec.params.address, packet_class(spec.packet),
+                                    driver.options(**options), scheduler, trace)
+
+
+def emulator_for(protocol: str) -> type:
+    """The emulated-device class of ``emulate: {protocol: ...}`` (its module imported now)."""
+    reference = DRIVERS[protocol].emulator
+    if reference is None:
+        raise KeyError(f"backend {protocol!r} has no emulator")
+    return _resolve(reference)

@@ -1,0 +1,88 @@
+"""The link keys that the backend table decides: ``backend:``, a real driver's options, ``emulate:``.
+
+Everything driver-specific is read from :mod:`hilgate.drivers.table` each time a link is read: which
+backends exist, which keys each takes and how each is checked, which one is required (and what to
+give), which protocols can be emulated and which of them over TCP.  So a modem type added to the
+table is a valid backend here, with its keys, its checks, its "only for backend X" and its place in
+"did you mean", without a line changed in the loader.  The table imports no driver; the only driver
+code run here is :func:`hilgate.drivers.port.port_problem`, when a scene names a port.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ..drivers.table import DRIVERS, Option, emulated_protocols, scene_options
+from .checks import Checker, Fields, boolean, choice, integer, number, path_value, text
+from .yaml_nodes import Node
+
+__all__ = ["backend_names", "driver_keys", "driver_options", "emulated_device"]
+
+SIM = "sim"  # the simulated modem: not a driver, opened by the world
+
+
+def backend_names() -> tuple[str, ...]:
+    return (SIM, *DRIVERS)
+
+
+def driver_keys() -> tuple[str, ...]:
+    """Every driver's scene keys, each once, in the table's order (for unknown-key messages)."""
+    return tuple(dict.fromkeys(key for driver in DRIVERS.values() for key, _, _ in scene_options(driver)))
+
+
+def driver_options(f: Fields, backend: str) -> tuple[tuple[str, Any], ...]:
+    """The driver keys a link gives, checked: none unless its backend takes them, its required ones
+    present.  Returns (key, value) in the order the driver declares them."""
+    driver = DRIVERS.get(backend)
+    declared = list(scene_options(driver)) if driver is not None else []
+    allowed = [key for key, _, _ in declared]
+    for key in driver_keys():
+        if key in f and key not in allowed:
+            users = [name for name, other in DRIVERS.items() if key in (k for k, _, _ in scene_options(other))]
+            raise f.child(key).error(f.sub(key), f"only for backend {' or '.join(users)} (this link is {backend})")
+    for key, check, required in declared:
+        if required and key not in f:
+            raise f.error(f"backend {backend} needs {key!r}" + (f" ({check.hint})" if check.hint else ""))
+    return tuple((key, f.get(key, checker(check))) for key, check, _ in declared if key in f)
+
+
+def checker(option: Option) -> Checker:
+    """The scene checker of one driver option, from the table's metadata."""
+    if option.kind == "port":
+        return _port
+    if option.kind == "integer":
+        low = None if option.minimum is None else int(option.minimum)
+        high = None if option.maximum is None else int(option.maximum)
+        return integer(low, high)
+    if option.kind == "number":
+        return number(option.minimum, option.maximum, above=option.above)
+    if option.kind == "boolean":
+        return boolean
+    return choice(*option.choices)
+
+
+def _port(node: Node, path: str) -> str:
+    """A device path (relative to the scene) or a pyserial URL that hilgate can open."""
+    from ..drivers.port import port_problem
+
+    value = node.value
+    problem = port_problem(value) if isinstance(value, str) and value else None
+    if problem:
+        raise node.error(path, problem)
+    value = text(node, path)
+    return value if "://" in value else path_value(node, path)
+
+
+def emulated_device(node: Node, path: str) -> tuple[tuple[str, Any], ...]:
+    """``emulate: {protocol, pty | tcp}``: an emulated device in front of a simulated link."""
+    f = Fields(node, path, ("protocol", "pty", "tcp"))
+    protocol = f.get("protocol", choice(*emulated_protocols()))
+    if ("pty" in f) == ("tcp" in f):
+        raise f.error("give exactly one of pty (a path for the device link) or tcp (a loopback port)")
+    if "tcp" in f:
+        if not DRIVERS[protocol].emulator_tcp:
+            speakers = " or the ".join(d.title for d in DRIVERS.values() if d.emulator and d.emulator_tcp)
+            raise f.child("tcp").error(f.sub("tcp"), f"only the {speakers} speaks TCP; "
+                                                     f"the {DRIVERS[protocol].title} is serial")
+        return (("protocol", protocol), ("tcp", f.get("tcp", integer(1, 65535))))
+    return (("protocol", protocol), ("pty", f.get("pty", path_value)))
