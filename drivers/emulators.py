@@ -29,6 +29,7 @@ from hilgate.core.streams import Connection, Listener
 
 from .evologics_codec import BadCommand, Command, Data, ModemCodec
 from .s100_codec import CRLF, FrameHunter, Notice, Skipped, wire_class
+from .table import emulator_for
 
 log = logging.getLogger(__name__)
 
@@ -412,6 +413,8 @@ class S100Emulator:
         self.hosts.close()
 
 
+# Which device each protocol emulates is a column of the backend table (hilgate.drivers.table);
+# this mapping stays for older callers until nothing imports it.
 EMULATORS = {"evologics": EvologicsEmulator, "s100": S100Emulator}
 
 
@@ -425,7 +428,7 @@ class EmulatorDoor:
         options = port.emulate
         if not options:
             return None
-        emulator = EMULATORS[options["protocol"]](port, options, self.scheduler)
+        emulator = emulator_for(options["protocol"])(port, options, self.scheduler)
         port.attach(emulator)
         return emulator
 
