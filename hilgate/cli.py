@@ -312,6 +312,12 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
 }
 
 
+def emulated_protocols() -> list[str]:
+    from .drivers.table import emulated_protocols as protocols
+
+    return list(protocols())
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="hilgate",
@@ -362,7 +368,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="socket GLI clients at once on one link (default 32)")
 
     e = sub.add_parser("emulate", help="run a scene with one simulated link shown as an EvoLogics or S100 device")
-    e.add_argument("protocol", choices=["evologics", "s100"])
+    e.add_argument("protocol", choices=emulated_protocols())
     _add_scene_args(e, optional=True)
     e.add_argument("--link", required=True, help="the simulated link to expose")
     e.add_argument("--pty", help="link the emulated device's pseudo-terminal here (e.g. /tmp/ttyEVO0)")

@@ -19,6 +19,7 @@ from .access import LinkLock
 from ..core.backend import AppFrame, Backend
 from ..core.endpoint import ABSENT, KEPT, TAKEN, Door, Endpoint
 from ..core.packets import Decoded, PacketClass, packet_class
+from ..drivers.table import DRIVERS, open_backend
 from ..models.frame import BROADCAST
 from ..scene import LinkSpec, Scene
 from ..scene.diff import diff
@@ -254,7 +255,7 @@ class Router:
         self.scene: Scene | None = None
         self._names: dict[tuple[str, int], str] = {}
         self.backend_factories: dict[str, Callable[[LinkSpec], Backend]] = {
-            "sim": self._sim_backend, "evologics": self._driver_backend, "s100": self._driver_backend}
+            "sim": self._sim_backend, **dict.fromkeys(DRIVERS, self._driver_backend)}
 
     def port(self, link_id: str) -> RoutedLink | None:
         """The link a socket client names in its HELLO."""
@@ -271,17 +272,8 @@ class Router:
         return address != BROADCAST and (channel, address) not in self._names
 
     def _driver_backend(self, spec: LinkSpec) -> Backend:
-        from ..drivers.evologics import EvologicsBackend, EvologicsOptions
-        from ..drivers.s100 import S100Backend, S100Options
-
-        options = dict(spec.options)
-        packet = packet_class(spec.packet)
-        if spec.backend == "evologics":
-            return EvologicsBackend(spec.id, spec.params.address, packet, EvologicsOptions(**options),
-                                    self.scheduler, self.recorder.event)
-        options.setdefault("air_bitrate_bps", spec.params.bitrate_bps)
-        return S100Backend(spec.id, spec.params.address, packet, S100Options(**options), self.scheduler,
-                           self.recorder.event)
+        """A real modem's driver, as the backend table (:mod:`hilgate.drivers.table`) says to open it."""
+        return open_backend(spec, self.scheduler, self.recorder.event)
 
     def apply(self, scene: Scene) -> None:
         """Build the first scene, or change the running one into ``scene`` (already validated)."""
