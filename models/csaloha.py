@@ -17,11 +17,10 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from .frame import ACK, BROADCAST, DATA
-from .mac import Duplicates, Mac, Param
+from .mac import Duplicates, Mac, MacHost, Param
 
 if TYPE_CHECKING:
     from .frame import Frame
-    from .modem import SimModem
 
 IDLE, BACKOFF, SENDING, WAIT_ACK = "idle", "backoff", "sending", "wait_ack"
 
@@ -59,7 +58,7 @@ class CsAloha(Mac):
     def holding(self) -> bool:
         return self.current is not None
 
-    def attach(self, modem: "SimModem") -> None:
+    def attach(self, modem: MacHost) -> None:
         super().attach(modem)
         if not self.acks:
             self.ack_timeout = 0.0
@@ -80,8 +79,7 @@ class CsAloha(Mac):
         max_range = self.max_range_m if self.max_range_m is not None else modem.range_m[1]
         if max_range == float("inf"):
             raise ValueError("cs-aloha: give ack_timeout_s or max_range_m (the modem's range is unlimited)")
-        channel = modem.medium.channels[modem.tx_channel]
-        tau = channel.delay(max_range)
+        tau = modem.tau_at(max_range)
         return 1.1 * (2 * tau + modem.tx_delay + modem.airtime(self.ack_bytes)) + 0.001
 
     # -- sending -------------------------------------------------------------------------------

@@ -7,8 +7,6 @@ import random
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from .frame import Frame
-
 if TYPE_CHECKING:
     from .clock import Clock
     from .modem import SimModem
@@ -75,8 +73,7 @@ class FlowSource:
         t = self.clock.now()
         spec = self.spec
         modem = self.modem
-        frame = Frame(modem.medium.new_frame_id(), modem.id, spec.dst, self.dst_addr, spec.size_bytes, t, self.stats)
-        modem.send(frame)
+        modem.send(modem.new_frame(spec.dst, self.dst_addr, spec.size_bytes, self.stats))
         self._count += 1
         if spec.poisson:
             self._schedule(t + self.rng.expovariate(1.0 / spec.interval_s))

@@ -10,30 +10,74 @@ A MAC sits between the modem's transmit FIFO and its PHY.  It is *told*:
   reported unless the MAC sets ``hears_all`` (to overhear RTS/CTS, for example).
 - timers it set itself fire (plain callbacks through ``modem.clock``).
 
-It *may*, through the modem (see :class:`hilgate.models.modem.SimModem`):
-
-- ``modem.control_frame(kind, size, dst_addr, dst, ref)``: make an ACK/RTS/CTS that serves ``ref``;
-  ``modem.consume(frame)``: trace a good control frame as received (it is not delivered up);
-
-- ``modem.fifo`` / ``modem.fifo_pop()``: look at and take frames from the FIFO;
-- ``modem.transmit(frame)``: put a frame on air (after the modem's intrinsic delay and jitter);
-  ``modem.phy_busy`` is true from then until ``on_tx_done``;
-- ``modem.deliver(frame)``: hand a good frame up to the application (after the rx delay);
-- ``modem.channel_busy()``: carrier sense, true while something arrives or the modem transmits;
-- ``modem.clock.at(t, fn, *args)`` / ``modem.clock.cancel(handle)``: timers;
-- ``modem.rng``: its own seeded random stream, so backoffs are reproducible;
-- ``modem.observer.mac(t, modem, frame, ev, ...)``: trace MAC outcomes (``retx``, ``giveup``, ``backoff``).
+It *may* use its modem, ``self.modem``, through :class:`MacHost` and nothing else; the built-in
+protocols do exactly that (``tests/test_radio_mac_host.py`` checks it).
 """
 
 from __future__ import annotations
 
-from collections import OrderedDict
+from collections import OrderedDict, deque
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 if TYPE_CHECKING:
+    import random
+
+    from .clock import Clock
     from .frame import Frame
-    from .modem import SimModem
+    from .observer import Observer
+
+
+class MacHost(Protocol):
+    """What a MAC may use of its modem: the whole MAC ↔ modem interface.
+
+    A MAC needs no more to decide when frames go on air; it never reaches the medium, the radio or
+    the modem's other parts, so a MAC runs unchanged on any host that offers these."""
+
+    address: int
+    """This modem's address (what ``frame.dst_addr`` is compared with)."""
+    fifo: deque[Frame]
+    """The transmit FIFO, to look at (take frames only with :meth:`fifo_pop`)."""
+    phy_busy: bool
+    """True from :meth:`transmit` until ``on_tx_done`` (intrinsic delay and air time)."""
+    clock: Clock
+    """Timers: ``clock.now()``, ``clock.at(t, fn, *args)`` → handle, ``clock.cancel(handle)``."""
+    rng: random.Random
+    """The modem's own seeded random stream, so backoffs are reproducible."""
+    observer: Observer
+    """``observer.mac(t, modem, frame, ev, **fields)`` traces MAC outcomes (``retx``, ``giveup``,
+    ``backoff``, ``dup``)."""
+    tx_delay: float
+    """The modem's intrinsic transmit delay (s), for sizing slots and timeouts."""
+    range_m: tuple[float, float]
+    """The sender's range ``[min, max]`` in metres."""
+
+    def fifo_pop(self) -> Frame:
+        """Take the head of the FIFO (the frame then belongs to the MAC)."""
+
+    def transmit(self, frame: Frame) -> None:
+        """Put a frame on air after the modem's intrinsic delay and jitter."""
+
+    def deliver(self, frame: Frame) -> None:
+        """Hand a good frame up to the application (after the rx delay)."""
+
+    def consume(self, frame: Frame) -> None:
+        """Trace a good control frame as received; it is not delivered up."""
+
+    def channel_busy(self) -> bool:
+        """Carrier sense: true while something arrives or the modem transmits."""
+
+    def control_frame(self, kind: str, size: int, dst_addr: int, dst: str, ref: Frame) -> Frame:
+        """Make an ACK/RTS/CTS of ``size`` bytes for ``dst_addr`` (link id ``dst``) that serves ``ref``."""
+
+    def check_idle(self) -> None:
+        """Tell the GLI the modem may be idle again (call it after letting go of a held frame)."""
+
+    def airtime(self, size: int) -> float:
+        """Seconds on air for ``size`` bytes at the modem's bitrate."""
+
+    def tau_at(self, range_m: float) -> float:
+        """Propagation delay to ``range_m`` metres on the modem's transmit channel."""
 
 
 @dataclass(frozen=True)
@@ -64,9 +108,9 @@ class Mac:
     def __init__(self, **params: Any):
         if params:
             raise TypeError(f"mac {self.name!r} takes no parameters, got {', '.join(sorted(params))}")
-        self.modem: SimModem | None = None
+        self.modem: MacHost | None = None
 
-    def attach(self, modem: "SimModem") -> None:
+    def attach(self, modem: MacHost) -> None:
         self.modem = modem
 
     def on_enqueue(self) -> None:

@@ -1,15 +1,14 @@
-"""Who hears whom, when, and whether it survives: channels, propagation, range, collisions, errors.
+"""Who hears whom, when, and how likely it survives: channels, propagation, range, error model.
 
-For one transmission the medium walks the sender's *neighbours* (every modem listening on the
-sender's transmit channel) once.  An arrival that someone must judge (the addressed receiver, every
-receiver of a broadcast, a promiscuous modem or a MAC that overhears) gets an :class:`Arrival`, an
-overlap check against what the receiver hears, an error draw and one event at its end.  Any other
-arrival is only interference: a ``(start, end)`` pair in the receiver's ``rx_noise`` that can spoil
-the judged ones.  Expired entries are dropped as the lists are walked (``rx_noise`` once it holds
-more than a few), so each list stays as short as the number of frames on air at once.  Distances between vehicles that never move are computed
-once per pair; that is what keeps the hot path O(1) per arrival.
+For one transmission the medium walks the sending radio's *neighbours* (every radio listening on
+the sender's transmit channel) once.  For each it works out, through the channel, whether the frame
+reaches it and over which interval, and hands it the arrival in one call (:meth:`Radio.arrive`,
+with the path's loss probability from the error model); the receiving radio keeps what it hears and
+decides collisions (``radio.py``).  Distances between vehicles that never move, and the loss
+probability on such a path, are computed once per pair; that is what keeps the hot path O(1) per
+arrival.
 
-The arithmetic is DESIGN.md's "timing and loss model", steps 3 to 5.
+The arithmetic is DESIGN.md's "timing and loss model", step 3 (and the PER of step 5).
 """
 
 from __future__ import annotations
@@ -17,18 +16,15 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Iterable
+from typing import TYPE_CHECKING, Any, Iterable
 
 from .frame import BROADCAST
-
-OVERLAP_EPS = 1e-9
-"""Arrivals must overlap by more than a nanosecond to collide: back-to-back frames computed along
-different floating-point paths (t + τ + T versus (t + T) + τ) may otherwise "overlap" by one ulp."""
+from .radio import OVERLAP_EPS, Arrival  # noqa: F401  (their home was here; kept importable)
 
 if TYPE_CHECKING:
     from .clock import Clock
     from .frame import Frame
-    from .modem import SimModem
+    from .radio import Radio
 
 
 @dataclass(frozen=True)
@@ -43,30 +39,17 @@ class Channel:
         return self.min_delay_s + d / self.speed_mps
 
 
-class Arrival:
-    """One frame reaching one receiver over ``[start, end]``; flags set as the medium learns more."""
-
-    __slots__ = ("frame", "start", "end", "d", "error", "collided")
-
-    def __init__(self, frame: "Frame", start: float, end: float, d: float):
-        self.frame = frame
-        self.start = start
-        self.end = end
-        self.d = d
-        self.error = False
-        self.collided = False
-
-    def __repr__(self) -> str:
-        return f"Arrival({self.frame!r} [{self.start:.6f}, {self.end:.6f}] d={self.d:.3f})"
-
-
 class _Neighbour:
-    """A (sender, receiver) pair on the sender's transmit channel, with what can be precomputed."""
+    """A (sender, receiver) pair on the sender's transmit channel, with what can be precomputed.
 
-    __slots__ = ("receiver", "static", "d", "tau", "in_range", "rmin", "rmax", "min_delay", "speed", "per_cache")
+    It is also the loss model handed with each arrival on this path: the receiver's error model at
+    the distance, cached per frame size when neither vehicle moves."""
 
-    def __init__(self, sender: "SimModem", receiver: "SimModem", channel: Channel):
-        self.receiver = receiver
+    __slots__ = ("radio", "static", "reach", "d", "tau", "in_range", "rmin", "rmax", "min_delay", "speed",
+                 "per_cache")
+
+    def __init__(self, sender: "Radio", receiver: "Radio", channel: Channel):
+        self.radio = receiver
         self.rmin, self.rmax = sender.range_m
         self.min_delay = channel.min_delay_s
         self.speed = channel.speed_mps
@@ -83,55 +66,76 @@ class _Neighbour:
                 self.d = math.dist(a, b)
                 self.tau = channel.delay(self.d)
                 self.in_range = self.rmin <= self.d <= self.rmax
+        self.reach = self.static and self.in_range  # the common case, tested first: d and tau are known
+
+    def per(self, d: float, size: int) -> float:
+        """Probability that a frame of ``size`` bytes is lost on this path at distance ``d``."""
+        if self.static:
+            per = self.per_cache.get(size)
+            if per is None:
+                per = self.per_cache[size] = self.radio.error.per(d, size)
+            return per
+        return self.radio.error.per(d, size)
 
 
 class Medium:
-    """All channels of a scene and every simulated modem attached to them."""
+    """All channels of a scene and every radio attached to them."""
 
     def __init__(self, clock: "Clock", channels: Iterable[Channel]):
         self.clock = clock
         self.channels = {c.name: c for c in channels}
-        self.modems: list[SimModem] = []
+        self.radios: list[Radio] = []
         self.frame_ids = itertools.count(1)
         self.arrivals = 0
+        self._neighbours: dict[Radio, list[_Neighbour]] = {}
         self._dirty = True
 
     def new_frame_id(self) -> int:
         return next(self.frame_ids)
 
-    def attach(self, modem: "SimModem") -> None:
-        for name in (modem.tx_channel, modem.rx_channel):
+    def attach(self, radio: "Radio") -> None:
+        for name in (radio.tx_channel, radio.rx_channel):
             if name not in self.channels:
-                raise ValueError(f"modem {modem.id}: no channel {name!r}")
-        self.modems.append(modem)
+                raise ValueError(f"modem {getattr(radio.host, 'id', radio)}: no channel {name!r}")
+        self.radios.append(radio)
         self._dirty = True
 
-    def detach(self, modem: "SimModem") -> None:
-        self.modems.remove(modem)
+    def detach(self, radio: "Radio") -> None:
+        self.radios.remove(radio)
         self._dirty = True
 
     def topology_changed(self) -> None:
-        """Forget cached distances (a pose source or a modem's range changed)."""
+        """Forget cached distances (a pose source, a channel or a radio's parameters changed)."""
         self._dirty = True
 
-    def modem_by_address(self, channel: str, address: int) -> "SimModem | None":
-        for modem in self.modems:
-            if modem.rx_channel == channel and modem.address == address:
-                return modem
+    @property
+    def modems(self) -> list[Any]:
+        """The modems (hosts of the attached radios), in the order they were attached."""
+        return [radio.host for radio in self.radios]
+
+    def modem_by_address(self, channel: str, address: int) -> Any:
+        """The modem listening on ``channel`` with ``address``, or None."""
+        for radio in self.radios:
+            if radio.rx_channel == channel and radio.address == address:
+                return radio.host
         return None
 
     def _rebuild(self) -> None:
-        for sender in self.modems:
+        radios = self.radios
+        neighbours = {}
+        for sender in radios:
             channel = self.channels[sender.tx_channel]
-            sender.neighbours = [
+            neighbours[sender] = [
                 _Neighbour(sender, receiver, channel)
-                for receiver in self.modems
+                for receiver in radios
                 if receiver is not sender and receiver.rx_channel == sender.tx_channel
             ]
+        self._neighbours = neighbours
         self._dirty = False
 
-    def propagation_delay(self, sender: "SimModem", receiver: "SimModem", t: float) -> float | None:
-        """τ from ``sender`` to ``receiver`` at ``t``, or None if out of range or without a pose."""
+    def propagation_delay(self, sender: Any, receiver: Any, t: float) -> float | None:
+        """τ from ``sender`` to ``receiver`` (modems or radios) at ``t``, or None if out of range or
+        without a pose."""
         a, b = sender.pose.position(t), receiver.pose.position(t)
         if a is None or b is None:
             return None
@@ -141,83 +145,46 @@ class Medium:
             return None
         return self.channels[sender.tx_channel].delay(d)
 
-    def transmit(self, sender: "SimModem", frame: "Frame", t: float, duration: float) -> None:
-        """``frame`` goes on air at ``t`` for ``duration`` seconds: create its arrivals."""
+    def transmit(self, sender: "Radio", frame: "Frame", t: float, duration: float) -> None:
+        """``frame`` goes on air from ``sender`` at ``t`` for ``duration`` seconds: hand out its arrivals."""
         if self._dirty:
             self._rebuild()
+        neighbours = self._neighbours[sender]
         dst = frame.dst_addr
-        size = frame.size
-        at = self.clock.at
         sender_position = None
-        count = 0
-        for nb in sender.neighbours:
-            receiver = nb.receiver
-            if nb.static:
-                if not nb.in_range:
-                    if receiver.address == dst:
-                        receiver.unreachable(frame)
-                    continue
+        missed = 0  # neighbours the frame does not reach (counted this way round: they are the few)
+        for nb in neighbours:
+            radio = nb.radio
+            if nb.reach:
                 d = nb.d
                 start = t + nb.tau
+            elif nb.static:
+                if radio.address == dst:
+                    radio.unreachable(frame)
+                missed += 1
+                continue
             else:
                 if sender_position is None:
                     sender_position = sender.pose.position(t)
                     if sender_position is None:  # a vehicle without a pose is heard by nobody
                         if dst != BROADCAST:
-                            target = next((n.receiver for n in sender.neighbours if n.receiver.address == dst), None)
+                            target = next((n.radio for n in neighbours if n.radio.address == dst), None)
                             if target is not None:
                                 target.unreachable(frame)
+                        missed += len(neighbours) - neighbours.index(nb)
                         break
-                receiver_position = receiver.pose.position(t)
+                receiver_position = radio.pose.position(t)
                 if receiver_position is None:
-                    if receiver.address == dst:
-                        receiver.unreachable(frame)
+                    if radio.address == dst:
+                        radio.unreachable(frame)
+                    missed += 1
                     continue
                 d = math.dist(sender_position, receiver_position)
                 if d < nb.rmin or d > nb.rmax:
-                    if receiver.address == dst:
-                        receiver.unreachable(frame)
+                    if radio.address == dst:
+                        radio.unreachable(frame)
+                    missed += 1
                     continue
                 start = t + nb.min_delay + d / nb.speed
-            end = start + duration
-            count += 1
-            if receiver.hears_all or dst == receiver.address or dst == BROADCAST:
-                # An arrival someone must judge: full bookkeeping, an error draw, an event at its end.
-                arrival = Arrival(frame, start, end, d)
-                live = []
-                for other in receiver.rx_pending:
-                    if other.end > t:
-                        live.append(other)
-                        if other.start < end - OVERLAP_EPS and start < other.end - OVERLAP_EPS:
-                            other.collided = True
-                            arrival.collided = True
-                live.append(arrival)
-                receiver.rx_pending = live
-                if not arrival.collided:
-                    for other_start, other_end in receiver.rx_noise:
-                        if other_start < end - OVERLAP_EPS and start < other_end - OVERLAP_EPS:
-                            arrival.collided = True
-                            break
-                    if (receiver.half_duplex and receiver.tx_end - OVERLAP_EPS > start
-                            and receiver.tx_start < end - OVERLAP_EPS):
-                        arrival.collided = True
-                if not receiver.error_free:
-                    if nb.static:
-                        per = nb.per_cache.get(size)
-                        if per is None:
-                            per = nb.per_cache[size] = receiver.error.per(d, size)
-                    else:
-                        per = receiver.error.per(d, size)
-                    if per > 0.0 and (per >= 1.0 or receiver.rng.random() < per):
-                        arrival.error = True
-                at(end, receiver.arrival_end, arrival)
-            else:
-                # Only interference: it can spoil arrivals at this receiver but has no outcome itself.
-                for other in receiver.rx_pending:
-                    if other.start < end - OVERLAP_EPS and start < other.end - OVERLAP_EPS:
-                        other.collided = True
-                noise = receiver.rx_noise
-                noise.append((start, end))
-                if len(noise) > 8:
-                    receiver.rx_noise = [span for span in noise if span[1] > t]
-        self.arrivals += count
+            radio.arrive(frame, t, start, start + duration, d, nb)
+        self.arrivals += len(neighbours) - missed

@@ -17,14 +17,14 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Callable
 
 from .errormodel import NO_ERRORS, ErrorModel
-from .frame import BROADCAST, Frame
+from .frame import BROADCAST, DATA, Frame
 from .mac import Mac, NoMac
-from .medium import OVERLAP_EPS
 from .observer import NullObserver, Observer
+from .radio import Radio
 
 if TYPE_CHECKING:
     from .clock import Clock
-    from .medium import Arrival, Medium
+    from .medium import Medium
     from .trajectories import PoseSource
 
 
@@ -56,7 +56,9 @@ class LinkStats:
 
 
 class SimModem:
-    """One simulated modem, attached to a :class:`~hilgate.models.medium.Medium`."""
+    """One simulated modem: FIFO, intrinsic delays, MAC, and its :class:`~hilgate.models.radio.Radio`
+    on a :class:`~hilgate.models.medium.Medium`.  To its MAC it is a
+    :class:`~hilgate.models.mac.MacHost`; to its radio a :class:`~hilgate.models.radio.RadioHost`."""
 
     def __init__(
         self,
@@ -73,7 +75,6 @@ class SimModem:
         self.id = link_id
         self.json_id = json.dumps(link_id)
         self.vehicle = vehicle
-        self.pose = pose
         self.clock = clock
         self.medium = medium
         self.rng = rng
@@ -84,41 +85,83 @@ class SimModem:
         self.fifo: deque[Frame] = deque()
         self.queued_bytes = 0
         self.phy_busy = False
-        self.tx_start = float("-inf")
-        self.tx_end = float("-inf")
-        self.rx_pending: list[Arrival] = []  # judged arrivals that may still be on air
-        self.rx_noise: list[tuple[float, float]] = []  # (start, end) of arrivals that only interfere
-        self.neighbours: list = []
         self.closed = False
+        self.radio = Radio(self, medium, clock, rng)
+        self.radio.pose = pose
         self.configure(params)
         self.set_mac(mac or NoMac())
-        medium.attach(self)
+        medium.attach(self.radio)
 
     def configure(self, params: ModemParams) -> None:
         """Take new parameters in place (a scene reload); frames in the FIFO are kept."""
         self.params = params
-        self.address = params.address
-        self.tx_channel = params.tx_channel
-        self.rx_channel = params.rx_channel
         self.bitrate = float(params.bitrate_bps)
         self.tx_delay = params.tx_delay_s
         self.rx_delay = params.rx_delay_s
         self.tx_jitter = params.tx_jitter_s
         self.rx_jitter = params.rx_jitter_s
         self.fifo_bytes = params.fifo_bytes
-        self.range_m = params.range_m
-        self.error = params.error
-        self.error_free = params.error.constant_zero
-        self.half_duplex = params.duplex == "half"
         self.promiscuous = params.promiscuous
+        radio = self.radio
+        radio.address = params.address
+        radio.tx_channel = params.tx_channel
+        radio.rx_channel = params.rx_channel
+        radio.range_m = params.range_m
+        radio.error = params.error
+        radio.error_free = params.error.constant_zero
+        radio.half_duplex = params.duplex == "half"
         if hasattr(self, "mac"):
-            self.hears_all = self.promiscuous or self.mac.hears_all
+            radio.judges_all = self.promiscuous or self.mac.hears_all
             self.medium.topology_changed()
 
     def set_mac(self, mac: Mac) -> None:
         self.mac = mac
         mac.attach(self)
-        self.hears_all = self.promiscuous or mac.hears_all
+        self.radio.judges_all = self.promiscuous or mac.hears_all
+
+    # What the radio holds, read through the modem (MACs, the trace, the emulators).
+
+    @property
+    def address(self) -> int:
+        return self.radio.address
+
+    @property
+    def tx_channel(self) -> str:
+        return self.radio.tx_channel
+
+    @property
+    def rx_channel(self) -> str:
+        return self.radio.rx_channel
+
+    @property
+    def range_m(self) -> tuple[float, float]:
+        return self.radio.range_m
+
+    @property
+    def error(self) -> ErrorModel:
+        return self.radio.error
+
+    @property
+    def pose(self) -> "PoseSource":
+        return self.radio.pose
+
+    def set_pose(self, pose: "PoseSource") -> None:
+        self.radio.pose = pose
+        self.medium.topology_changed()
+
+    # -- frames ---------------------------------------------------------------------------------
+
+    def new_frame(self, dst: str, dst_addr: int, size: int, flow: Any = None, payload: Any = None,
+                  kind: str = DATA, ref: "Frame | None" = None) -> Frame:
+        """The one way to make a frame this modem sends: the next id of the medium, stamped now.
+
+        ``dst`` is the receiver's link id for the trace (``"*"`` for broadcast), ``dst_addr`` the
+        address receivers match; ``flow`` the statistics of the flow that offered it, ``payload`` an
+        application's frame; MACs make their control frames with another ``kind`` serving ``ref``."""
+        frame = Frame(self.medium.new_frame_id(), self.id, dst, dst_addr, size, self.clock.now(), flow, payload,
+                      kind, ref)
+        frame.src_addr = self.radio.address
+        return frame
 
     # -- from the application ------------------------------------------------------------------
 
@@ -129,7 +172,7 @@ class SimModem:
             self.stats.fifo_drops += 1
             self.observer.drop(t, self, frame, "fifo")
             return False
-        frame.src_addr = self.address
+        frame.src_addr = self.radio.address
         self.fifo.append(frame)
         self.queued_bytes += frame.size
         if self.queued_bytes > self.stats.fifo_peak_bytes:
@@ -138,7 +181,7 @@ class SimModem:
         self.mac.on_enqueue()
         return True
 
-    # -- what a MAC may use -------------------------------------------------------------------
+    # -- what a MAC may use (MacHost) -----------------------------------------------------------
 
     def fifo_pop(self) -> "Frame":
         frame = self.fifo.popleft()
@@ -159,6 +202,10 @@ class SimModem:
     def airtime(self, size: int) -> float:
         return size * 8.0 / self.bitrate
 
+    def tau_at(self, range_m: float) -> float:
+        """Propagation delay to ``range_m`` metres on this modem's transmit channel."""
+        return self.medium.channels[self.radio.tx_channel].delay(range_m)
+
     def deliver(self, frame: "Frame") -> None:
         """Hand a good frame to the application after the rx delay and jitter."""
         extra = self.rx_delay
@@ -171,16 +218,25 @@ class SimModem:
 
     def channel_busy(self) -> bool:
         """Carrier sense: something is arriving at this modem now, or it is transmitting."""
-        now = self.clock.now()
-        if self.tx_start <= now < self.tx_end:
-            return True
-        for arrival in self.rx_pending:
-            if arrival.start <= now < arrival.end:
-                return True
-        for start, end in self.rx_noise:
-            if start <= now < end:
-                return True
-        return False
+        return self.radio.busy(self.clock.now())
+
+    def control_frame(self, kind: str, size: int, dst_addr: int, dst: str, ref: "Frame") -> "Frame":
+        """A MAC frame (ack, rts, cts…) serving ``ref``: its bytes count as ``ref``'s flow's on-air bytes."""
+        return self.new_frame(dst, dst_addr, size, flow=ref.flow, kind=kind, ref=ref)
+
+    def consume(self, frame: "Frame") -> None:
+        """A good MAC frame for this modem, used by the MAC itself: traced as ``rx``, not delivered."""
+        self.observer.rx(self.clock.now(), self, frame)
+
+    @property
+    def idle(self) -> bool:
+        """Nothing to send: FIFO empty, PHY free, and the MAC holds no frame (e.g. awaiting its ACK)."""
+        return not self.phy_busy and not self.fifo and not self.mac.holding
+
+    def check_idle(self) -> None:
+        """Tell the GLI (READY) if the modem just became idle; MACs call it when they let go of a frame."""
+        if self.on_idle is not None and self.idle:
+            self.on_idle()
 
     # -- inside the modem ---------------------------------------------------------------------
 
@@ -197,65 +253,31 @@ class SimModem:
             frame = self.fifo_pop()
             self.stats.fifo_drops += 1
             self.observer.drop(t, self, frame, "closed")
-        self.medium.detach(self)
+        self.medium.detach(self.radio)
 
     def _on_air(self, frame: "Frame") -> None:
         if self.closed:
             return
         t = self.clock.now()
         duration = frame.size * 8.0 / self.bitrate
-        end = t + duration
-        self.tx_start = t
-        self.tx_end = end
-        if self.half_duplex:
-            for arrival in self.rx_pending:
-                if arrival.start < end - OVERLAP_EPS and arrival.end - OVERLAP_EPS > t:
-                    arrival.collided = True
         self.stats.tx_packets += 1
         self.observer.tx(t, self, frame)
-        self.medium.transmit(self, frame, t, duration)
-        self.clock.at(end, self._off_air, frame)
+        self.radio.transmit(frame, t, duration)
+        self.clock.at(t + duration, self._off_air, frame)
 
     def _off_air(self, frame: "Frame") -> None:
         self.phy_busy = False
         self.mac.on_tx_done(frame)
         self.check_idle()
 
-    @property
-    def idle(self) -> bool:
-        """Nothing to send: FIFO empty, PHY free, and the MAC holds no frame (e.g. awaiting its ACK)."""
-        return not self.phy_busy and not self.fifo and not self.mac.holding
+    # -- from the radio (RadioHost) -------------------------------------------------------------
 
-    def check_idle(self) -> None:
-        """Tell the GLI (READY) if the modem just became idle; MACs call it when they let go of a frame."""
-        if self.on_idle is not None and self.idle:
-            self.on_idle()
-
-    def control_frame(self, kind: str, size: int, dst_addr: int, dst: str, ref: "Frame") -> "Frame":
-        """A MAC frame (ack, rts, cts…) serving ``ref``: its bytes count as ``ref``'s flow's on-air bytes."""
-        frame = Frame(self.medium.new_frame_id(), self.id, dst, dst_addr, size, self.clock.now(), ref.flow,
-                      kind=kind, ref=ref)
-        frame.src_addr = self.address
-        return frame
-
-    def consume(self, frame: "Frame") -> None:
-        """A good MAC frame for this modem, used by the MAC itself: traced as ``rx``, not delivered."""
-        self.observer.rx(self.clock.now(), self, frame)
-
-    def set_pose(self, pose: "PoseSource") -> None:
-        self.pose = pose
-        self.medium.topology_changed()
-
-    def arrival_end(self, arrival: "Arrival") -> None:
-        """The medium's call at the end of an arrival this modem must judge."""
+    def heard(self, frame: "Frame", cause: str | None) -> None:
+        """An arrival the radio judged has ended, good (``cause`` None) or lost."""
         if self.closed:
             return
-        frame = arrival.frame
-        if arrival.error:
-            cause = "mult" if arrival.collided else "prop"
-        else:
-            cause = "col" if arrival.collided else None
-        addressed = frame.dst_addr == self.address or frame.dst_addr == BROADCAST or self.promiscuous
+        address = self.radio.address
+        addressed = frame.dst_addr == address or frame.dst_addr == BROADCAST or self.promiscuous
         if cause is not None and addressed:
             self.observer.err(self.clock.now(), self, frame, cause)
         if addressed or self.mac.hears_all:

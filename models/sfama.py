@@ -27,11 +27,10 @@ import math
 from typing import TYPE_CHECKING, Any
 
 from .frame import ACK, BROADCAST, CTS, DATA, RTS
-from .mac import Duplicates, Mac, Param
+from .mac import Duplicates, Mac, MacHost, Param
 
 if TYPE_CHECKING:
     from .frame import Frame
-    from .modem import SimModem
 
 EPS = 1e-9
 DECIDE = 1e-9  # how long after a boundary a missing answer is declared missing
@@ -72,13 +71,12 @@ class SFama(Mac):
     def holding(self) -> bool:
         return self.current is not None
 
-    def attach(self, modem: "SimModem") -> None:
+    def attach(self, modem: MacHost) -> None:
         super().attach(modem)
         max_range = self.max_range_m if self.max_range_m is not None else modem.range_m[1]
         if max_range == float("inf"):
             raise ValueError("s-fama: give max_range_m (the modem's range is unlimited)")
-        channel = modem.medium.channels[modem.tx_channel]
-        self.tau_max = channel.delay(max_range)
+        self.tau_max = modem.tau_at(max_range)
         self.slot = self.tau_max + modem.airtime(max(self.rts_bytes, self.cts_bytes)) + modem.tx_delay
 
     @classmethod

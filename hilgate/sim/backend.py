@@ -40,9 +40,7 @@ class SimBackend(Backend):
         # (an emulated EvoLogics modem's frames, with meta, carry the modem's own acoustic addresses)
         dst = BROADCAST if self.everyone_in_range and frame.meta is None else frame.dst
         dst_name = "*" if dst == BROADCAST else self._link_names(modem.tx_channel, dst)
-        sim_frame = Frame(modem.medium.new_frame_id(), modem.id, dst_name, dst, len(frame.real),
-                          modem.clock.now(), None, frame)
-        return modem.send(sim_frame)
+        return modem.send(modem.new_frame(dst_name, dst, len(frame.real), payload=frame))
 
     def _deliver(self, frame: Frame) -> None:
         # Frames of built-in flows carry no application payload: they are background traffic.

@@ -1,0 +1,197 @@
+"""The radio of a simulated modem: what it is receiving, what it is sending, and what collides.
+
+This is the transducer of ns-3's UAN model (``UanTransducerHd``): it keeps the modem's transmit
+window, the arrivals it is receiving and the interference it hears, and decides which arrivals
+collide (DESIGN.md's timing model, step 4, and the error draw of step 5).  The medium only works out
+*when* a frame reaches which radio (through the channel) and *how likely* it is lost (through the
+error model), then hands each arrival to the receiver in one call, :meth:`Radio.arrive`.  The modem
+above it never looks at arrivals: at the end of each one it is judging, the radio tells its host the
+outcome with :meth:`RadioHost.heard`.
+
+An arrival someone must judge (addressed to this radio, broadcast, or every arrival when the radio
+``judges_all``: promiscuous modems and MACs that overhear) is an :class:`Arrival` in ``pending``;
+any other is only interference, a ``(start, end)`` pair in ``noise`` that can spoil the judged ones.
+Expired entries are dropped as the lists are walked (``noise`` once it has doubled since it was last
+pruned), so each list stays within a small multiple of the number of frames on air at once: that
+keeps an arrival O(1).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any, Protocol
+
+from .frame import BROADCAST
+
+if TYPE_CHECKING:
+    import random
+
+    from .clock import Clock
+    from .errormodel import ErrorModel
+    from .frame import Frame
+    from .medium import Medium
+    from .trajectories import PoseSource
+
+OVERLAP_EPS = 1e-9
+"""Arrivals must overlap by more than a nanosecond to collide: back-to-back frames computed along
+different floating-point paths (t + τ + T versus (t + T) + τ) may otherwise "overlap" by one ulp."""
+
+
+NOISE_MIN = 8
+"""``noise`` is pruned once it holds this many more entries than twice what was still on air at the
+last pruning: pruning then costs O(1) per arrival however many frames are on air at once."""
+
+
+class RadioHost(Protocol):
+    """What a radio tells the modem above it (the modem's side of the radio)."""
+
+    def heard(self, frame: "Frame", cause: str | None) -> None:
+        """An arrival this radio judged has ended: ``cause`` is None (good), ``prop``, ``col`` or ``mult``."""
+
+    def unreachable(self, frame: "Frame") -> None:
+        """A frame for this radio was sent while it was out of the sender's range (or had no pose)."""
+
+
+class LossModel(Protocol):
+    """What the medium hands with an arrival: the frame-loss probability on that path."""
+
+    def per(self, d: float, size: int) -> float: ...
+
+
+class Arrival:
+    """One frame reaching one radio over ``[start, end]``; flags set as the radio learns more."""
+
+    __slots__ = ("frame", "start", "end", "d", "error", "collided")
+
+    def __init__(self, frame: "Frame", start: float, end: float, d: float):
+        self.frame = frame
+        self.start = start
+        self.end = end
+        self.d = d
+        self.error = False
+        self.collided = False
+
+    def __repr__(self) -> str:
+        return f"Arrival({self.frame!r} [{self.start:.6f}, {self.end:.6f}] d={self.d:.3f})"
+
+
+class Radio:
+    """One modem's transducer on the medium.
+
+    What the medium reads (the radio's identity on the channels, set by the modem's configuration):
+    ``address``, ``tx_channel``, ``rx_channel``, ``range_m`` (as a sender), ``pose`` (where its vehicle
+    is) and ``error`` (the receiving side's error model, as the README decides).  What the medium
+    calls: :meth:`arrive` and :meth:`unreachable`.  What the modem calls: :meth:`transmit` and
+    :meth:`busy`.
+    """
+
+    __slots__ = (
+        "host", "medium", "clock", "rng",
+        "address", "tx_channel", "rx_channel", "range_m", "pose", "error", "error_free", "half_duplex", "judges_all",
+        "tx_start", "tx_end", "pending", "noise", "_noise_cap",
+    )
+
+    def __init__(self, host: RadioHost, medium: "Medium", clock: "Clock", rng: "random.Random"):
+        self.host = host
+        self.medium = medium
+        self.clock = clock
+        self.rng = rng  # the modem's own stream: one draw per judged arrival that may be lost
+        self.address = -1
+        self.tx_channel = self.rx_channel = ""
+        self.range_m: tuple[float, float] = (0.0, float("inf"))
+        self.pose: "PoseSource | Any" = None
+        self.error: "ErrorModel | Any" = None
+        self.error_free = True  # ``error`` is constant zero: no loss to compute, no draw
+        self.half_duplex = True
+        self.judges_all = False
+        self.tx_start = float("-inf")
+        self.tx_end = float("-inf")
+        self.pending: list[Arrival] = []  # judged arrivals that may still be on air
+        self.noise: list[tuple[float, float]] = []  # (start, end) of arrivals that only interfere
+        self._noise_cap = NOISE_MIN  # prune ``noise`` when it grows past this
+
+    # -- the modem's side ----------------------------------------------------------------------
+
+    def transmit(self, frame: "Frame", t: float, duration: float) -> None:
+        """Put ``frame`` on air from ``t`` for ``duration``: half duplex, it spoils what is arriving."""
+        end = t + duration
+        self.tx_start = t
+        self.tx_end = end
+        if self.half_duplex:
+            for arrival in self.pending:
+                if arrival.start < end - OVERLAP_EPS and arrival.end - OVERLAP_EPS > t:
+                    arrival.collided = True
+        self.medium.transmit(self, frame, t, duration)
+
+    def busy(self, now: float) -> bool:
+        """Carrier sense: something is arriving now, or this radio is transmitting."""
+        if self.tx_start <= now < self.tx_end:
+            return True
+        for arrival in self.pending:
+            if arrival.start <= now < arrival.end:
+                return True
+        for start, end in self.noise:
+            if start <= now < end:
+                return True
+        return False
+
+    # -- the medium's side ---------------------------------------------------------------------
+
+    def arrive(self, frame: "Frame", t: float, start: float, end: float, d: float, loss: LossModel) -> None:
+        """``frame``, sent at ``t`` from ``d`` metres away, reaches this radio over ``[start, end]``;
+        ``loss`` gives its loss probability on that path.
+
+        An arrival this radio judges goes to :meth:`_judge`; any other is only interference, kept
+        as a span that may spoil what it judges (the common case, so it is handled right here)."""
+        dst = frame.dst_addr
+        if self.judges_all or dst == self.address or dst == BROADCAST:
+            self._judge(frame, t, start, end, d, loss)
+            return
+        if self.pending:
+            for other in self.pending:
+                if other.start < end - OVERLAP_EPS and start < other.end - OVERLAP_EPS:
+                    other.collided = True
+        noise = self.noise
+        noise.append((start, end))
+        if len(noise) > self._noise_cap:
+            noise = self.noise = [span for span in noise if span[1] > t]
+            self._noise_cap = NOISE_MIN + 2 * len(noise)
+
+    def _judge(self, frame: "Frame", t: float, start: float, end: float, d: float, loss: LossModel) -> None:
+        """Check the arrival against what this radio hears and its own transmission, draw its loss now
+        (so draws follow the order of transmissions), and decide its outcome at its end."""
+        arrival = Arrival(frame, start, end, d)
+        live = []
+        for other in self.pending:
+            if other.end > t:
+                live.append(other)
+                if other.start < end - OVERLAP_EPS and start < other.end - OVERLAP_EPS:
+                    other.collided = True
+                    arrival.collided = True
+        live.append(arrival)
+        self.pending = live
+        if not arrival.collided:
+            for other_start, other_end in self.noise:
+                if other_start < end - OVERLAP_EPS and start < other_end - OVERLAP_EPS:
+                    arrival.collided = True
+                    break
+            if self.half_duplex and self.tx_end - OVERLAP_EPS > start and self.tx_start < end - OVERLAP_EPS:
+                arrival.collided = True
+        if not self.error_free:
+            per = loss.per(d, frame.size)
+            if per > 0.0 and (per >= 1.0 or self.rng.random() < per):
+                arrival.error = True
+        self.clock.at(end, self._arrival_over, arrival)
+
+    def unreachable(self, frame: "Frame") -> None:
+        """A frame for this radio that cannot reach it (out of the sender's range, or no pose)."""
+        self.host.unreachable(frame)
+
+    def _arrival_over(self, arrival: Arrival) -> None:
+        if arrival.error:
+            cause = "mult" if arrival.collided else "prop"
+        else:
+            cause = "col" if arrival.collided else None
+        self.host.heard(arrival.frame, cause)
+
+    def __repr__(self) -> str:
+        return f"Radio(addr={self.address} {self.tx_channel}->{self.rx_channel})"
