@@ -1,8 +1,10 @@
-"""The simulated modem: transmit FIFO in bytes, intrinsic delays and jitter, bitrate, half duplex.
+"""The simulated modem: transmit FIFO in bytes, intrinsic delays and jitter, bitrate, its MAC and its radio.
 
 This is DESIGN.md's timing model, steps 1, 2 and 6, with the MAC deciding when the head of the FIFO
 goes to the PHY.  A frame leaves the FIFO when the MAC hands it to the PHY; from then until the end
-of its transmission the PHY is busy.  With ``mac: none`` that gives exactly
+of its transmission the PHY is busy.  What is on air (duplex, collisions, the error draw) is the
+radio's (``radio.py``); the modem hears only the outcome of each arrival.  With ``mac: none`` that
+gives exactly
 
     t_s = max(t0, t_free) + tx_delay + N(0, tx_jitter)   (extra delay never negative)
     delivery = t_e + rx_delay + N(0, rx_jitter)          (extra delay never negative)
@@ -102,16 +104,10 @@ class SimModem:
         self.rx_jitter = params.rx_jitter_s
         self.fifo_bytes = params.fifo_bytes
         self.promiscuous = params.promiscuous
-        radio = self.radio
-        radio.address = params.address
-        radio.tx_channel = params.tx_channel
-        radio.rx_channel = params.rx_channel
-        radio.range_m = params.range_m
-        radio.error = params.error
-        radio.error_free = params.error.constant_zero
-        radio.half_duplex = params.duplex == "half"
+        self.radio.configure(params.address, params.tx_channel, params.rx_channel, params.range_m, params.error,
+                             params.duplex == "half")
         if hasattr(self, "mac"):
-            radio.judges_all = self.promiscuous or self.mac.hears_all
+            self.radio.judges_all = self.promiscuous or self.mac.hears_all
             self.medium.topology_changed()
 
     def set_mac(self, mac: Mac) -> None:

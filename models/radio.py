@@ -77,11 +77,12 @@ class Arrival:
 class Radio:
     """One modem's transducer on the medium.
 
-    What the medium reads (the radio's identity on the channels, set by the modem's configuration):
+    What the medium reads (the radio's identity on the channels, from the modem's configuration):
     ``address``, ``tx_channel``, ``rx_channel``, ``range_m`` (as a sender), ``pose`` (where its vehicle
-    is) and ``error`` (the receiving side's error model, as the README decides).  What the medium
-    calls: :meth:`arrive` and :meth:`unreachable`.  What the modem calls: :meth:`transmit` and
-    :meth:`busy`.
+    is), ``error`` (the receiving side's error model, as the README decides) and ``host`` (to find a
+    modem by address).  What the medium calls: :meth:`arrive` for every arrival, :meth:`unreachable`
+    for a frame addressed to it that cannot arrive.  What the modem calls: :meth:`configure`,
+    :meth:`transmit` and :meth:`busy`; it sets ``pose`` and ``judges_all``.
     """
 
     __slots__ = (
@@ -110,6 +111,17 @@ class Radio:
         self._noise_cap = NOISE_MIN  # prune ``noise`` when it grows past this
 
     # -- the modem's side ----------------------------------------------------------------------
+
+    def configure(self, address: int, tx_channel: str, rx_channel: str, range_m: tuple[float, float],
+                  error: "ErrorModel", half_duplex: bool) -> None:
+        """Take the modem's (new) parameters; the modem tells the medium that they changed."""
+        self.address = address
+        self.tx_channel = tx_channel
+        self.rx_channel = rx_channel
+        self.range_m = range_m
+        self.error = error
+        self.error_free = error.constant_zero
+        self.half_duplex = half_duplex
 
     def transmit(self, frame: "Frame", t: float, duration: float) -> None:
         """Put ``frame`` on air from ``t`` for ``duration``: half duplex, it spoils what is arriving."""

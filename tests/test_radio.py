@@ -7,6 +7,7 @@ import random
 import pytest
 
 from hilgate.core.scheduler import VirtualScheduler
+from hilgate.models.errormodel import NO_ERRORS, ErrorModel
 from hilgate.models.frame import BROADCAST, Frame
 from hilgate.models.radio import NOISE_MIN, Arrival, Radio
 
@@ -48,10 +49,9 @@ def make(half_duplex=True, judges_all=False, error_free=True, seed=1):
     clock = VirtualScheduler()
     host = Host(clock)
     radio = Radio(host, Medium(), clock, random.Random(seed))
-    radio.address = ME
-    radio.half_duplex = half_duplex
+    error = NO_ERRORS if error_free else ErrorModel("packet", "0.5")  # the loss model handed says how much
+    radio.configure(ME, "ac", "ac", (0.0, float("inf")), error, half_duplex)
     radio.judges_all = judges_all
-    radio.error_free = error_free
     return radio, host, clock
 
 
