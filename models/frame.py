@@ -19,6 +19,7 @@ class Frame:
     it (None for frames from applications) so that counting an event is one attribute access.
     ``payload`` carries the GLI packet bytes for frames from applications.  MAC protocols make their
     own control frames with another ``kind`` and may hang the data frame they serve on ``ref``.
+    Frames are made by the sending modem, :meth:`SimModem.new_frame`, which hands out the ids.
     """
 
     __slots__ = ("id", "src", "dst", "dst_addr", "size", "t0", "flow", "payload", "kind", "ref", "seq", "src_addr")
