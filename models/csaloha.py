@@ -164,7 +164,7 @@ class CsAloha(Mac):
         if frame.kind != DATA:
             return
         if self.acks and frame.dst_addr != BROADCAST and frame.dst_addr == modem.address:
-            ack = modem.control_frame(ACK, self.ack_bytes, frame.src_addr, frame.src, frame)
+            ack = modem.control_frame(ACK, self.ack_bytes, frame.src_addr, frame.src_link, frame)
             if modem.phy_busy:
                 self.pending_acks.append(ack)
             else:

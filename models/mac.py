@@ -144,7 +144,7 @@ class Duplicates:
         self._recent: OrderedDict[tuple[str, int], None] = OrderedDict()
 
     def seen(self, frame: "Frame") -> bool:
-        key = (frame.src, frame.id)
+        key = (frame.src_link, frame.id)
         if key in self._recent:
             return True
         self._recent[key] = None

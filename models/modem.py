@@ -82,7 +82,7 @@ class SimModem:
         self.rng = rng
         self.observer: Observer = observer or NullObserver()
         self.stats = LinkStats()
-        self.upper: Callable[["Frame"], Any] | None = None
+        self.on_deliver: Callable[["Frame"], Any] | None = None  # hands a good frame up (the backend)
         self.on_idle: Callable[[], Any] | None = None  # FIFO empty and PHY free again (GLI READY)
         self.fifo: deque[Frame] = deque()
         self.queued_bytes = 0
@@ -147,15 +147,15 @@ class SimModem:
 
     # -- frames ---------------------------------------------------------------------------------
 
-    def new_frame(self, dst: str, dst_addr: int, size: int, flow: Any = None, payload: Any = None,
+    def new_frame(self, dst_link: str, dst_addr: int, size: int, flow: Any = None, app_frame: Any = None,
                   kind: str = DATA, ref: "Frame | None" = None) -> Frame:
         """The one way to make a frame this modem sends: the next id of the medium, stamped now.
 
-        ``dst`` is the receiver's link id for the trace (``"*"`` for broadcast), ``dst_addr`` the
-        address receivers match; ``flow`` the statistics of the flow that offered it, ``payload`` an
+        ``dst_link`` is the receiver's link id for the trace (``"*"`` for broadcast), ``dst_addr`` the
+        address receivers match; ``flow`` the statistics of the flow that offered it, ``app_frame`` an
         application's frame; MACs make their control frames with another ``kind`` serving ``ref``."""
-        frame = Frame(self.medium.new_frame_id(), self.id, dst, dst_addr, size, self.clock.now(), flow, payload,
-                      kind, ref)
+        frame = Frame(self.medium.new_frame_id(), self.id, dst_link, dst_addr, size, self.clock.now(), flow,
+                      app_frame, kind, ref)
         frame.src_addr = self.radio.address
         return frame
 
@@ -242,7 +242,7 @@ class SimModem:
         if self.closed:
             return
         self.closed = True
-        self.upper = None
+        self.on_deliver = None
         self.on_idle = None
         t = self.clock.now()
         while self.fifo:
@@ -286,8 +286,8 @@ class SimModem:
     def _deliver_now(self, frame: "Frame") -> None:
         self.stats.rx_packets += 1
         self.observer.rx(self.clock.now(), self, frame)
-        if self.upper is not None:
-            self.upper(frame)
+        if self.on_deliver is not None:
+            self.on_deliver(frame)
 
     def __repr__(self) -> str:
         return f"SimModem({self.id!r} addr={self.address})"

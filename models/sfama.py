@@ -140,7 +140,7 @@ class SFama(Mac):
             self.state = SEND_DATA
             modem.transmit(frame)
             return
-        rts = modem.control_frame(RTS, self.rts_bytes, frame.dst_addr, frame.dst, frame)
+        rts = modem.control_frame(RTS, self.rts_bytes, frame.dst_addr, frame.dst_link, frame)
         self.state = WAIT_CTS
         modem.transmit(rts)
         self.rts_slot = self.slot_index(now)
@@ -221,7 +221,7 @@ class SFama(Mac):
             modem.consume(frame)
             if now < self.silent_until - EPS or self.state in (WAIT_CTS, SEND_DATA, WAIT_ACK) or self.answering:
                 return  # busy or silenced: no CTS
-            cts = modem.control_frame(CTS, self.cts_bytes, frame.src_addr, frame.src, frame.ref)
+            cts = modem.control_frame(CTS, self.cts_bytes, frame.src_addr, frame.src_link, frame.ref)
             # the slot is sized so that an RTS from up to max_range has fully arrived by the next
             # boundary, possibly exactly on it: the CTS goes at that boundary
             at = self.next_boundary(now)
@@ -240,7 +240,7 @@ class SFama(Mac):
                 self._done()
         elif frame.kind == DATA and addressed:
             if frame.dst_addr != BROADCAST and frame.dst_addr == modem.address:
-                ack = modem.control_frame(ACK, self.ack_bytes, frame.src_addr, frame.src, frame)
+                ack = modem.control_frame(ACK, self.ack_bytes, frame.src_addr, frame.src_link, frame)
                 self._answer(self.next_boundary(now), ack)
             if self.duplicates.seen(frame):
                 modem.observer.mac(now, modem, frame, "dup")

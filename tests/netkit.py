@@ -31,7 +31,7 @@ class Net:
                          random.Random(f"{self.seed}/{name}"), self.events, mac)
         self.modems[name] = modem
         self.delivered[name] = []
-        modem.upper = lambda frame, name=name: self.delivered[name].append((self.clock.now(), frame))
+        modem.on_deliver = lambda frame, name=name: self.delivered[name].append((self.clock.now(), frame))
         return modem
 
     def send(self, src: str, dst: str | None, size: int, at: float | None = None) -> Frame:

@@ -65,12 +65,12 @@ def test_tau_at_is_the_delay_on_the_modems_transmit_channel():
 def test_new_frame_and_control_frame():
     net = Net()
     a = net.modem("a", address=7)
-    first = a.new_frame("b", 3, 20, flow="flow-stats", payload=b"x")
+    first = a.new_frame("b", 3, 20, flow="flow-stats", app_frame=b"x")
     net.clock.run(2.5)
     ack = a.control_frame(ACK, 5, 3, "b", first)
-    assert (first.id, first.src, first.dst, first.dst_addr, first.size, first.t0, first.src_addr) == \
+    assert (first.id, first.src_link, first.dst_link, first.dst_addr, first.size, first.t0, first.src_addr) == \
         (1, "a", "b", 3, 20, 0.0, 7)
-    assert (ack.id, ack.kind, ack.ref, ack.flow, ack.t0, ack.src_addr, ack.payload) == \
+    assert (ack.id, ack.kind, ack.ref, ack.flow, ack.t0, ack.src_addr, ack.app_frame) == \
         (2, ACK, first, "flow-stats", 2.5, 7, None)
     assert a.new_frame("*", BROADCAST, 1).id == 3
 

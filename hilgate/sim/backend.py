@@ -19,12 +19,12 @@ class SimBackend(Backend):
         self.modem = modem
         self._link_names = link_names
         self.everyone_in_range = everyone_in_range  # see LinkSpec.everyone_in_range
-        modem.upper = self._deliver
+        modem.on_deliver = self._deliver
         modem.on_idle = self._idle
 
     def rebind(self, modem: SimModem) -> None:
         self.modem = modem
-        modem.upper = self._deliver
+        modem.on_deliver = self._deliver
         modem.on_idle = self._idle
 
     @property
@@ -40,12 +40,12 @@ class SimBackend(Backend):
         # (an emulated EvoLogics modem's frames, with meta, carry the modem's own acoustic addresses)
         dst = BROADCAST if self.everyone_in_range and frame.meta is None else frame.dst
         dst_name = "*" if dst == BROADCAST else self._link_names(modem.tx_channel, dst)
-        return modem.send(modem.new_frame(dst_name, dst, len(frame.real), payload=frame))
+        return modem.send(modem.new_frame(dst_name, dst, len(frame.real), app_frame=frame))
 
     def _deliver(self, frame: Frame) -> None:
         # Frames of built-in flows carry no application payload: they are background traffic.
-        if isinstance(frame.payload, AppFrame) and self.on_receive is not None:
-            self.on_receive(frame.payload)
+        if isinstance(frame.app_frame, AppFrame) and self.on_receive is not None:
+            self.on_receive(frame.app_frame)
 
     def _idle(self) -> None:
         if self.on_idle is not None:
@@ -57,5 +57,5 @@ class SimBackend(Backend):
                 "fifo_bytes": self.modem.queued_bytes}
 
     def close(self) -> None:
-        self.modem.upper = None
+        self.modem.on_deliver = None
         self.modem.on_idle = None

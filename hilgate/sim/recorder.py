@@ -76,7 +76,7 @@ class FlowStats:
 def _lateness(frame: Any) -> str:
     """``, "lateness_s": x`` for a frame from an application that the daemon read late (its stamp
     ``t`` may be up to x after the application sent it); nothing otherwise."""
-    payload = frame.payload
+    payload = frame.app_frame
     late = getattr(payload, "lateness", 0.0) if payload is not None else 0.0
     return f', "lateness_s": {round(late, 6)!r}' if late else ""
 
@@ -126,7 +126,7 @@ class Recorder:
     def _line(self, t: float, ev: str, modem: Any, frame: Any, cause: str | None = None, extra: str = "") -> None:
         name = self._name
         line = (f'{{"t": {round(t, 9)!r}, "ev": "{ev}", "link": {modem.json_id}, "pkt": {frame.id}, '
-                f'"src": {name(frame.src)}, "dst": {name(frame.dst)}, "size": {frame.size}')
+                f'"src": {name(frame.src_link)}, "dst": {name(frame.dst_link)}, "size": {frame.size}')
         if frame.kind != DATA:
             line += f', "kind": "{frame.kind}"'
         if cause is not None:
