@@ -91,12 +91,12 @@ class VirtualScheduler:
         fn(*args)
 
     def run_deferred(self) -> None:
-        deferred = self._deferred
+        deferred = self._deferred  # one list for the scheduler's life: run() keeps a local name for it
         while deferred:
-            batch, self._deferred = deferred, []
+            batch = deferred[:]
+            deferred.clear()
             for fn in batch:
                 self._fire(fn, ())
-            deferred = self._deferred
 
     # -- virtual time ------------------------------------------------------------------------------
 
@@ -105,6 +105,7 @@ class VirtualScheduler:
 
         This is :meth:`peek` and :meth:`step` written out in one loop: it is the simulator's hot path."""
         heap = self._heap
+        deferred = self._deferred
         fired = 0
         while heap:
             entry = heap[0]
@@ -118,9 +119,9 @@ class VirtualScheduler:
             self._now = t
             fn(*entry[3])
             fired += 1
-            if self._deferred and (not heap or heap[0][0] > t):
+            if deferred and (not heap or heap[0][0] > t):
                 self.run_deferred()
-        if self._deferred:
+        if deferred:
             self.run_deferred()
         if until != INF and until > self._now:
             self._now = until
