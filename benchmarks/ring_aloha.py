@@ -4,7 +4,7 @@
 A sink at the origin and N-1 senders on a ring of 500 m; every sender offers 35-byte frames (32 B of
 payload + ns-3's 3-byte UAN header, as on air) to the sink as a Poisson process of 0.05 frame/s, at
 1 kbit/s, ideal propagation at 1500 m/s, half duplex, ``mac: none``; 36 000 simulated seconds.  The
-scene goes through the normal scene loader and ``hilgate.simulate``, exactly what ``hilgate sim``
+scene goes through the normal scene loader and ``hilgate.sim.simulate``, exactly what ``hilgate sim``
 runs.  Printed per N: the sink's delivery ratio beside ns-3's, the arrivals handled per wall second
 (every frame reaching every receiver in range, as the bare heapq baseline counts them) and the wall
 time beside ns-3's.

@@ -5,7 +5,7 @@ a packet is the link's packet bytes followed by CR LF.  Without RTS/CTS flow con
 at most 45 bytes at a time, so the bridge writes 45-byte pieces paced at the air bitrate, then the
 CR LF.  The receiver hunts frames in the byte stream by the packet class's preamble, length and CRC,
 skipping stray CR LF and ``+++…\\r\\n`` modem notices.  ``raw`` links, which have no framing of their
-own, get :class:`hilgate.packets.HilgateFrame`.
+own, get :class:`hilgate.core.packets.HilgateFrame`.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The only view of time the models have.
 
 ``models/`` never reads the wall clock or sleeps: it asks a :class:`Clock` for the current time and
-to call it back later.  ``hilgate.scheduler`` provides a virtual-time implementation (as fast as
+to call it back later.  ``hilgate.core.scheduler`` provides a virtual-time implementation (as fast as
 possible, for ``hilgate sim`` and tests) and a real-time one (for the daemon); both run this code
 unchanged.
 """

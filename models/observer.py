@@ -1,7 +1,7 @@
 """What the models report as they run: the events of the trace, as calls.
 
 The simulated modem and the MACs call an :class:`Observer` at every enqueue, drop, transmission,
-delivery and loss.  ``hilgate.recorder`` implements it (trace file, per-flow and per-link metrics);
+delivery and loss.  ``hilgate.sim.recorder`` implements it (trace file, per-flow and per-link metrics);
 tests use :class:`EventList` to look at exactly what happened.
 """
 

@@ -10,7 +10,7 @@
     Link.open("rov0_rf", tcp=("topside", 4280))  # from another host (the daemon's --tcp listener)
 
 Blocking and single-threaded on purpose: one object per link per thread.  The framing is
-documented in :mod:`hilgate.gli_wire` for applications in other languages.
+documented in :mod:`hilgate.gli.wire` for applications in other languages.
 """
 
 from __future__ import annotations
