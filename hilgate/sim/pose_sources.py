@@ -1,7 +1,7 @@
 """Pose sources built from a scene's vehicles: scripted ones, application-driven ones, live ones.
 
 Live vehicles (MAVLink, ArUco) are :class:`~hilgate.sim.live_vehicle.LiveVehicle` entries of the pose board;
-what feeds them runs in the daemon (:mod:`hilgate.live`).  In virtual time nothing feeds them: they
+what feeds them runs in the daemon (:mod:`hilgate.daemon.live_sources`).  In virtual time nothing feeds them: they
 stay at their ``initial`` position (or, without one, nowhere: their modems are heard by nobody).
 """
 
