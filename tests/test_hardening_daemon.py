@@ -247,24 +247,24 @@ def test_frames_nobody_was_there_to_read_are_not_counted_as_application_drops(tm
     try:
         daemon.wait_for("READY=1")
         with Link.open(a, runtime_dir=daemon.runtime) as sender, Link.open(b, runtime_dir=daemon.runtime) as reader:
-            for i in range(15):
+            for i in range(80):
                 sender.send(b"hello %d" % i)  # broadcast: b (a socket client) and c (nobody) hear it
-            got = [reader.recv(timeout=60) for _ in range(15)]
+            got = [reader.recv(timeout=60) for _ in range(80)]
             assert all(m is not None for m in got)
             deadline = time.monotonic() + 60
-            while daemon.link_status(c)["unread"] < 15:
+            while daemon.link_status(c)["unread"] < 80:
                 assert time.monotonic() < deadline, daemon.link_status(c)
                 time.sleep(0.01)
         status_b, status_c = daemon.link_status(b), daemon.link_status(c)
         assert status_b["drops"] == 0 and status_b["unread"] == 0  # socket-only: every frame delivered
-        # c: its queue (10 messages, BUSY and READY among them) keeps 8 frames for an application that
-        # starts late; the other 7 nobody could read
-        assert status_c["drops"] == 0 and status_c["unread"] == 15 and status_c["drop_causes"] == {"no_reader": 7}
+        # c: its queue (10 messages, BUSY and READY among them) and a 64-message backlog keep 72 frames for
+        # an application that starts late; the other 8 nobody could read
+        assert status_c["drops"] == 0 and status_c["unread"] == 80 and status_c["drop_causes"] == {"no_reader": 8}
     finally:
         daemon.stop()
         events = daemon.trace_events()
         daemon.close()
-    assert sum(1 for e in events if e.get("cause") == "no_reader" and e["link"] == c) == 7
+    assert sum(1 for e in events if e.get("cause") == "no_reader" and e["link"] == c) == 8
 
 
 def test_frames_left_in_the_queue_while_no_daemon_ran_are_counted_and_traced_as_stale(tmp_path):
@@ -343,5 +343,34 @@ def test_a_reload_of_a_scene_with_a_plugin_mac(tmp_path):
         daemon.scene.write_text(text.replace("slot_s: 0.5", "slot_s: 0.25"))
         assert daemon.control({"class": "RELOAD"}) == {"class": "RELOAD", "ok": True}
         assert "Traceback" not in daemon.output()
+    finally:
+        daemon.close()
+
+
+def test_an_application_that_only_listens_gets_a_burst_without_losses(tmp_path):
+    """It never writes on its queue (no REQ_STATE), but it reads: the daemon sees that and keeps the
+    whole backlog for it."""
+    import posix_ipc
+
+    from hilgate.client import Link
+
+    a, b = unique("a"), unique("b")
+    daemon = Daemon(tmp_path, scene(a, b).replace("bitrate_bps: 10000", "bitrate_bps: 1e9"), [a, b])
+    try:
+        daemon.wait_for("READY=1")
+        queue = posix_ipc.MessageQueue(f"/{b}_rx_dlnk_phy")
+        frames = 0
+        with Link.open(a, runtime_dir=daemon.runtime) as sender:
+            sender.send(b"first", dst=2)
+            while frames < 1:  # the listener takes what the daemon put in its queue…
+                message, _ = queue.receive(60)
+                frames += message[0] == 0
+            for i in range(300):  # …so a burst far beyond queue and short backlog reaches it whole
+                sender.send(b"burst %d" % i, dst=2)
+            while frames < 301:
+                message, _ = queue.receive(60)
+                frames += message[0] == 0
+        queue.close()
+        assert daemon.link_status(b)["drop_causes"] == {}
     finally:
         daemon.close()

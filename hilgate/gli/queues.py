@@ -259,12 +259,19 @@ def drain(queue: posix_ipc.MessageQueue, limit: int = 100_000) -> list[bytes]:
     return messages
 
 
+UNATTENDED_BACKLOG = 64
+"""Messages kept for a link's queue before any application has shown itself on it: enough for a burst
+while a listener starts reading, little memory for the many links nobody opens."""
+
+
 class MqEndpoint:
     """One link's pair of queues, attached to the real-time scheduler's loop: an endpoint of the link.
 
-    Whether an application is there is known once it speaks (:class:`QueueProtocol`).  Until then
-    frames are kept only in the kernel queue, for an application that starts late, and what does not
-    fit is not an application's loss but a frame nobody was there to read (see :meth:`deliver`).
+    Whether an application is there is known once it speaks (:class:`QueueProtocol`), or once it
+    takes messages from its queue (an application that only listens).  Until then frames are kept in
+    the queue and a short backlog (:data:`UNATTENDED_BACKLOG`) for an application that starts late,
+    and what does not fit is not an application's loss but a frame nobody was there to read (see
+    :meth:`deliver`).
     Frames that an application left in the queues while no daemon ran are drained at start and
     reported (``stale``), never sent on air."""
 
@@ -297,6 +304,7 @@ class MqEndpoint:
                         port.id, self.stale)
         self.backlog_limit = backlog
         self.backlog: deque[bytes] = deque()
+        self._queued = 0  # messages put in the application's queue since it was last looked at
         self._tell(self.protocol.state_message(False))  # BUSY until the link is up
         scheduler.add_reader(self.from_app.mqd, self._readable)
 
@@ -348,8 +356,8 @@ class MqEndpoint:
     def deliver(self, frame: AppFrame, t: float) -> str:
         """Hand a received frame to the application: ``taken`` (in its queue, or the backlog while it is
         slow to read) or ``app_full`` (the queue and the backlog are full).  Before any application has
-        shown itself, the frame is ``kept`` in the kernel queue for one that starts late (at most the
-        queue's few messages, no backlog: nobody may ever come), or is ``absent``."""
+        shown itself, the frame is ``kept`` for one that starts late (in the queue and a short backlog:
+        nobody may ever come), or is ``absent``."""
         real = frame.real
         packet = self.protocol.packet
         if frame.packet.name != packet.name:
@@ -358,31 +366,37 @@ class MqEndpoint:
             except PacketError:
                 return "size"
         message = self.protocol.frame_message(real, frame.seq, frame.src, frame.dst)
+        if not self.protocol.attended and self._someone_reads():
+            self.protocol.attended = True  # an application that only reads: it took what was queued
         if not self.protocol.attended:
-            if self.backlog:
-                return ABSENT
-            try:
-                self.to_app.send(message)
-            except posix_ipc.BusyError:
-                return ABSENT
-            except (ValueError, posix_ipc.Error, OSError) as exc:
-                log.warning("link %s: cannot write %s: %s", self.port.id, self.to_app_name, exc)
-                return ABSENT
-            return KEPT
+            return KEPT if self._put(message, UNATTENDED_BACKLOG) else ABSENT
         return TAKEN if self._put(message) else "app_full"
 
-    def _put(self, message: bytes) -> bool:
-        """Send now, or keep in the backlog; False if the backlog is full too."""
+    def _someone_reads(self) -> bool:
+        """Whether messages this endpoint put in the application's queue have been taken since it last
+        looked: an application that never writes (a pure listener) shows itself that way."""
+        try:
+            waiting = self.to_app.current_messages
+        except (posix_ipc.Error, OSError):
+            return False
+        taken = waiting < self._queued
+        self._queued = waiting
+        return taken
+
+    def _put(self, message: bytes, limit: int | None = None) -> bool:
+        """Send now, or keep in the backlog (at most ``limit`` messages, default ``--gli-backlog``);
+        False if the backlog is full too."""
         if not self.backlog:
             try:
                 self.to_app.send(message)
+                self._queued += 1
                 return True
             except posix_ipc.BusyError:
                 self.scheduler.set_writer(self.to_app.mqd, self._flush)
             except (ValueError, posix_ipc.Error, OSError) as exc:  # checked at open; kept for safety
                 log.warning("link %s: cannot write %s: %s", self.port.id, self.to_app_name, exc)
                 return False
-        if len(self.backlog) >= self.backlog_limit:
+        if len(self.backlog) >= min(self.backlog_limit, limit if limit is not None else self.backlog_limit):
             return False
         self.backlog.append(message)
         return True
@@ -392,6 +406,7 @@ class MqEndpoint:
         while backlog:
             try:
                 self.to_app.send(backlog[0])
+                self._queued += 1
             except posix_ipc.BusyError:
                 return
             except (ValueError, posix_ipc.Error, OSError) as exc:
