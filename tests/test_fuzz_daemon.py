@@ -11,7 +11,7 @@ import socket
 
 import posix_ipc
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from daemon_kit import Daemon, unique
@@ -69,6 +69,8 @@ requests = st.one_of(
 
 @settings(max_examples=examples(60), deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(lines=st.lists(requests, min_size=1, max_size=5))
+@example(lines=['{"class": "WATCH", "enable": false, "interval_s": null}'])  # once went unanswered
+@example(lines=['{"class": "WATCH", "interval_s": 0.05}', '{"class": "STATUS"}'])
 def test_fuzz_control_requests(daemon, lines):
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     sock.settimeout(60)
@@ -82,9 +84,11 @@ def test_fuzz_control_requests(daemon, lines):
                 continue  # an empty line gets no answer; reloads are tested elsewhere (they take a second)
             sock.sendall(request + b"\n")
             answer = json.loads(reader.readline())
-            assert answer["class"] in ("ERROR", "STATUS"), answer
-            if '"WATCH"' in line:
+            assert answer["class"] in ("ERROR", "STATUS", "WATCH"), answer
+            if '"WATCH"' in line:  # maybe a watch began: stop it, and skip its STATUS lines to the answer
                 sock.sendall(b'{"class": "WATCH", "enable": false}\n')
+                while answer["class"] != "WATCH" or answer.get("enable") is not False:
+                    answer = json.loads(reader.readline())
     finally:
         sock.close()
 

@@ -197,6 +197,16 @@ def test_clients_per_link_and_in_total_are_capped_with_an_answer(tmp_path):
         first, second = Link.open(a, runtime_dir=daemon.runtime), Link.open(a, runtime_dir=daemon.runtime)
         with pytest.raises(GliError, match="too many clients on link"):
             Link.open(a, runtime_dir=daemon.runtime)
+
+        class SlowToSayHello(Link):  # descheduled between connect and HELLO, as on a loaded host
+            def _connected(self):
+                deadline = time.monotonic() + 60
+                while not self.sock.recv(1, socket.MSG_PEEK):  # the daemon's refusal has arrived
+                    assert time.monotonic() < deadline
+                time.sleep(0.2)  # and it has closed the connection by now
+
+        with pytest.raises(GliError, match="too many clients on link"):
+            SlowToSayHello.open(a, runtime_dir=daemon.runtime)
         third = Link.open(b, runtime_dir=daemon.runtime)
         with pytest.raises(GliError, match=r"too many clients \(3\)"):
             Link.open(b, runtime_dir=daemon.runtime)

@@ -5,7 +5,8 @@ Requests and their replies:
 
 - ``{"class": "STATUS"}`` → ``{"class": "STATUS", "time": t, "scene": name, "links": [...], "vehicles": [...]}``
 - ``{"class": "RELOAD"}`` → ``{"class": "RELOAD", "ok": true}`` or ``{"ok": false, "error": "..."}``
-- ``{"class": "WATCH", "interval_s": 1.0}`` → a STATUS every interval until ``{"class": "WATCH", "enable": false}``
+- ``{"class": "WATCH", "interval_s": 1.0}`` → a STATUS at once and every interval until
+  ``{"class": "WATCH", "enable": false}``, which is answered ``{"class": "WATCH", "enable": false}``
 - anything else, or a request with bad values → ``{"class": "ERROR", "error": "..."}``
 
 Everything a client sends is checked: a line is at most 16 KB of JSON nested at most 32 deep, the
@@ -144,7 +145,9 @@ class _ControlClient:
                 raise RequestError(f"interval_s must be a number of seconds, not {json.dumps(interval)[:40]}")
             self._stop_watch()
             if enable:
-                self._watch(min(MAX_WATCH_S, max(MIN_WATCH_S, float(interval))))
+                self._watch(min(MAX_WATCH_S, max(MIN_WATCH_S, float(interval))))  # answered by its first STATUS
+            else:
+                self.send({"class": "WATCH", "enable": False})
         elif kind in server.extra:
             self.send(server.extra[kind](request))
         else:

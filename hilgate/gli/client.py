@@ -69,7 +69,11 @@ class Link:
                 raise GliError(f"cannot reach link {link_id!r} at {path}: {exc.strerror or exc}") from None
         link = cls(sock, link_id)
         try:
-            sock.sendall(wire.encode_json(wire.HELLO, {"link": link_id}))
+            link._connected()
+            try:
+                sock.sendall(wire.encode_json(wire.HELLO, {"link": link_id}))
+            except (BrokenPipeError, ConnectionResetError):
+                pass  # hilgate refused the connection at once (a full link): its ERROR waits to be read
             deadline = time.monotonic() + timeout
             while not link.info:
                 link._pump(max(0.0, deadline - time.monotonic()))
@@ -81,6 +85,9 @@ class Link:
             sock.close()
             raise
         return link
+
+    def _connected(self) -> None:
+        """Called between connecting and HELLO (a test makes the client slow there)."""
 
     @property
     def address(self) -> int:
@@ -138,6 +145,8 @@ class Link:
             data = self.sock.recv(65536)
         except socket.timeout:
             return False
+        except ConnectionResetError:
+            raise GliError("hilgate closed the connection (reset)") from None
         if not data:
             raise GliError("hilgate closed the connection")
         for kind, body in self.decoder.feed(data):
