@@ -79,7 +79,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         log.info("real-time set-up: %s", make_realtime(args.realtime_priority))
     daemon = Daemon(scene, args.overrides, daemon_runtime_dir(args.runtime_dir), args.speed, args.tcp,
                     args.trace, args.summary, args.until, status_line, args.gli_backlog, args.group,
-                    args.max_clients, args.max_link_clients, plugins=args.plugins, preset_dirs=args.preset_dirs)
+                    args.max_clients, args.max_link_clients, plugins=args.plugins, preset_dirs=args.preset_dirs,
+                    host=args.host, zenoh_connect=args.zenoh_connect, zenoh_listen=args.zenoh_listen,
+                    clock_offset_s=args.clock_offset_s)
     return daemon.run()
 
 
@@ -118,6 +120,9 @@ def cmd_status(args: argparse.Namespace) -> int:
             for line in reader:
                 _print_status(json.loads(line), args.json)
             return 0
+        if args.network:
+            _print_network(request({"class": "NETWORK"}), args.json)
+            return 0
         _print_status(request({"class": "STATUS"}), args.json)
     finally:
         sock.close()
@@ -130,6 +135,41 @@ def _link_note(link: dict) -> str:
         return link["reason"]
     causes = link.get("drop_causes") or {}
     return ", ".join(f"{cause} {n}" for cause, n in sorted(causes.items()))
+
+
+def _print_network(answer: dict, as_json: bool) -> None:
+    """``hilgate status --network``: every host's daemon, its links and how late the others' frames come."""
+    import json
+
+    if answer.get("class") == "ERROR":
+        raise OSError(answer.get("error"))
+    hosts = answer.get("hosts", [])
+    if as_json:
+        print(json.dumps(hosts), flush=True)
+        return
+    from .report.tables import _render
+
+    rows, seen = [], {}
+    for host in hosts:
+        for view in host.get("hosts", []):
+            seen.setdefault(view["host"], []).append((host["host"], view))
+    for host in hosts:
+        for link in host.get("links", []):
+            rows.append([host["host"], link["id"], link["backend"], link["state"], str(link["tx_packets"]),
+                         str(link["rx_packets"]), str(link["drops"]), _link_note(link)])
+    print(_render(["host", "link", "backend", "state", "tx", "rx", "drops", "note"], rows))
+    print()
+    lines = []
+    for name, views in sorted(seen.items()):
+        for observer, view in views:
+            lines.append([name, observer, view["state"], str(view["heard"]), str(view["gaps"]), str(view["late"]),
+                          f"{view['late_max_ms']:.3f}",
+                          "-" if view["net_delay_mean_ms"] is None else f"{view['net_delay_mean_ms']:.3f}"])
+    answered = {host["host"] for host in hosts}
+    for name in sorted(set(seen) - answered):
+        lines.append([name, "-", "no answer", "", "", "", "", ""])
+    print(_render(["host", "seen by", "state", "frames heard", "gaps", "late", "late max ms", "net delay ms"],
+                  lines), flush=True)
 
 
 def _print_status(status: dict, as_json: bool) -> None:
@@ -364,6 +404,14 @@ def build_parser() -> argparse.ArgumentParser:
                         "group; the systemd unit runs as group hilgate)")
     p.add_argument("--max-clients", type=int, default=256, metavar="N",
                    help="socket GLI clients at once, all links together (default 256)")
+    p.add_argument("--host", metavar="NAME",
+                   help="this daemon's host in a scene spread over hosts (default: the machine's host name)")
+    p.add_argument("--zenoh-connect", action="append", default=[], metavar="ENDPOINT",
+                   help="a daemon to join, e.g. tcp/192.168.1.10:7447 (repeatable; besides the scene's zenoh.connect)")
+    p.add_argument("--zenoh-listen", action="append", default=[], metavar="ENDPOINT",
+                   help="where the others may connect (default: the scene's zenoh.listen, else loopback only)")
+    p.add_argument("--clock-offset-s", type=float, default=0.0, metavar="S",
+                   help="act as if this host's clock were S seconds ahead (to measure what an offset does)")
     p.add_argument("--max-link-clients", type=int, default=32, metavar="N",
                    help="socket GLI clients at once on one link (default 32)")
 
@@ -385,6 +433,8 @@ def build_parser() -> argparse.ArgumentParser:
         p = sub.add_parser(name, help=text)
         p.add_argument("--json", action="store_true", help='one JSON object: {"links": [...], "vehicles": [...]}')
         p.add_argument("--watch", type=float, metavar="S", help="print again every S seconds")
+        p.add_argument("--network", action="store_true",
+                       help="every host of the network: its links, and how the others hear it (over Zenoh)")
         p.add_argument("--runtime-dir")
 
     p = sub.add_parser("pose", help="follow the vehicles' poses live")

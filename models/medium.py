@@ -89,6 +89,9 @@ class Medium:
         self.arrivals = 0
         self._neighbours: dict[Radio, list[_Neighbour]] = {}
         self._dirty = True
+        self.tap: Any = None
+        """Called ``tap(sender, frame, t, duration)`` for every transmission from a radio that listens
+        here (one this host serves): how other hosts' media hear it (hilgate.daemon.network)."""
 
     def new_frame_id(self) -> int:
         return next(self.frame_ids)
@@ -128,7 +131,7 @@ class Medium:
             neighbours[sender] = [
                 _Neighbour(sender, receiver, channel)
                 for receiver in radios
-                if receiver is not sender and receiver.rx_channel == sender.tx_channel
+                if receiver is not sender and receiver.rx_channel == sender.tx_channel and receiver.listens
             ]
         self._neighbours = neighbours
         self._dirty = False
@@ -149,6 +152,8 @@ class Medium:
         """``frame`` goes on air from ``sender`` at ``t`` for ``duration`` seconds: hand out its arrivals."""
         if self._dirty:
             self._rebuild()
+        if self.tap is not None and sender.listens:
+            self.tap(sender, frame, t, duration)
         neighbours = self._neighbours[sender]
         dst = frame.dst_addr
         sender_position = None

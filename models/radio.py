@@ -88,6 +88,7 @@ class Radio:
     __slots__ = (
         "host", "medium", "clock", "rng",
         "address", "tx_channel", "rx_channel", "range_m", "pose", "error", "error_free", "half_duplex", "judges_all",
+        "listens",
         "tx_start", "tx_end", "pending", "noise", "_noise_cap",
     )
 
@@ -104,6 +105,7 @@ class Radio:
         self.error_free = True  # ``error`` is constant zero: no loss to compute, no draw
         self.half_duplex = True
         self.judges_all = False
+        self.listens = True  # False: the modem is served by another host, whose own medium judges its arrivals
         self.tx_start = float("-inf")
         self.tx_end = float("-inf")
         self.pending: list[Arrival] = []  # judged arrivals that may still be on air

@@ -106,13 +106,17 @@ class RealtimeScheduler(VirtualScheduler):
         self.input_lateness = 0.0
         """Model seconds by which the loop was late when it read the input being handled (0 if on time)."""
         self.late_threshold = 0.0005
+        self.epoch_ns = 0
+        """The UNIX clock (ns) at model time 0, once the clock runs: how hosts relate their model times."""
 
     # -- time ---------------------------------------------------------------------------------
 
     def start_clock(self) -> None:
         """Model time 0 is now (called by :meth:`run` if nobody did it before)."""
         if self._origin is None:
-            self._origin = time.perf_counter() - self.now() / self.speed
+            wall_ns, counter = time.time_ns(), time.perf_counter()
+            self._origin = counter - self.now() / self.speed
+            self.epoch_ns = wall_ns - round(self.now() / self.speed * 1e9)
 
     def model_time(self) -> float:
         """Where the wall clock is, in model seconds."""

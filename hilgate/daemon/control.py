@@ -5,6 +5,8 @@ Requests and their replies:
 
 - ``{"class": "STATUS"}`` → ``{"class": "STATUS", "time": t, "scene": name, "links": [...], "vehicles": [...]}``
 - ``{"class": "RELOAD"}`` → ``{"class": "RELOAD", "ok": true}`` or ``{"ok": false, "error": "..."}``
+- ``{"class": "NETWORK"}`` (a daemon of several hosts) → ``{"class": "NETWORK", "hosts": [...]}``: every
+  daemon's status as it answered over Zenoh
 - ``{"class": "WATCH", "interval_s": 1.0}`` → a STATUS at once and every interval until
   ``{"class": "WATCH", "enable": false}``, which is answered ``{"class": "WATCH", "enable": false}``
 - anything else, or a request with bad values → ``{"class": "ERROR", "error": "..."}``
@@ -49,12 +51,14 @@ class ControlServer:
     def __init__(self, path: str, scheduler: Any, status: Callable[[], dict],
                  reload: Callable[[Callable[[bool, str], Any]], Any],
                  extra: dict[str, Callable[[dict], dict]] | None = None, max_clients: int = MAX_CLIENTS,
-                 group: int | None = None):
+                 group: int | None = None,
+                 deferred: dict[str, Callable[[dict, Callable[[dict], Any]], Any]] | None = None):
         self.path = path
         self.scheduler = scheduler
         self.status = status
         self.reload = reload
         self.extra = extra or {}
+        self.deferred = deferred or {}  # requests answered later, through the callback they are given
         self.max_clients = max_clients
         self.clients: set[_ControlClient] = set()
         os.makedirs(os.path.dirname(path), exist_ok=True)
@@ -150,6 +154,8 @@ class _ControlClient:
                 self.send({"class": "WATCH", "enable": False})
         elif kind in server.extra:
             self.send(server.extra[kind](request))
+        elif kind in server.deferred:
+            server.deferred[kind](request, self.send)
         else:
             self.send({"class": "ERROR", "error": f"unknown class {kind[:40]!r}"})
 

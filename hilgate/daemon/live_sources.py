@@ -44,9 +44,13 @@ class LiveSources:
         self.cameras: dict[str, Any] = {}
         self.feedback: list[Any] = []
 
-    def apply(self, scene: Scene, poses: dict[str, Any]) -> None:
+    def apply(self, scene: Scene, poses: dict[str, Any], local: Any = lambda spec: True) -> None:
+        """Start the sources of the vehicles and cameras this host serves (``local``, in a scene spread
+        over hosts: the others' are measured on their hosts and published)."""
         self.close()
         for name, vehicle in scene.vehicles.items():
+            if not local(vehicle):
+                continue
             pose = poses.get(name)
             if vehicle.pose.kind == "live" and isinstance(pose, LiveVehicle):
                 for kind, params in vehicle.pose.params:
@@ -55,7 +59,8 @@ class LiveSources:
             if vehicle.feedback:
                 self._start_feedback(name, pose, dict(vehicle.feedback), _feedback_identity(vehicle))
         for camera in scene.cameras.values():
-            self._start_camera(scene, camera, poses)
+            if local(camera):
+                self._start_camera(scene, camera, poses)
 
     def _deliver(self, vehicle: LiveVehicle, source: str):
         post = self.scheduler.post

@@ -156,6 +156,11 @@ class RoutedLink:
                 and self.router.addressed_to_nobody(self.spec.params.tx_channel, frame.dst)):
             # it still goes on air (and may spoil others' frames), but nobody will ever take it
             self.lost("no_receiver", len(frame.real), ev="err", src=self.id, dst=f"addr:{frame.dst}")
+        network = self.router.network
+        if network is not None and frame.dst != BROADCAST:
+            target = self.router.link_name(self.spec.params.tx_channel, frame.dst)
+            if network.host_down(target):  # it still goes on air here, but its host is gone
+                self.lost("host_down", len(frame.real), ev="err", src=self.id, dst=target)
         backend.send(frame)
         self.state_changed()
 
@@ -245,7 +250,9 @@ class Router:
     a reload changed (:func:`hilgate.scene.diff.diff`).  The daemon gives it the doors."""
 
     def __init__(self, scheduler: Any, recorder: Recorder, doors: list[Door] | None = None,
-                 max_link_clients: int = 32):
+                 max_link_clients: int = 32, host: str | None = None):
+        self.host = host  # in a scene spread over hosts, the links of this host only (scene/hosts.py)
+        self.network: Any = None  # hilgate.daemon.network.Network, when there are several hosts
         self.scheduler = scheduler
         self.recorder = recorder
         self.doors: list[Door] = list(doors or [])
@@ -282,17 +289,22 @@ class Router:
         self._names.update({(l.params.rx_channel, BROADCAST): "*" for l in scene.links.values()})
         first = self.world is None
         if first:
-            self.world = World(scene, self.scheduler, self.recorder)
+            self.world = World(scene, self.scheduler, self.recorder, host=self.host)
         else:
             self.world.reconfigure(scene, changes)
         self.scene = scene
         for change in changes.links.values():
-            if change.removed:
+            if change.removed and change.id in self.links:
                 log.info("link %s removed", change.id)
                 self.links.pop(change.id).close()
         for spec in scene.links.values():
             change = changes.links.get(spec.id)
             link = self.links.get(spec.id)
+            if not self.world.local(spec):
+                if link is not None:
+                    log.info("link %s is served by host %s now", spec.id, spec.host)
+                    self.links.pop(spec.id).close()
+                continue
             if link is None:
                 self._add(spec, announce=not first)
                 continue
@@ -376,7 +388,10 @@ class Router:
                 "position": None if position is None else [round(v, 4) for v in position],
                 "age_s": None if age is None else round(age, 3),
             })
-        return {"links": [link.status() for link in self.links.values()], "vehicles": vehicles}
+        status = {"links": [link.status() for link in self.links.values()], "vehicles": vehicles}
+        if self.network is not None:
+            status["network"] = self.network.status()
+        return status
 
     def close(self) -> None:
         for link in self.links.values():

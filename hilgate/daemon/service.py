@@ -8,6 +8,7 @@ import gc
 import logging
 import os
 import signal
+import socket
 import sys
 import time
 import uuid
@@ -23,7 +24,9 @@ from .live_sources import LiveSources
 from ..core.realtime import RealtimeScheduler
 from ..sim.recorder import Recorder
 from .router import Router
-from ..scene import Scene, load_scene
+from .network import Network
+from ..scene import Scene, SceneError, load_scene
+from ..scene.hosts import HOST_NAME, ZenohSpec
 from ..scene.worker import SceneJob, request_for
 from ..core.notify import notify, watchdog_interval
 from ..sim.simulate import write_summary
@@ -39,8 +42,8 @@ def parse_tcp(value: str) -> tuple[str, int]:
     return (host.strip("[]") or "127.0.0.1"), int(port)
 
 
-def _link_list(scene: Scene, limit: int = 12) -> str:
-    parts = [f"{link.id}={link.backend}" for link in scene.links.values()]
+def _link_list(scene: Scene, host: str | None, limit: int = 12) -> str:
+    parts = [f"{link.id}={link.backend}" for link in scene.links.values() if host is None or link.host == host]
     if len(parts) > limit:
         parts = parts[:limit] + [f"… {len(parts) - limit} more"]
     return ", ".join(parts)
@@ -52,7 +55,14 @@ class Daemon:
                  summary_path: str | None = None, until: float | None = None, status_line: bool = False,
                  gli_backlog: int = 1000, group: str | None = None, max_clients: int = 256,
                  max_link_clients: int = 32, plugins: list[str] | tuple[str, ...] = (),
-                 preset_dirs: list[str] | tuple[str, ...] = ()):
+                 preset_dirs: list[str] | tuple[str, ...] = (), host: str | None = None,
+                 zenoh_connect: list[str] | tuple[str, ...] = (), zenoh_listen: list[str] | tuple[str, ...] = (),
+                 clock_offset_s: float = 0.0):
+        self.host = host
+        self.zenoh_connect = list(zenoh_connect)
+        self.zenoh_listen = list(zenoh_listen)
+        self.clock_offset_s = clock_offset_s
+        self.network: Network | None = None
         self.plugins = list(plugins)
         self.preset_dirs = list(preset_dirs)
         self.group_name = group
@@ -80,6 +90,7 @@ class Daemon:
         scene = load_scene(self.scene_path, self.overrides, plugins=self.plugins,
                            preset_dirs=self.preset_dirs)  # a bad scene never half-starts
         self.scene = scene
+        host = self._host(scene)
         group = resolve_group(self.group_name)
         prepare_private_dir(self.runtime_dir, group)
         prepare_private_dir(os.path.join(self.runtime_dir, "gli"), group)
@@ -94,10 +105,11 @@ class Daemon:
                              "start": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="milliseconds"),
                              "scene": scene.name, "path": os.path.abspath(self.scene_path), "version": __version__,
                              "speed": self.speed})
-        self.router = Router(scheduler, self.recorder, max_link_clients=self.max_link_clients)
+        self.router = Router(scheduler, self.recorder, max_link_clients=self.max_link_clients, host=host)
         self.clients = ClientLimits(self.max_clients, self.max_link_clients)
         self.router.doors = [
-            QueueDoor(scheduler, plan_message_size(len(scene.links)), self.gli_backlog, group),
+            QueueDoor(scheduler, plan_message_size(sum(1 for l in scene.links.values() if host in (None, l.host))),
+                      self.gli_backlog, group),
             SocketDoor(os.path.join(self.runtime_dir, "gli"), scheduler, self.clients, self.router.port, group),
             EmulatorDoor(scheduler),
         ]
@@ -105,15 +117,22 @@ class Daemon:
         self.control = None
         self.live = LiveSources(scheduler)
         try:
+            if host is not None:
+                self.network = Network(scheduler, self.router, self.recorder, host, scene.zenoh or ZenohSpec(),
+                                       self.zenoh_connect, self.zenoh_listen, self.clock_offset_s)
+                self.router.doors.append(self.network.open())
+                self.network.claim(scene)  # before anything opens: a refused daemon touches nothing
+                self.router.network = self.network
             self.router.apply(scene)
-            self.live.apply(scene, self.router.world.poses)
+            self.live.apply(scene, self.router.world.poses, self.router.world.local)
             if self.trace is not None and scene.trace_poses_s:
                 self.router.world.sample_poses(scene.trace_poses_s * self.speed, self.recorder.event)
             if self.tcp:
                 host, port = parse_tcp(self.tcp)
                 self.tcp_listener = tcp_listener(host, port, scheduler, self.clients, self.router.port)
             self.control = ControlServer(os.path.join(self.runtime_dir, "control.sock"), scheduler,
-                                         self.status, self.reload, group=group)
+                                         self.status, self.reload, group=group,
+                                         deferred={"NETWORK": self._network_status})
             scheduler.on_signal(signal.SIGHUP, lambda s: self.reload())  # answered in the log only
             scheduler.on_signal(signal.SIGTERM, self.stop)
             scheduler.on_signal(signal.SIGINT, self.stop)
@@ -122,8 +141,8 @@ class Daemon:
             gc.freeze()  # everything built so far is long-lived: keep it out of the collector's walks
             log.info("hilgate %s started: scene %r (%s), %d links (%s), endpoints: POSIX queues /ID_{tx,rx}_dlnk_phy, "
                      "sockets %s/gli/ID.sock%s, control %s/control.sock; run %s",
-                     __version__, scene.name, os.path.abspath(self.scene_path), len(scene.links),
-                     _link_list(scene), self.runtime_dir,
+                     __version__, scene.name, os.path.abspath(self.scene_path), len(self.router.links),
+                     _link_list(scene, host), self.runtime_dir,
                      f", TCP {self.tcp}" if self.tcp else "", self.runtime_dir, self.run_id)
         except BaseException:
             removed = unlink_created()  # it never said READY: its queues would only cost the user's budget
@@ -132,13 +151,41 @@ class Daemon:
             self.shutdown()
             raise
         forget_created()  # from now on applications may hold them: never unlinked by the daemon
+        if self.network is not None:
+            scheduler.start_clock()  # model time 0 now: the epoch the other hosts convert through
+            self.network.start(scene)
+            self.recorder.event({"t": 0.0, "ev": "network", "host": host, "zid": self.network.zid,
+                                 "epoch_ns": self.network.epoch_ns})
+            log.info("joined the network as host %s (zenoh %s, prefix %s)", host, self.network.zid,
+                     self.network.prefix)
         try:
-            notify("READY=1", f"STATUS=running {scene.name!r}: {len(scene.links)} links",
+            notify("READY=1", f"STATUS=running {scene.name!r}: {len(self.router.links)} links",
                    f"MAINPID={os.getpid()}")
             scheduler.run(self.until if self.until is not None else float("inf"))
         finally:
             self.shutdown()
         return 0
+
+    def _host(self, scene: Scene) -> str | None:
+        """This daemon's host name in a scene spread over hosts (None: the scene is for one daemon)."""
+        if not (scene.multi_host or self.host or self.zenoh_connect or self.zenoh_listen):
+            return None
+        host = self.host or socket.gethostname().split(".")[0]
+        if not HOST_NAME.fullmatch(host):
+            raise SceneError("--host", 0, "", f"{host!r} is not a host name (letters, digits, '_', '.', '-')")
+        if self.speed != 1.0:
+            raise SceneError("--speed", 0, "", "a daemon of several hosts runs at real time (--speed 1): model "
+                                               "times cross hosts through the UNIX clock")
+        if scene.hosts and host not in scene.hosts:
+            raise SceneError(self.scene_path, 0, "", f"this daemon is host {host!r} but the scene's hosts are "
+                                                      f"{', '.join(scene.hosts)}: give --host")
+        return host
+
+    def _network_status(self, request: dict, reply: Callable[[dict], Any]) -> None:
+        if self.network is None:
+            reply({"class": "ERROR", "error": "this daemon is not part of a network of hosts (no zenoh)"})
+            return
+        self.network.query_status(lambda hosts: reply({"class": "NETWORK", "hosts": hosts}))
 
     def _periodic(self) -> None:
         """Every half second of wall clock: flush the trace (a SIGKILL loses at most that) and redraw the
@@ -206,7 +253,9 @@ class Daemon:
             return
         try:
             self.router.apply(scene)
-            self.live.apply(scene, self.router.world.poses)
+            if self.network is not None:
+                self.network.apply(scene)
+            self.live.apply(scene, self.router.world.poses, self.router.world.local)
             self.scene = scene
         except Exception as exc:  # e.g. a new link's port or queue cannot be opened
             log.debug("reload failed while applying", exc_info=True)
@@ -218,8 +267,8 @@ class Daemon:
     def _reload_finished(self, ok: bool, error: str) -> None:
         scene = self.scene
         if ok:
-            log.info("reloaded %s: %d links", self.scene_path, len(scene.links))
-            notify("READY=1", f"STATUS=running {scene.name!r}: {len(scene.links)} links")
+            log.info("reloaded %s: %d links", self.scene_path, len(self.router.links))
+            notify("READY=1", f"STATUS=running {scene.name!r}: {len(self.router.links)} links")
         else:
             error = " ".join(error.split())
             log.error("reload refused, the running scene stays: %s", error)
@@ -253,7 +302,7 @@ class Daemon:
             write_summary(summary, self.summary_path)
         if self._reload_job is not None:
             self._reload_job.cancel()
-        for closer in (getattr(self, "live", None), self.control, self.tcp_listener, router):
+        for closer in (getattr(self, "live", None), self.control, self.tcp_listener, router, self.network):
             if closer is not None:
                 try:
                     closer.close()

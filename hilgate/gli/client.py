@@ -8,6 +8,7 @@
         print(message.src, message.data)
 
     Link.open("rov0_rf", tcp=("topside", 4280))  # from another host (the daemon's --tcp listener)
+    Link.open("rov0_rf", zenoh="tcp/topside:7447")  # from any host of a network of daemons (Zenoh)
 
 Blocking and single-threaded on purpose: one object per link per thread.  The framing is
 documented in :mod:`hilgate.gli.wire` for applications in other languages.
@@ -54,7 +55,14 @@ class Link:
 
     @classmethod
     def open(cls, link_id: str, *, tcp: tuple[str, int] | None = None, runtime_dir: str | None = None,
-             timeout: float = 5.0) -> "Link":
+             timeout: float = 5.0, zenoh: Any = None) -> "Link":
+        """``zenoh``: reach the link over Zenoh from any host of a network of daemons (an endpoint
+        such as ``"tcp/10.0.0.5:7447"``, a list, or ``{"connect": [...], "prefix": ...}``); the object
+        returned has the same methods (:class:`hilgate.gli.zenoh_client.ZenohLink`)."""
+        if zenoh is not None:
+            from .zenoh_client import ZenohLink
+
+            return ZenohLink.open(link_id, zenoh, timeout)  # type: ignore[return-value]
         if tcp is not None:
             sock = socket.create_connection(tcp, timeout=timeout)
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)

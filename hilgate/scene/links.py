@@ -17,6 +17,7 @@ from ..models.expr import ExprError, compile_expression
 from ..models.frame import BROADCAST
 from ..models.modem import ModemParams
 from .backends import SIM, backend_names, driver_keys, driver_options, emulated_device
+from .hosts import host_name
 from .checks import Fields, boolean, choice, describe, integer, join_path, number, text
 from .mac import mac_spec
 from .plugins import Plugin
@@ -26,7 +27,7 @@ from .yaml_nodes import Node
 
 __all__ = ["LINK_KEYS", "BACKENDS", "Context", "link_spec", "assign_addresses"]
 
-OWN_KEYS = ("vehicle", "backend", "model", "address", "channel", "tx_channel", "rx_channel")
+OWN_KEYS = ("vehicle", "backend", "model", "address", "channel", "tx_channel", "rx_channel", "host")
 
 
 def link_keys() -> tuple[str, ...]:
@@ -112,8 +113,9 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
             raise f.child("emulate").error(f.sub("emulate"), "only a backend: sim link can emulate a modem")
         emulate = f.get("emulate", emulated_device)
     addressing = f.get("addressing", choice(*ADDRESSING), "auto")
+    host = f.get("host", host_name, None)
     return LinkSpec(link_id, vehicle, backend, model, params, mac, packet, node.file, node.line, options, emulate,
-                    addressing)
+                    addressing, host)
 
 
 def assign_addresses(links: dict[str, LinkSpec], nodes: dict[str, Node]) -> dict[str, LinkSpec]:

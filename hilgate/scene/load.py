@@ -18,6 +18,7 @@ from ..models.flows import FlowSpec
 from ..models.medium import Channel
 from .checks import Fields, base_dir, integer, items, join_path, mapping, number, path_value, quote, text
 from .flows import flow_spec
+from .hosts import resolve_hosts, zenoh_spec
 from .links import Context, assign_addresses, link_spec
 from .overrides import apply_override
 from .plugins import Plugin, PluginError, load_plugin
@@ -29,7 +30,8 @@ __all__ = ["TOP_KEYS", "load_scene", "load_scene_text", "scene_summary"]
 
 log = logging.getLogger(__name__)
 
-TOP_KEYS = ("name", "seed", "duration_s", "plugins", "channels", "vehicles", "links", "flows", "trace", "cameras")
+TOP_KEYS = ("name", "seed", "duration_s", "plugins", "channels", "vehicles", "links", "flows", "trace", "cameras",
+            "zenoh")
 CHANNEL_KEYS = ("speed_mps", "min_delay_s")
 
 
@@ -97,6 +99,9 @@ def _validate(root: Node | None, file: str, plugins: Sequence[str] = (), preset_
     context = {"channels": channels, "vehicles": vehicles}
     links = {lid: link_spec(lid, lnode, join_path("links", lid), context, ctx) for lid, lnode in link_nodes.items()}
     links = assign_addresses(links, link_nodes)
+    hosts, links, vehicles, cameras = resolve_hosts(links, vehicles, cameras, link_nodes, root)
+    zenoh_node = f.child("zenoh")
+    zenoh = None if zenoh_node is None else zenoh_spec(zenoh_node)
 
     flows: list[FlowSpec] = []
     flows_node = f.child("flows")
@@ -111,7 +116,8 @@ def _validate(root: Node | None, file: str, plugins: Sequence[str] = (), preset_
         tf = Fields(trace_node, "trace", ("file", "poses_s"))
         trace_file = tf.get("file", path_value, None)
         trace_poses = tf.get("poses_s", number(0), 1.0) or None
-    return Scene(name, seed, duration, channels, vehicles, links, flows, trace_file, file, cameras, trace_poses)
+    return Scene(name, seed, duration, channels, vehicles, links, flows, trace_file, file, cameras, trace_poses,
+                 hosts, zenoh)
 
 
 def load_scene(path: str, overrides: Sequence[str] = (), *, plugins: Sequence[str] = (),

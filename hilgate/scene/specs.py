@@ -47,6 +47,7 @@ class VehicleSpec:
     extrapolate_s: float = 0.0
     initial: tuple[float, float, float] | None = None
     feedback: tuple[tuple[str, Any], ...] = ()
+    host: str | None = None  # the host that computes or measures its pose (scene/hosts.py)
 
 
 @dataclass(frozen=True)
@@ -60,6 +61,7 @@ class CameraSpec:
     onboard: tuple | None = None     # (vehicle, position, rpy_deg) of the camera on a vehicle
     map: tuple = ()                  # ((marker id, position, rpy_deg), …) markers fixed in the tank
     fps: float | None = None
+    host: str | None = None
 
 
 @dataclass(frozen=True)
@@ -107,6 +109,7 @@ class LinkSpec:
     options: tuple[tuple[str, Any], ...] = ()  # the driver's keys (port, baud…) for real backends
     emulate: tuple[tuple[str, Any], ...] = ()  # emulated modem in front of a sim link
     addressing: str = "auto"  # auto: address-less packet classes without a MAC reach everyone in range
+    host: str | None = None  # the host whose daemon serves it (None: a scene for one daemon)
 
     @property
     def everyone_in_range(self) -> bool:
@@ -131,6 +134,12 @@ class Scene:
     path: str
     cameras: dict[str, CameraSpec] = field(default_factory=dict)
     trace_poses_s: float | None = 1.0  # pose samples in the trace every so many seconds (None: none)
+    hosts: tuple[str, ...] = ()  # the hosts the scene names (scene/hosts.py); () for one daemon
+    zenoh: Any = None  # the ``zenoh:`` section (a ZenohSpec), None when absent
+
+    @property
+    def multi_host(self) -> bool:
+        return bool(self.hosts) or self.zenoh is not None
 
     def link_of_address(self, channel: str, address: int) -> LinkSpec | None:
         for link in self.links.values():

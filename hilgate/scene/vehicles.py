@@ -17,15 +17,16 @@ from .checks import (
     Fields, boolean, choice, describe, integer, items, join_path, mapping, number, path_value, text,
     unknown_key_message, vector,
 )
+from .hosts import host_name
 from .specs import CameraSpec, PoseSpec, VehicleSpec
 from .yaml_nodes import MAX_FILE_BYTES, Node, SceneError, read_limited
 
 __all__ = ["VEHICLE_KEYS", "CAMERA_KEYS", "LIVE_KINDS", "POSE_KINDS", "vehicle_spec", "camera_spec",
            "check_camera_references", "unknown_pose"]
 
-VEHICLE_KEYS = ("pose", "stale_after_s", "stale", "extrapolate_s", "initial", "feedback")
+VEHICLE_KEYS = ("pose", "stale_after_s", "stale", "extrapolate_s", "initial", "feedback", "host")
 LIVE_KINDS = ("mavlink", "aruco")
-CAMERA_KEYS = ("source", "calibration", "dictionary", "marker_length_m", "fixed", "onboard", "map", "fps")
+CAMERA_KEYS = ("source", "calibration", "dictionary", "marker_length_m", "fixed", "onboard", "map", "fps", "host")
 
 
 def _static_pose(node: Node, path: str) -> Any:
@@ -188,6 +189,7 @@ def vehicle_spec(name: str, node: Node, path: str) -> VehicleSpec:
         extrapolate_s=f.get("extrapolate_s", number(0), 0.0),
         initial=f.get("initial", vector(), None),
         feedback=feedback,
+        host=f.get("host", host_name, None),
     )
 
 
@@ -230,7 +232,7 @@ def camera_spec(name: str, node: Node, path: str, vehicles: dict[str, VehicleSpe
             entries.append((int(marker_id), *_placement(marker_node, where)))
         markers = tuple(entries)
     return CameraSpec(name, source, f.get("calibration", _calibration), dictionary, f.get("marker_length_m", number(above=0)),
-                      fixed, onboard, markers, f.get("fps", number(above=0), None))
+                      fixed, onboard, markers, f.get("fps", number(above=0), None), f.get("host", host_name, None))
 
 
 def _camera_source(node: Node, path: str) -> int | str:

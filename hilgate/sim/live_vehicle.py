@@ -43,6 +43,7 @@ class LiveVehicle:
         self.attitude: tuple[float, float, float] | None = None
         self.extra: dict[str, Any] = {}
         self.updates = 0
+        self.listeners: list[Any] = []  # called after each update (the network publishes it to other hosts)
 
     def update(self, source: str, t: float, position: dict[str, float], velocity: dict[str, float] | None = None,
                attitude: tuple[float, float, float] | None = None) -> None:
@@ -56,6 +57,8 @@ class LiveVehicle:
         if attitude is not None:
             self.attitude = attitude
         self.updates += 1
+        for listener in self.listeners:
+            listener()
 
     def age(self, t: float) -> float | None:
         """Seconds since the oldest measured axis was measured; None before any measurement."""
@@ -87,3 +90,26 @@ class LiveVehicle:
 
     def sources(self) -> str:
         return "+".join(sorted({s.source for s in self.axes.values()})) or "none"
+
+
+class RemoteVehicle(LiveVehicle):
+    """A vehicle whose pose another host computes or measures (its ``host:``), as that host publishes
+    it: position, velocity and the model time it was measured at, in this host's model time.  Between
+    updates it is carried on along the velocity (over at most ``extrapolate_s``, at least one second:
+    scripted vehicles are published ten times a second); with no update yet it has no position, so its
+    modems are heard by nobody rather than from a place it never was."""
+
+    def __init__(self, spec: Any):
+        live = spec.pose.kind == "live"  # measured: carried on as its own host does; scripted: smoothly
+        super().__init__(spec.name, None, spec.stale_after_s, spec.stale,
+                         spec.extrapolate_s if live else max(spec.extrapolate_s, 1.0))
+        self.host = spec.host
+
+    def update_from(self, t: float, position: Vec3, velocity: Vec3 | None) -> None:
+        axes = dict(zip(AXES, position))
+        speeds = None if velocity is None else dict(zip(AXES, velocity))
+        if self.axes and min(state.t for state in self.axes.values()) > t:
+            return  # an older update overtaken by a newer one
+        if speeds is None and self.axes:  # a transmission's exact position: keep the published velocity
+            speeds = {axis: state.velocity for axis, state in self.axes.items() if state.velocity is not None}
+        self.update("net", t, axes, speeds or None)

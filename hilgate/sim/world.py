@@ -19,6 +19,7 @@ from ..models.medium import Medium
 from ..models.modem import SimModem
 from ..models.observer import Observer
 from ..models.trajectories import PoseSource
+from .live_vehicle import RemoteVehicle
 from .pose_sources import build_pose
 from ..scene import LinkSpec, Scene
 from ..scene.diff import SceneDiff, diff
@@ -32,23 +33,42 @@ def random_stream(seed: int, *names: str) -> random.Random:
 
 
 class World:
-    def __init__(self, scene: Scene, clock: Any, observer: Observer, seed: int | None = None):
+    """``host``: the host this world serves in a scene spread over hosts (None: all of it, as
+    ``hilgate sim`` and a one-host daemon).  Links of other hosts get a modem that sends only what
+    their host tells (:meth:`hilgate.daemon.network.Network`) and hears nothing here; vehicles whose
+    pose another host computes or measures get a :class:`RemoteVehicle` that host keeps up to date."""
+
+    def __init__(self, scene: Scene, clock: Any, observer: Observer, seed: int | None = None,
+                 host: str | None = None):
         self.scene = scene
         self.clock = clock
         self.observer = observer
+        self.host = host
         self.seed = scene.seed if seed is None else seed
         self.medium = Medium(clock, scene.channels.values())
-        self.poses: dict[str, PoseSource] = {name: build_pose(v) for name, v in scene.vehicles.items()}
+        self.poses: dict[str, PoseSource] = {name: self._build_pose(v) for name, v in scene.vehicles.items()}
         self.modems: dict[str, SimModem] = {}
         for link in scene.links.values():
             if link.backend == "sim":
                 self.add_modem(link)
         self.flows: list[FlowSource] = self._make_flows(scene, {})
 
+    def local(self, spec: Any) -> bool:
+        """Whether this world serves ``spec`` (a link, a vehicle or a camera)."""
+        return self.host is None or spec.host is None or spec.host == self.host
+
+    def _build_pose(self, vehicle: Any) -> PoseSource:
+        pose = build_pose(vehicle)
+        if self.local(vehicle) or getattr(pose, "static", False):
+            return pose  # a static pose is the same on every host: computed here, exactly
+        return RemoteVehicle(vehicle)
+
     def _make_flows(self, scene: Scene, reuse: dict[Any, Any]) -> list[FlowSource]:
         flows = []
         for index, spec in enumerate(scene.flows):
             modem = self.modems.get(spec.src)
+            if modem is not None and not self.local(scene.links[spec.src]):
+                continue  # its host runs it
             if modem is None:
                 log.warning("flow %d from %s: not a simulated link, ignored", index, spec.src)
                 continue
@@ -64,6 +84,7 @@ class World:
             link.id, link.vehicle, self.poses[link.vehicle], link.params, self.clock, self.medium,
             random_stream(self.seed, "modem", link.id), self.observer, link.mac.build(),
         )
+        modem.radio.listens = self.local(link)
         self.modems[link.id] = modem
         return modem
 
@@ -99,7 +120,7 @@ class World:
         self.medium.channels.clear()
         self.medium.channels.update({c.name: c for c in scene.channels.values()})
         for name in changes.vehicles:
-            self.poses[name] = build_pose(scene.vehicles[name])
+            self.poses[name] = self._build_pose(scene.vehicles[name])
         for name in changes.vehicles_removed:
             self.poses.pop(name, None)
         for change in changes.links.values():
@@ -115,6 +136,7 @@ class World:
             change = changes.links.get(link.id)
             if change is not None and change.modem_changed:
                 modem.configure(link.params)
+            modem.radio.listens = self.local(link)
             if change is not None and change.mac_changed:
                 modem.set_mac(link.mac.build())
             modem.vehicle = link.vehicle

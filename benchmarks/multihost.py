@@ -1,0 +1,280 @@
+#!/usr/bin/env python3
+"""Across hosts: a GLI frame through two daemons joined over Zenoh, against a bare Zenoh ping-pong.
+
+1. Bare: two processes bounce a 2 066-byte message over Zenoh (peer mode, loopback TCP, no scouting).
+2. hilgate: daemon A and daemon B (two processes, their own runtime directories and Zenoh ports),
+   one link each on an ideal channel (same place, 1e12 bit/s, no delays).  A dccomms-layout
+   application on A's queue sends a 2 066-byte queue message (a 2 048-byte VariableLength2B payload)
+   to B's link; an echo application on B sends it back: app → A → Zenoh → B → app → B → Zenoh → A →
+   app.  Target: p50 ≤ 3 × the bare ping-pong.  (With no propagation delay every frame from the other
+   host is "late": the daemons deliver it at once and count it, as they must.)
+3. Throughput: the application on A sends 20-byte payloads as fast as its queue takes them, the one
+   on B counts; frames per second and frames lost (target ≥ 5 000 frames/s, zero loss).
+
+Bare and hilgate round trips alternate, ``--repeats`` times; the ratio is printed as min/median/max.
+
+    python benchmarks/multihost.py [--round-trips 2000] [--frames 20000] [--repeats 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import uuid
+
+import posix_ipc
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from gli_roundtrip import MESSAGE, frame, open_queue, percentiles  # noqa: E402
+
+from hilgate.gli.queues import unlink_queues  # noqa: E402
+
+WARM_UP = 100
+
+
+def free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def zenoh_config(listen: str | None = None, connect: str | None = None):
+    import zenoh
+
+    config = zenoh.Config()
+    config.insert_json5("mode", '"peer"')
+    config.insert_json5("scouting/multicast/enabled", "false")
+    config.insert_json5("listen/endpoints", json.dumps([listen or "tcp/127.0.0.1:0"]))
+    if connect:
+        config.insert_json5("connect/endpoints", json.dumps([connect]))
+    return config
+
+
+# -- 1. bare Zenoh ping-pong ------------------------------------------------------------------------
+
+
+def _pong(port: int, key: str, ready) -> None:
+    import zenoh
+
+    session = zenoh.open(zenoh_config(listen=f"tcp/127.0.0.1:{port}"))
+    publisher = session.declare_publisher(f"{key}/pong")
+    session.declare_subscriber(f"{key}/ping", lambda sample: publisher.put(sample.payload.to_bytes()))
+    ready.set()
+    time.sleep(3600)
+
+
+def bare(count: int) -> list[float]:
+    import zenoh
+
+    port, key = free_port(), f"bench-{uuid.uuid4().hex[:8]}"
+    ready = mp.Event()
+    process = mp.Process(target=_pong, args=(port, key, ready), daemon=True)
+    process.start()
+    ready.wait(30)
+    session = zenoh.open(zenoh_config(connect=f"tcp/127.0.0.1:{port}"))
+    got = threading.Event()
+    session.declare_subscriber(f"{key}/pong", lambda sample: got.set())
+    publisher = session.declare_publisher(f"{key}/ping")
+    while not list(session.info.peers_zid()):
+        time.sleep(0.01)
+    time.sleep(0.5)
+    message = bytes(MESSAGE)
+    samples = []
+    for _ in range(count + WARM_UP):
+        got.clear()
+        start = time.perf_counter()
+        publisher.put(message)
+        if not got.wait(5):
+            raise RuntimeError("the bare ping-pong lost a message")
+        samples.append(time.perf_counter() - start)
+    session.close()
+    process.terminate()
+    process.join()
+    return samples[WARM_UP:]
+
+
+# -- 2. and 3. through two daemons --------------------------------------------------------------------
+
+
+SCENE = """\
+name: multihost-bench
+channels: {{ideal: {{speed_mps: 3.0e8}}}}
+zenoh: {{prefix: {prefix}}}
+vehicles: {{v: {{pose: {{static: [0, 0, 0]}}}}}}
+links:
+  {a}: {{vehicle: v, host: A, address: 1, bitrate_bps: 1.0e12, fifo_bytes: 10000000, packet: vl2b}}
+  {b}: {{vehicle: v, host: B, address: 2, bitrate_bps: 1.0e12, fifo_bytes: 10000000, packet: vl2b}}
+"""
+
+
+class Network:
+    """Daemons A and B, joined over loopback TCP."""
+
+    def __init__(self, a: str, b: str):
+        self.dir = tempfile.mkdtemp(prefix="hilgate-multihost-bench-")
+        scene = os.path.join(self.dir, "scene.yaml")
+        with open(scene, "w") as handle:
+            handle.write(SCENE.format(a=a, b=b, prefix=f"bench-{uuid.uuid4().hex[:8]}"))
+        port = free_port()
+        self.processes = []
+        for host, args in (("A", ["--zenoh-listen", f"tcp/127.0.0.1:{port}"]),
+                           ("B", ["--zenoh-connect", f"tcp/127.0.0.1:{port}"])):
+            notify_path = os.path.join(self.dir, f"notify-{host}")
+            notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+            notify.bind(notify_path)
+            self.processes.append(subprocess.Popen(
+                [sys.executable, "-m", "hilgate", "run", scene, "--host", host, "--runtime-dir",
+                 os.path.join(self.dir, host), "--no-status-line", *args],
+                env=dict(os.environ, NOTIFY_SOCKET=notify_path)))
+            notify.settimeout(30)
+            while b"READY=1" not in notify.recv(4096):
+                pass
+            notify.close()
+        self.links = (a, b)
+        deadline = time.monotonic() + 30
+        while not self._sees("A", "B"):
+            if time.monotonic() > deadline:
+                raise RuntimeError("the daemons did not meet")
+            time.sleep(0.05)
+
+    def status(self, host: str) -> dict:
+        with socket.socket(socket.AF_UNIX) as sock:
+            sock.connect(os.path.join(self.dir, host, "control.sock"))
+            reader = sock.makefile("r")
+            reader.readline()
+            sock.sendall(b'{"class": "STATUS"}\n')
+            return json.loads(reader.readline())
+
+    def _sees(self, host: str, other: str) -> bool:
+        views = self.status(host)["network"]["hosts"]
+        return any(v["host"] == other and v["state"] == "up" for v in views)
+
+    def close(self) -> None:
+        for process in self.processes:
+            process.terminate()
+            process.wait()
+        unlink_queues(self.links)
+
+
+def _echo(link: str, count: int, mode: str, result) -> None:
+    """On link b: echo every frame back to address 1, or only count them."""
+    tx, rx = open_queue(f"/{link}_tx_dlnk_phy"), open_queue(f"/{link}_rx_dlnk_phy")
+    received = 0
+    first = last = 0.0
+    while received < count:
+        try:
+            message, _ = rx.receive(10.0)
+        except posix_ipc.BusyError:
+            break
+        if message[0] != 0:
+            continue  # READY/BUSY
+        received += 1
+        last = time.perf_counter()
+        if received == 1:
+            first = last
+        if mode == "echo":
+            tx.send(message[:-4] + (1).to_bytes(4, "little"))
+    tx.close()
+    rx.close()
+    result.put((received, first, last))
+
+
+def through_hilgate(count: int) -> list[float]:
+    a, b = f"mha{os.getpid()}", f"mhb{os.getpid()}"
+    network = Network(a, b)
+    try:
+        result = mp.Queue()
+        echo = mp.Process(target=_echo, args=(b, count + WARM_UP, "echo", result))
+        echo.start()
+        tx, rx = open_queue(f"/{a}_tx_dlnk_phy"), open_queue(f"/{a}_rx_dlnk_phy")
+        message = frame(b"\xa5" * 2048, 0, 2)
+        assert len(message) == MESSAGE
+        samples = []
+        for _ in range(count + WARM_UP):
+            start = time.perf_counter()
+            tx.send(message)
+            while True:
+                reply, _ = rx.receive(10.0)
+                if reply[0] == 0:
+                    break
+            samples.append(time.perf_counter() - start)
+        echo.join()
+        tx.close()
+        rx.close()
+        return samples[WARM_UP:]
+    finally:
+        network.close()
+
+
+def throughput(count: int, size: int) -> tuple[float, int, int, int]:
+    a, b = f"mta{os.getpid()}", f"mtb{os.getpid()}"
+    network = Network(a, b)
+    try:
+        result = mp.Queue()
+        counter = mp.Process(target=_echo, args=(b, count, "count", result))
+        counter.start()
+        tx, rx = open_queue(f"/{a}_tx_dlnk_phy"), open_queue(f"/{a}_rx_dlnk_phy")
+        stop = threading.Event()
+
+        def drain_states() -> None:  # a dccomms application's service thread reads READY/BUSY
+            while not stop.is_set():
+                try:
+                    rx.receive(0.1)
+                except posix_ipc.BusyError:
+                    pass
+
+        reader = threading.Thread(target=drain_states, daemon=True)
+        reader.start()
+        messages = [frame(b"x" * size, i, 2) for i in range(count)]
+        start = time.perf_counter()
+        for message in messages:
+            tx.send(message)  # blocks when the queue is full, as dccomms' WritePacket does
+        received, first, last = result.get(timeout=120)
+        counter.join()
+        stop.set()
+        reader.join()
+        tx.close()
+        rx.close()
+        drops = sum(link["drops"] for link in network.status("A")["links"] + network.status("B")["links"])
+        gaps = sum(view["gaps"] for view in network.status("B")["network"]["hosts"])
+        return received / (last - start), count - received, drops, gaps
+    finally:
+        network.close()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--round-trips", type=int, default=2000)
+    parser.add_argument("--frames", type=int, default=20000)
+    parser.add_argument("--size", type=int, default=20, help="payload bytes per frame in the throughput test")
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    ratios, bares, hils = [], [], []
+    for repeat in range(args.repeats):
+        bare_p50, bare_p99 = percentiles(bare(args.round_trips))
+        hil_p50, hil_p99 = percentiles(through_hilgate(args.round_trips))
+        bares.append(bare_p50)
+        hils.append(hil_p50)
+        ratios.append(hil_p50 / bare_p50)
+        print(f"repeat {repeat + 1}: bare Zenoh ping-pong p50 {bare_p50 * 1e6:.0f} µs (p99 {bare_p99 * 1e6:.0f}); "
+              f"through two daemons p50 {hil_p50 * 1e6:.0f} µs (p99 {hil_p99 * 1e6:.0f}); "
+              f"ratio {hil_p50 / bare_p50:.2f}", flush=True)
+    print(f"round trip of a {MESSAGE}-byte frame, p50: bare {statistics.median(bares) * 1e6:.0f} µs, hilgate "
+          f"{statistics.median(hils) * 1e6:.0f} µs (median of {args.repeats}); ratio min/median/max "
+          f"{min(ratios):.2f} / {statistics.median(ratios):.2f} / {max(ratios):.2f} (target <= 3)")
+    rate, lost, drops, gaps = throughput(args.frames, args.size)
+    print(f"throughput A -> B, {args.size}-byte payloads, flat out: {rate:,.0f} frames/s received, {lost} lost, "
+          f"{drops} dropped by the daemons, {gaps} missing between the hosts (target >= 5,000 frames/s, zero loss)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,460 @@
+"""Several daemons, one network: what a daemon tells the others over Zenoh and what it makes of theirs.
+
+**Where the model runs.** Every daemon runs the medium for its own receivers.  Each transmission from
+a modem this host serves is published (:mod:`.netcodec`) when it goes on air; every other host gives
+it to its own medium as a transmission from that link's modem (a modem there that hears nothing and
+sends only what its host says), which hands out the arrivals at *its* receivers exactly as the
+sender's medium would: same start, duration and sender position, so the same delays, collisions
+and error draws for its receivers.  Nothing is judged twice and no host waits for another: a host
+that is cut off keeps serving its own links, and the others see its links go down (liveliness).
+
+**Time.** A transmission's start is converted from the sender's model time to this host's through
+both hosts' epochs (the UNIX clock at model time 0), so the hosts' clocks must agree (chrony on a
+lab network: well under a millisecond; PTP better).  A clock offset ε shifts every arrival from that
+host by ε.  When a transmission is heard after one of its arrivals here should already have ended
+(the network was slower than the model's propagation delay: radio links, a loaded host), the frame
+is delivered at once and the lateness is traced (``late``) and counted (``hilgate status``).
+
+**Poses.** Each vehicle's pose is computed or measured on its host (``host:``) and published: live
+vehicles at each update, scripted ones ``pose_rate_hz`` times a second; every transmission also
+carries its sender's exact position.  Static vehicles are computed everywhere.
+
+**Faults.** A daemon holds liveliness tokens for its host and each of its links; a host that dies or
+is cut off loses them within the Zenoh lease (``lease_s``), its links show ``down`` here and frames
+addressed to them are traced and counted ``host_down``.  A second daemon with the same host name or
+link is refused at start.
+
+Key layout (under ``<prefix>``, ``hilgate`` unless the scene's ``zenoh.prefix`` says otherwise):
+``tx/<channel>`` transmissions, ``pose/<vehicle>`` poses, ``alive/hosts/<host>/<zid>`` and
+``alive/links/<link>/<host>/<zid>`` liveliness, ``status/<host>`` a queryable with each host's status,
+``link/<id>/…`` the GLI (:mod:`hilgate.gli.zenoh_door`).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+import time
+from collections import Counter, OrderedDict
+from typing import Any, Callable
+
+from .access import AccessError
+from .netcodec import NetError, decode_pose, decode_transmission, encode_pose, encode_transmission, to_local
+from ..gli.zenoh_door import ZenohDoor
+from ..sim.live_vehicle import LiveVehicle, RemoteVehicle
+
+log = logging.getLogger(__name__)
+
+__all__ = ["Network", "zenoh_config"]
+
+REMEMBERED_FRAMES = 4096  # frames a control frame of another host may still refer to (S-FAMA's RTS → CTS)
+JOIN_WAIT_S = 2.0
+
+
+def zenoh_config(spec: Any, connect: list[str] | tuple[str, ...] = (), listen: list[str] | tuple[str, ...] = ()) -> Any:
+    """The Zenoh configuration of a daemon (or a client): peer mode, multicast scouting off unless
+    asked, listening on loopback unless told where, the lease that bounds fault detection."""
+    import zenoh
+
+    config = zenoh.Config.from_file(spec.config) if spec.config else zenoh.Config()
+    if not spec.config:
+        config.insert_json5("mode", '"peer"')
+    config.insert_json5("scouting/multicast/enabled", json.dumps(bool(spec.multicast_scouting)))
+    config.insert_json5("listen/endpoints", json.dumps(list(listen or spec.listen)))
+    endpoints = list(dict.fromkeys([*spec.connect, *connect]))
+    if endpoints:
+        config.insert_json5("connect/endpoints", json.dumps(endpoints))
+    config.insert_json5("transport/link/tx/lease", str(int(spec.lease_s * 1000)))
+    config.insert_json5("transport/link/tx/keep_alive", "4")
+    return config
+
+
+class HostView:
+    """What this daemon knows of another host."""
+
+    __slots__ = ("name", "up", "zids", "links", "heard", "gaps", "late", "late_max", "delay_sum", "delay_max",
+                 "expected", "epoch_ns", "since")
+
+    def __init__(self, name: str):
+        self.name = name
+        self.zids: set[str] = set()
+        self.up = False
+        self.links: dict[str, set[str]] = {}
+        self.heard = 0
+        self.gaps = 0
+        self.late = 0
+        self.late_max = 0.0
+        self.delay_sum = 0.0
+        self.delay_max = 0.0
+        self.expected: int | None = None
+        self.epoch_ns: int | None = None
+        self.since = 0.0
+
+    def status(self) -> dict[str, Any]:
+        return {"host": self.name, "state": "up" if self.up else "down",
+                "links": sorted(link for link, zids in self.links.items() if zids),
+                "heard": self.heard, "gaps": self.gaps, "late": self.late,
+                "late_max_ms": round(self.late_max * 1e3, 3),
+                "net_delay_mean_ms": round(self.delay_sum / self.heard * 1e3, 3) if self.heard else None,
+                "net_delay_max_ms": round(self.delay_max * 1e3, 3)}
+
+
+class Network:
+    """This daemon's part of a network of daemons (see the module's docstring)."""
+
+    def __init__(self, scheduler: Any, router: Any, recorder: Any, host: str, spec: Any,
+                 connect: list[str] | tuple[str, ...] = (), listen: list[str] | tuple[str, ...] = (),
+                 clock_offset_s: float = 0.0):
+        self.scheduler = scheduler
+        self.router = router
+        self.recorder = recorder
+        self.host = host
+        self.spec = spec
+        self.prefix = spec.prefix
+        self.connect = list(connect)
+        self.listen = list(listen)
+        self.clock_offset_ns = int(round(clock_offset_s * 1e9))
+        self.session: Any = None
+        self.hosts: dict[str, HostView] = {}
+        self.remote_links: dict[str, str] = {}  # link id → host, from the scene
+        self.sent: OrderedDict[tuple[str, int], Any] = OrderedDict()
+        self.heard: OrderedDict[tuple[str, int], Any] = OrderedDict()
+        self.counters: Counter[str] = Counter()
+        self.number = 0
+        self._publishers: dict[str, Any] = {}
+        self._pose_publishers: dict[str, Any] = {}
+        self._tokens: dict[str, Any] = {}
+        self._entities: list[Any] = []
+        self._status_cache = b"{}"
+        self.door: ZenohDoor | None = None
+
+    # -- set-up ---------------------------------------------------------------------------------
+
+    @property
+    def epoch_ns(self) -> int:
+        return self.scheduler.epoch_ns + self.clock_offset_ns
+
+    def open(self) -> ZenohDoor:
+        """Join the network; refuse (AccessError) a host name or a link another daemon serves."""
+        import zenoh
+
+        config = zenoh_config(self.spec, self.connect, self.listen)
+        self.session = session = zenoh.open(config)
+        self.zid = str(session.zid())
+        deadline = time.monotonic() + JOIN_WAIT_S
+        wanted = len(self.connect) + len(self.spec.connect)
+        while wanted and time.monotonic() < deadline and not list(session.info.peers_zid()):
+            time.sleep(0.02)  # connecting to the listed peers: liveliness answers need them
+        self.door = ZenohDoor(session, self.prefix, self.host, self.scheduler.post)
+        return self.door
+
+    def _alive(self, *parts: str) -> str:
+        return "/".join((self.prefix, "alive", *parts))
+
+    def _claims(self, key: str) -> list[str]:
+        """Other daemons' tokens under ``key`` (their zenoh ids)."""
+        others = []
+        for reply in self.session.liveliness().get(key, timeout=1.0):
+            if reply.ok is not None:
+                zid = str(reply.ok.key_expr).rsplit("/", 1)[-1]
+                if zid != self.zid:
+                    others.append(str(reply.ok.key_expr))
+        return others
+
+    def claim(self, scene: Any) -> None:
+        """Declare this host and its links, then check nobody else claims them (both daemons of a
+        race see each other and both refuse: never two daemons serving one link)."""
+        liveliness = self.session.liveliness()
+        self._tokens["host"] = liveliness.declare_token(self._alive("hosts", self.host, self.zid))
+        for link in scene.links.values():
+            if link.host == self.host:
+                self._tokens[link.id] = liveliness.declare_token(self._alive("links", link.id, self.host, self.zid))
+        others = self._claims(self._alive("hosts", self.host, "*"))
+        if others:
+            raise AccessError(f"host name {self.host!r} is already used by another daemon on the network "
+                              f"({others[0]}); start this one with another --host")
+        for link in scene.links.values():
+            if link.host == self.host:
+                others = self._claims(self._alive("links", link.id, "*", "*"))
+                if others:
+                    raise AccessError(f"link {link.id} is already served by another daemon on the network "
+                                      f"({others[0]})")
+
+    def start(self, scene: Any) -> None:
+        """Listen to the others and start telling them about this host (on the loop, clock running)."""
+        import zenoh
+
+        session, post = self.session, self.scheduler.post
+        self.apply(scene)
+        liveliness = session.liveliness()
+        self._entities.append(liveliness.declare_subscriber(
+            f"{self.prefix}/alive/**", lambda s: post(self._on_alive, str(s.key_expr), "PUT" if s.kind == zenoh.SampleKind.PUT else "DELETE"), history=True))
+        self._entities.append(session.declare_subscriber(
+            f"{self.prefix}/tx/*", lambda s: post(self._on_transmission, s.payload.to_bytes())))
+        self._entities.append(session.declare_subscriber(
+            f"{self.prefix}/pose/*", lambda s: post(self._on_pose, s.payload.to_bytes())))
+        self._entities.append(session.declare_queryable(
+            f"{self.prefix}/status/{self.host}", lambda q: q.reply(q.key_expr, self._status_cache)))
+        world = self.router.world
+        world.medium.tap = self._on_air
+        self._poses_every(1.0 / self.spec.pose_rate_hz)
+        self._refresh_status()
+
+    def apply(self, scene: Any) -> None:
+        """A scene (the first or a reload): which links are whose, tokens for links added or removed."""
+        self.scene = scene
+        self.remote_links = {link.id: link.host for link in scene.links.values() if link.host != self.host}
+        for name in scene.hosts:
+            if name != self.host:
+                self.hosts.setdefault(name, HostView(name))
+        liveliness = self.session.liveliness()
+        mine = {link.id for link in scene.links.values() if link.host == self.host}
+        for link_id in [key for key in self._tokens if key != "host" and key not in mine]:
+            self._tokens.pop(link_id).undeclare()
+        for link_id in mine - set(self._tokens):
+            self._tokens[link_id] = liveliness.declare_token(self._alive("links", link_id, self.host, self.zid))
+        world = self.router.world
+        for name, pose in world.poses.items():
+            if isinstance(pose, LiveVehicle) and not isinstance(pose, RemoteVehicle) and world.local(scene.vehicles[name]):
+                pose.listeners = [self._live_update(name, pose)]
+
+    # -- liveliness ------------------------------------------------------------------------------
+
+    def _on_alive(self, key: str, kind: str) -> None:
+        parts = key[len(self.prefix) + 1:].split("/")
+        if len(parts) == 4 and parts[:2] == ["alive", "hosts"]:
+            _, _, host, zid = parts
+            if host == self.host:
+                return
+            view = self.hosts.setdefault(host, HostView(host))
+            (view.zids.add if kind == "PUT" else view.zids.discard)(zid)
+            up = bool(view.zids)
+            if up != view.up:
+                view.up = up
+                view.since = self.scheduler.now()
+                if not up:
+                    view.expected = None  # a host that comes back starts its counter again
+                log.log(logging.INFO if up else logging.WARNING, "host %s is %s", host, "up" if up else "down")
+                self.recorder.event({"t": round(self.scheduler.now(), 9), "ev": "host", "host": host,
+                                     "state": "up" if up else "down"})
+        elif len(parts) == 5 and parts[:2] == ["alive", "links"]:
+            _, _, link, host, zid = parts
+            if host == self.host:
+                return
+            view = self.hosts.setdefault(host, HostView(host))
+            zids = view.links.setdefault(link, set())
+            (zids.add if kind == "PUT" else zids.discard)(zid)
+        self._refresh_status()
+
+    def link_state(self, link_id: str) -> str:
+        """``up``/``down`` of a link another host serves (its token is alive or not)."""
+        host = self.remote_links.get(link_id)
+        view = self.hosts.get(host) if host else None
+        return "up" if view is not None and view.up and view.links.get(link_id) else "down"
+
+    def host_down(self, link_id: str) -> bool:
+        return link_id in self.remote_links and self.link_state(link_id) == "down"
+
+    # -- transmissions ---------------------------------------------------------------------------
+
+    def _remember(self, cache: OrderedDict, key: tuple[str, int], frame: Any) -> None:
+        cache[key] = frame
+        if len(cache) > REMEMBERED_FRAMES:
+            cache.popitem(last=False)
+
+    def _on_air(self, sender: Any, frame: Any, t: float, duration: float) -> None:
+        """A modem of this host transmits: tell the other hosts (if any listens)."""
+        publisher = self._publishers.get(sender.tx_channel)
+        if publisher is None:
+            import zenoh
+
+            publisher = self._publishers[sender.tx_channel] = self.session.declare_publisher(
+                f"{self.prefix}/tx/{sender.tx_channel}", congestion_control=zenoh.CongestionControl.BLOCK,
+                express=True)
+        self._remember(self.sent, (frame.src_link, frame.id), frame)
+        if not publisher.matching_status:
+            return
+        self.number += 1
+        publisher.put(encode_transmission(self.host, self.epoch_ns, self.number, frame, t, duration,
+                                          sender.pose.position(t)))
+        self.counters["published"] += 1
+
+    def _on_transmission(self, data: bytes) -> None:
+        try:
+            message = decode_transmission(data)
+        except NetError as exc:
+            self.counters["bad_message"] += 1
+            log.debug("unreadable transmission: %s", exc)
+            return
+        if message.host == self.host:
+            return
+        view = self.hosts.setdefault(message.host, HostView(message.host))
+        if view.epoch_ns != message.epoch_ns:
+            view.epoch_ns, view.expected = message.epoch_ns, None  # the host restarted
+        if view.expected is not None and message.number > view.expected:
+            view.gaps += message.number - view.expected
+            self.recorder.event({"t": round(self.scheduler.now(), 9), "ev": "drop", "link": "*",
+                                 "src": message.host, "cause": "net_gap", "n": message.number - view.expected})
+        view.expected = message.number + 1
+        frame = message.frame
+        world = self.router.world
+        modem = world.modems.get(frame.src_link)
+        if modem is None or modem.radio.listens or self.remote_links.get(frame.src_link) != message.host:
+            self.counters["foreign_sender"] += 1  # not a link the scene gives that host: ignored
+            return
+        if message.ref_key is not None:
+            mine = self.sent.get(message.ref_key) if message.ref_key[0] not in self.remote_links else None
+            frame.ref = mine or self.heard.get(message.ref_key) or frame.ref
+        self._remember(self.heard, (frame.src_link, frame.id), frame)
+        now = self.scheduler.now()
+        t = to_local(message.t, message.epoch_ns, self.epoch_ns)
+        view.heard += 1
+        delay = now - t
+        view.delay_sum += delay
+        view.delay_max = max(view.delay_max, delay)
+        pose = modem.pose
+        if isinstance(pose, RemoteVehicle) and message.position is not None:
+            pose.update_from(t, message.position, None)
+        if now > t + message.duration:
+            self._account_late(modem, frame, t, message.duration, now, view)
+        world.medium.transmit(modem.radio, frame, t, message.duration)
+
+    def _account_late(self, sender: Any, frame: Any, t: float, duration: float, now: float, view: HostView) -> None:
+        """Arrivals here that should have ended before the transmission was heard: delivered at once
+        (the medium cannot go back), traced ``late`` and counted per host."""
+        medium = self.router.world.medium
+        for receiver in medium.modems:
+            radio = receiver.radio
+            if not radio.listens or radio.rx_channel != sender.radio.tx_channel:
+                continue
+            tau = medium.propagation_delay(sender, receiver, t)
+            if tau is None:
+                continue
+            lateness = now - (t + tau + duration)
+            if lateness > 0:
+                view.late += 1
+                view.late_max = max(view.late_max, lateness)
+                self.recorder.event({"t": round(now, 9), "ev": "late", "link": receiver.id, "src": frame.src_link,
+                                     "pkt": frame.id, "host": view.name, "lateness_s": round(lateness, 9)})
+
+    # -- poses -----------------------------------------------------------------------------------
+
+    def _pose_publisher(self, vehicle: str) -> Any:
+        publisher = self._pose_publishers.get(vehicle)
+        if publisher is None:
+            publisher = self._pose_publishers[vehicle] = self.session.declare_publisher(f"{self.prefix}/pose/{vehicle}")
+        return publisher
+
+    def _live_update(self, name: str, pose: LiveVehicle) -> Callable[[], None]:
+        def published() -> None:
+            now = self.scheduler.now()
+            position = pose.position(now)
+            age = pose.age(now)
+            velocity = None
+            if pose.axes and all(state.velocity is not None for state in pose.axes.values()) and len(pose.axes) == 3:
+                velocity = tuple(pose.axes[a].velocity for a in ("x", "y", "z"))
+            self._pose_publisher(name).put(encode_pose(self.host, self.epoch_ns, name, now - (age or 0.0),
+                                                       position, velocity))
+
+        return published
+
+    def _poses_every(self, interval: float) -> None:
+        def publish() -> None:
+            now = self.scheduler.now()
+            world = self.router.world
+            for name, pose in world.poses.items():
+                vehicle = self.scene.vehicles.get(name)
+                if vehicle is None or not world.local(vehicle) or getattr(pose, "static", False):
+                    continue
+                if isinstance(pose, LiveVehicle):
+                    continue  # published at each measurement
+                position = pose.position(now)
+                earlier = pose.position(max(0.0, now - 0.01)) if position is not None else None
+                velocity = None
+                if earlier is not None and now > 0.01:
+                    velocity = tuple((a - b) / 0.01 for a, b in zip(position, earlier))
+                self._pose_publisher(name).put(encode_pose(self.host, self.epoch_ns, name, now, position, velocity))
+            self._refresh_status()
+            self.scheduler.after_wall(interval, publish)
+
+        self.scheduler.after_wall(interval, publish)
+
+    def _on_pose(self, data: bytes) -> None:
+        try:
+            message = decode_pose(data)
+        except NetError:
+            self.counters["bad_message"] += 1
+            return
+        if message["host"] == self.host:
+            return
+        pose = self.router.world.poses.get(message["vehicle"])
+        vehicle = self.scene.vehicles.get(message["vehicle"])
+        if vehicle is None or vehicle.host != message["host"] or message["position"] is None:
+            return
+        t = to_local(message["t"], message["epoch_ns"], self.epoch_ns)
+        if isinstance(pose, RemoteVehicle):
+            pose.update_from(t, message["position"], message["velocity"])
+            self.router.world.medium.topology_changed()
+
+    # -- status ----------------------------------------------------------------------------------
+
+    def status(self) -> dict[str, Any]:
+        links = [{"id": link_id, "host": host, "state": self.link_state(link_id)}
+                 for link_id, host in sorted(self.remote_links.items())]
+        return {"host": self.host, "zid": getattr(self, "zid", None), "epoch_ns": self.epoch_ns if self._entities else None,
+                "hosts": [view.status() for _, view in sorted(self.hosts.items())], "remote_links": links,
+                "counters": dict(self.counters)}
+
+    def query_status(self, answer: Callable[[list[dict[str, Any]]], Any], timeout: float = 1.5) -> None:
+        """Ask every daemon (this one too) for its status; ``answer`` gets the list on the loop.  The
+        query runs on its own thread: the loop never waits for the network."""
+        session, post, prefix = self.session, self.scheduler.post, self.prefix
+        self._refresh_status()
+        own = json.loads(self._status_cache)
+
+        def ask() -> None:
+            answers = [own]  # (a session's own queryable does not answer its own query)
+            try:
+                import zenoh
+
+                for reply in session.get(f"{prefix}/status/*", timeout=timeout, target=zenoh.QueryTarget.ALL,
+                                         consolidation=zenoh.ConsolidationMode.NONE):  # one answer per host
+                    if reply.ok is not None:
+                        try:
+                            theirs = json.loads(reply.ok.payload.to_bytes())
+                        except ValueError:
+                            continue
+                        if isinstance(theirs, dict) and theirs.get("host") != own["host"]:
+                            answers.append(theirs)
+            except Exception as exc:  # the session closed meanwhile
+                log.debug("network status query: %s", exc)
+            post(answer, sorted(answers, key=lambda a: str(a.get("host"))))
+
+        threading.Thread(target=ask, name="network-status", daemon=True).start()
+
+    def _refresh_status(self) -> None:
+        """The answer to ``status/<host>`` queries, kept ready (Zenoh asks from its own threads)."""
+        local = self.router.status()
+        self._status_cache = json.dumps({**self.status(), "links": local["links"],
+                                         "vehicles": local["vehicles"]}, default=str).encode()
+
+    def close(self) -> None:
+        for entity in self._entities + list(self._publishers.values()) + list(self._pose_publishers.values()):
+            try:
+                entity.undeclare()
+            except Exception:
+                pass
+        for token in self._tokens.values():
+            try:
+                token.undeclare()
+            except Exception:
+                pass
+        self._entities, self._publishers, self._pose_publishers, self._tokens = [], {}, {}, {}
+        if self.session is not None:
+            try:
+                self.session.close()
+            except Exception:
+                log.debug("closing the Zenoh session", exc_info=True)
+            self.session = None
+

@@ -1,0 +1,397 @@
+"""Several daemons, one network: three hosts on this machine, joined over Zenoh on loopback TCP.
+
+Host A carries simulated vehicles and an application on its socket GLI; host B an emulated EvoLogics
+modem on a pty, driven by an AT client of this test (its own framing, not hilgate's codec); host C
+only a socket-GLI application.  Each daemon has its own runtime directory, free loopback ports and
+a Zenoh key prefix of its own test run, so other runs on the machine never meet it.  Model times
+are compared across hosts through the epochs each daemon writes in its trace (``network`` line).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+import uuid
+
+import pytest
+import serial
+
+import hilgate.drivers.mavlink_source  # noqa: F401,E402  (MAVLink 2 before pymavlink is imported)
+from daemon_kit import Daemon, unique  # noqa: E402
+from hilgate.client import Link  # noqa: E402
+from pymavlink import mavutil  # noqa: E402
+
+
+def free_port(kind: int = socket.SOCK_STREAM) -> int:
+    with socket.socket(socket.AF_INET, kind) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def wait_until(predicate, timeout: float = 20.0, what: str = "a condition"):
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        assert time.monotonic() < deadline, f"timed out waiting for {what}"
+        time.sleep(0.05)
+
+
+class Host:
+    """One daemon of the network, in its own directory."""
+
+    def __init__(self, tmp_path, name: str, scene: str, links: list[str], listen: int, connect: list[int] = (),
+                 extra: tuple[str, ...] = ()):
+        self.name = name
+        self.dir = tmp_path / name
+        self.dir.mkdir(parents=True, exist_ok=True)
+        self.listen = listen
+        args = ["--host", name, "--zenoh-listen", f"tcp/127.0.0.1:{listen}",
+                *(arg for port in connect for arg in ("--zenoh-connect", f"tcp/127.0.0.1:{port}")), *extra]
+        self.daemon = Daemon(self.dir, scene, links, *args)
+
+    def status(self) -> dict:
+        return self.daemon.status()
+
+    def sees(self, *hosts: str) -> bool:
+        views = {v["host"]: v["state"] for v in self.status()["network"]["hosts"]}
+        return all(views.get(h) == "up" for h in hosts)
+
+    def remote_link(self, link: str) -> str:
+        return next(l["state"] for l in self.status()["network"]["remote_links"] if l["id"] == link)
+
+    def events(self) -> list[dict]:
+        return self.daemon.trace_events()
+
+    def epoch_ns(self) -> int:
+        runs = [e for e in self.events() if e.get("ev") == "network"]
+        return runs[-1]["epoch_ns"]
+
+
+def to_host(t: float, source: Host, target: Host) -> float:
+    """A model time of ``source`` in ``target``'s model time (the daemons' own arithmetic)."""
+    return t + (source.epoch_ns() - target.epoch_ns()) * 1e-9
+
+
+class AtClient:
+    """An EvoLogics host of our own: writes AT commands, reads RECVIMs by their length field."""
+
+    def __init__(self, path):
+        self.port = serial.Serial(str(path), 19200, timeout=0.2)
+        self.buffer = b""
+
+    def command(self, text: str) -> None:
+        self.port.write(text.encode() + b"\r\n")
+
+    def send_im(self, dst: int, data: bytes) -> None:
+        self.port.write(b"AT*SENDIM,%d,%d,noack," % (len(data), dst) + data + b"\r\n")
+
+    def recvim(self, timeout: float = 10.0) -> tuple[int, bytes] | None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            match = re.search(rb"RECVIM,(\d+),(\d+),(\d+),(no)?ack,(-?\d+),(-?\d+),(\d+),(-?[\d.]+),", self.buffer)
+            if match:
+                length = int(match.group(1))
+                end = match.end() + length
+                if len(self.buffer) >= end:
+                    data = self.buffer[match.end():end]
+                    self.buffer = self.buffer[end:]
+                    return int(match.group(2)), data
+            self.buffer += self.port.read(4096)
+        return None
+
+    def close(self) -> None:
+        self.port.close()
+
+
+def network_scene(prefix: str, a: str, b: str, c: str, pty) -> str:
+    return f"""\
+channels: {{ac: {{speed_mps: 1500}}}}
+zenoh: {{prefix: {prefix}, lease_s: 0.5}}
+vehicles:
+  va: {{pose: {{static: [0, 0, 0]}}}}
+  vb: {{pose: {{static: [150, 0, 0]}}}}
+  vc: {{pose: {{static: [0, 300, 0]}}}}
+links:  # strict: a frame goes to the modem it names, so each hop is checked on its own
+  {a}: {{vehicle: va, host: A, address: 1, bitrate_bps: 1000, addressing: strict}}
+  {b}: {{vehicle: vb, host: B, address: 2, bitrate_bps: 1000, addressing: strict,
+        emulate: {{protocol: evologics, pty: {pty}}}}}
+  {c}: {{vehicle: vc, host: C, address: 3, bitrate_bps: 1000, addressing: strict}}
+"""
+
+
+def airtime(payload: int) -> float:
+    return (1 + 2 + payload + 2) * 8 / 1000  # vl2b: preamble, length, payload, CRC at 1000 b/s
+
+
+@pytest.fixture
+def network(tmp_path):
+    prefix = f"hilgate-test-{uuid.uuid4().hex[:8]}"
+    a, b, c = unique("na"), unique("nb"), unique("nc")
+    pty = tmp_path / "ttyEVO"
+    scene = network_scene(prefix, a, b, c, pty)
+    ports = [free_port() for _ in range(3)]
+    hosts = {"A": Host(tmp_path, "A", scene, [a], ports[0])}
+    hosts["A"].daemon.wait_for("READY=1")
+    hosts["B"] = Host(tmp_path, "B", scene, [b], ports[1], [ports[0]])
+    hosts["C"] = Host(tmp_path, "C", scene, [c], ports[2], [ports[0]])
+    try:
+        for name in "BC":
+            hosts[name].daemon.wait_for("READY=1")
+        for name, host in hosts.items():
+            wait_until(lambda: host.sees(*(h for h in hosts if h != name)), what=f"{name} to see the others")
+        yield {"hosts": hosts, "links": (a, b, c), "pty": pty, "prefix": prefix, "scene": scene, "ports": ports,
+               "tmp": tmp_path}
+    finally:
+        for host in hosts.values():
+            host.daemon.close()
+
+
+def test_three_hosts_share_one_channel_with_exact_model_times(network):
+    A, B, C = (network["hosts"][h] for h in "ABC")
+    a, b, c = network["links"]
+    at = AtClient(network["pty"])
+    try:
+        with Link.open(a, runtime_dir=A.daemon.runtime) as la, Link.open(c, runtime_dir=C.daemon.runtime) as lc:
+            start = time.monotonic()
+            la.send(b"A to B", dst=2)                        # A -> B: the emulated modem prints a RECVIM
+            received = at.recvim()
+            seen = time.monotonic() - start
+            assert received == (1, b"U\x00\x06A to B" + received[1][-2:])  # the whole vl2b packet, as on air
+            assert seen >= airtime(6) + 0.1 - 0.002          # never before the model's time (150 m)
+            at.send_im(1, b"B to A")                          # B -> A, from the AT client
+            message = la.recv(timeout=10)
+            assert (message.src, message.data) == (2, b"B to A")
+            lc.send(b"C to A", dst=1)                         # C -> A (300 m)
+            message = la.recv(timeout=10)
+            assert (message.src, message.data) == (3, b"C to A")
+            la.send(b"everyone", dst=255)                     # a broadcast reaches every host
+            assert at.recvim()[1][3:-2] == b"everyone"
+            message = lc.recv(timeout=10)
+            assert (message.src, message.data) == (1, b"everyone")
+            assert la.recv(timeout=0.5) is None and lc.recv(timeout=0.2) is None  # nothing else, no echo
+        # every host shows every vehicle; status --network lists each host's links
+        for host in (A, B, C):
+            assert {v["name"] for v in host.status()["vehicles"]} == {"va", "vb", "vc"}
+        answer = subprocess.run([sys.executable, "-m", "hilgate", "status", "--network", "--json", "--runtime-dir",
+                                 B.daemon.runtime], capture_output=True, text=True, timeout=30)
+        assert answer.returncode == 0, answer.stderr
+        hosts = {h["host"]: h for h in json.loads(answer.stdout)}
+        assert set(hosts) == {"A", "B", "C"}
+        assert {h: [l["id"] for l in v["links"]] for h, v in hosts.items()} == {"A": [a], "B": [b], "C": [c]}
+        assert {v["host"]: v["state"] for v in hosts["A"]["hosts"]} == {"B": "up", "C": "up"}
+    finally:
+        at.close()
+    for host in (A, B, C):
+        host.daemon.stop()
+    # model times: the arrival on the receiving host is the sender's start + τ + air time, exactly
+    ev = {name: host.events() for name, host in (("A", A), ("B", B), ("C", C))}
+    sent = {name: {e["pkt"]: e["t"] for e in events if e.get("ev") == "tx"} for name, events in ev.items()}
+    hosts = {"A": A, "B": B, "C": C}
+    by_link = {a: "A", b: "B", c: "C"}
+    checked = 0
+    distance = {frozenset("AB"): 150.0, frozenset("AC"): 300.0, frozenset("BC"): math.hypot(150, 300)}
+    for receiver, events in ev.items():
+        for e in (e for e in events if e.get("ev") == "rx"):
+            sender = by_link[e["src"]]
+            t_tx = to_host(sent[sender][e["pkt"]], hosts[sender], hosts[receiver])
+            expected = t_tx + distance[frozenset(sender + receiver)] / 1500 + e["size"] * 8 / 1000
+            assert e["t"] == pytest.approx(expected, abs=1e-6), (receiver, e)
+            checked += 1
+    assert checked == 5  # A->B, B->A, C->A, and the broadcast at B and C
+    assert not [e for events in ev.values() for e in events if e.get("ev") in ("err", "late")]
+
+
+def test_a_host_that_dies_is_down_on_the_others_and_rejoins_without_restarting_them(network):
+    A, B, C = (network["hosts"][h] for h in "ABC")
+    a, b, c = network["links"]
+    assert A.remote_link(b) == "up"
+    B.daemon.process.send_signal(signal.SIGKILL)
+    B.daemon.process.wait()
+    wait_until(lambda: A.remote_link(b) == "down", what="B's link to go down on A")
+    assert not A.sees("B") and A.sees("C")
+    with Link.open(a, runtime_dir=A.daemon.runtime) as la, Link.open(c, runtime_dir=C.daemon.runtime) as lc:
+        la.send(b"to nobody", dst=2)
+        wait_until(lambda: A.daemon.link_status(a)["drop_causes"].get("host_down") == 1, what="host_down")
+        lc.send(b"the others go on", dst=1)
+        assert la.recv(timeout=10).data == b"the others go on"
+        # B comes back (same name, same port): A and C go on without a restart
+        B.daemon.close()
+        B2 = Host(network["tmp"] / "again", "B", network["scene"], [b], network["ports"][1], [network["ports"][0]])
+        network["hosts"]["B"] = B2
+        B2.daemon.wait_for("READY=1")
+        wait_until(lambda: A.remote_link(b) == "up", what="B's link to come back on A")
+        at = AtClient(network["pty"])
+        try:
+            la.send(b"welcome back", dst=2)
+            assert at.recvim()[1][3:-2] == b"welcome back"
+        finally:
+            at.close()
+    A.daemon.stop()
+    errors = [e for e in A.events() if e.get("ev") == "err"]
+    assert [(e["cause"], e["dst"]) for e in errors] == [("host_down", b)]
+    states = [(e["host"], e["state"]) for e in A.events() if e.get("ev") == "host"]
+    assert states[-2:] == [("B", "down"), ("B", "up")]
+
+
+def test_an_application_reaches_a_link_over_zenoh_from_anywhere(network):
+    A, B = network["hosts"]["A"], network["hosts"]["B"]
+    a, b, c = network["links"]
+    at = AtClient(network["pty"])
+    try:
+        endpoint = f"tcp/127.0.0.1:{network['ports'][2]}"  # through C's daemon, for a link A serves
+        with Link.open(a, zenoh={"connect": [endpoint], "prefix": network["prefix"]}) as link:
+            assert link.address == 1 and link.max_payload > 0
+            assert link.command({"class": "POSE"})["position"] == [0.0, 0.0, 0.0]
+            link.send(b"over zenoh", dst=2)
+            assert at.recvim()[1][3:-2] == b"over zenoh"
+            at.send_im(1, b"and back")
+            message = link.recv(timeout=10)
+            assert (message.src, message.data) == (2, b"and back")
+            with pytest.raises(Exception, match="do not fit"):
+                link.send(b"x" * 5000, dst=2)
+                time.sleep(1.0)
+                link.recv(timeout=1.0)
+    finally:
+        at.close()
+
+
+def test_the_same_host_name_or_link_twice_is_refused(network, tmp_path):
+    a = network["links"][0]
+    port = free_port()
+    twin = Host(tmp_path / "twin", "A", network["scene"], [], port, [network["ports"][0]])
+    assert twin.daemon.process.wait(30) == 1  # refused, as a link held by another daemon on this host is
+    assert "host name 'A' is already used" in twin.daemon.output()
+    other = network["scene"].replace(f"{a}: {{vehicle: va, host: A,", f"{a}: {{vehicle: va, host: D,")
+    thief = Host(tmp_path, "D", other, [], free_port(), [network["ports"][0]])
+    assert thief.daemon.process.wait(30) == 1
+    assert f"link {a} is already served by another daemon" in thief.daemon.output()
+    assert network["hosts"]["A"].daemon.process.poll() is None
+
+
+class FakeBlueRov:
+    """ArduSub as seen from the topside: pymavlink sending to a daemon's udpin port at 20 Hz."""
+
+    def __init__(self, port: int):
+        self.link = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1, source_component=1)
+        self.position = [150.0, 0.0, 5.0]
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self):
+        boot = time.monotonic()
+        while not self.stop.is_set():
+            ms = int((time.monotonic() - boot) * 1000)
+            mav = self.link.mav
+            mav.heartbeat_send(mavutil.mavlink.MAV_TYPE_SUBMARINE, mavutil.mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 0)
+            x, y, z = self.position
+            mav.local_position_ned_send(ms, x, y, z, 0.0, 0.0, 0.0)
+            self.stop.wait(0.05)
+
+    def close(self):
+        self.stop.set()
+        self.thread.join()
+
+
+def test_a_pose_measured_on_one_host_moves_the_delays_on_another_exactly(tmp_path):
+    prefix = f"hilgate-test-{uuid.uuid4().hex[:8]}"
+    top, rov = unique("top"), unique("rov")
+    mav_port = free_udp = free_port(socket.SOCK_DGRAM)
+    scene = f"""\
+channels: {{ac: {{speed_mps: 1500}}}}
+zenoh: {{prefix: {prefix}}}
+vehicles:
+  topside: {{pose: {{static: [0, 0, 0]}}, host: A}}
+  bluerov:
+    pose: {{mavlink: {{url: "udpin:127.0.0.1:{free_udp}", system_id: 1}}}}
+    host: B
+links:
+  {top}: {{vehicle: topside, host: A, address: 1, bitrate_bps: 1000, addressing: strict}}
+  {rov}: {{vehicle: bluerov, host: A, address: 2, bitrate_bps: 1000, addressing: strict}}
+"""
+    pa = free_port()
+    A = Host(tmp_path, "A", scene, [top, rov], pa)
+    B = Host(tmp_path, "B", scene, [], free_port(), [pa])
+    vehicle = FakeBlueRov(mav_port)
+    try:
+        A.daemon.wait_for("READY=1")
+        B.daemon.wait_for("READY=1")
+
+        def position_on_a():
+            return next(v for v in A.status()["vehicles"] if v["name"] == "bluerov")["position"]
+
+        wait_until(lambda: position_on_a() == [150.0, 0.0, 5.0], what="B's MAVLink pose on A")
+        with Link.open(top, runtime_dir=A.daemon.runtime) as lt, Link.open(rov, runtime_dir=A.daemon.runtime) as lr:
+            lt.send(b"near", dst=2)
+            assert lr.recv(timeout=10).data == b"near"
+            vehicle.position = [300.0, 0.0, 5.0]
+            wait_until(lambda: position_on_a() == [300.0, 0.0, 5.0], what="the new pose on A")
+            lt.send(b"away", dst=2)
+            assert lr.recv(timeout=10).data == b"away"
+        A.daemon.stop()
+        events = A.events()
+        enq = {e["pkt"]: e["t"] for e in events if e.get("ev") == "enq"}
+        delays = [round(e["t"] - enq[e["pkt"]], 6) for e in events if e.get("ev") == "rx"]
+        # exactly as in the one-host test (test_live_poses): 9 bytes = 72 ms, then 150 m and 300 m at 5 m depth
+        assert delays == [round(0.072 + math.hypot(150, 5) / 1500, 6), round(0.072 + math.hypot(300, 5) / 1500, 6)]
+    finally:
+        vehicle.close()
+        A.daemon.close()
+        B.daemon.close()
+
+
+def test_a_clock_offset_shifts_arrivals_and_a_late_one_is_delivered_at_once_and_counted(tmp_path):
+    prefix = f"hilgate-test-{uuid.uuid4().hex[:8]}"
+    a, b = unique("oa"), unique("ob")
+    scene = f"""\
+channels: {{ac: {{speed_mps: 1500}}}}
+zenoh: {{prefix: {prefix}}}
+vehicles:
+  va: {{pose: {{static: [0, 0, 0]}}}}
+  vb: {{pose: {{static: [150, 0, 0]}}}}
+links:
+  {a}: {{vehicle: va, host: A, address: 1, bitrate_bps: 1000, addressing: strict}}
+  {b}: {{vehicle: vb, host: B, address: 2, bitrate_bps: 1000, addressing: strict}}
+"""
+    pa = free_port()
+    A = Host(tmp_path, "A", scene, [a], pa)
+    B = Host(tmp_path, "B", scene, [b], free_port(), [pa], extra=("--clock-offset-s", "-0.5"))
+    try:
+        A.daemon.wait_for("READY=1")
+        B.daemon.wait_for("READY=1")
+        wait_until(lambda: A.sees("B") and B.sees("A"), what="the hosts to meet")
+        with Link.open(a, runtime_dir=A.daemon.runtime) as la, Link.open(b, runtime_dir=B.daemon.runtime) as lb:
+            la.send(b"A to B", dst=2)  # B's clock is 0.5 s behind: the frame arrives 0.5 s later there
+            assert lb.recv(timeout=10).data == b"A to B"
+            lb.send(b"B to A", dst=1)  # and B's frames are 0.5 s early at A: past their end, so late
+            assert la.recv(timeout=10).data == b"B to A"
+            wait_until(lambda: next(h for h in A.status()["network"]["hosts"] if h["host"] == "B")["late"] == 1,
+                       what="the late arrival counted")
+        A.daemon.stop()
+        B.daemon.stop()
+        tx_a = next(e["t"] for e in A.events() if e.get("ev") == "tx")
+        rx_b = next(e for e in B.events() if e.get("ev") == "rx")
+        flight = 0.1 + rx_b["size"] * 8 / 1000
+        assert rx_b["t"] == pytest.approx(to_host(tx_a, A, B) + flight, abs=1e-6)  # B's own view: exact
+        real_epoch_b = B.epoch_ns() + 500_000_000  # the offset the daemon was told to pretend
+        assert to_host(tx_a, A, B) - (tx_a + (A.epoch_ns() - real_epoch_b) * 1e-9) == pytest.approx(0.5, abs=1e-6)
+        late = [e for e in A.events() if e.get("ev") == "late"]
+        assert len(late) == 1 and late[0]["link"] == a and late[0]["host"] == "B"
+        tx_b = next(e["t"] for e in B.events() if e.get("ev") == "tx")
+        rx_a = next(e for e in A.events() if e.get("ev") == "rx")
+        should_end = to_host(tx_b, B, A) + 0.1 + rx_a["size"] * 8 / 1000
+        assert late[0]["lateness_s"] == pytest.approx(rx_a["t"] - should_end, abs=1e-6)
+        assert late[0]["lateness_s"] > 0.5 - flight - 0.001  # at least what the offset did
+    finally:
+        A.daemon.close()
+        B.daemon.close()
