@@ -21,6 +21,7 @@ A **pose** is UTF-8 JSON ``{"h", "e", "v" vehicle, "t" measured (sender's model 
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import struct
@@ -120,16 +121,35 @@ def _frame(fields: dict) -> Frame:
     return frame
 
 
+@functools.lru_cache(maxsize=64)
+def _packet(name: str) -> Any:
+    try:
+        return packet_class(name)
+    except ValueError:
+        return Raw()
+
+
+def _loads(data: bytes) -> Any:
+    """JSON from another daemon, bounded: with few brackets it cannot be deep, and is parsed at once
+    (the common case, on the hot path); otherwise :mod:`hilgate.core.safejson` checks it first."""
+    if data.count(b"{") + data.count(b"[") <= safejson.MAX_DEPTH:
+        try:
+            return json.loads(data)
+        except (UnicodeDecodeError, ValueError) as exc:
+            raise NetError(f"not JSON: {exc}") from None
+    try:
+        return safejson.loads(data, max_bytes=MAX_HEADER)
+    except ValueError as exc:
+        raise NetError(f"bad JSON: {exc}") from None
+
+
 def decode_transmission(data: bytes) -> Transmission:
     if len(data) < _LENGTH.size:
         raise NetError("too short")
     (length,) = _LENGTH.unpack_from(data)
     if length > MAX_HEADER or _LENGTH.size + length > len(data):
         raise NetError("bad header length")
-    try:
-        header = safejson.loads(data[_LENGTH.size:_LENGTH.size + length])
-    except ValueError as exc:
-        raise NetError(f"bad header: {exc}") from None
+    header = _loads(data[_LENGTH.size:_LENGTH.size + length])
     if not isinstance(header, dict):
         raise NetError("the header is not an object")
     frame = _frame(header)
@@ -144,11 +164,7 @@ def decode_transmission(data: bytes) -> Transmission:
         if not isinstance(app, dict):
             raise NetError("'a' is not an object")
         real_length = _integer(app, "rl", 0, len(body))
-        name = _text(app, "c")
-        try:
-            packet = packet_class(name)
-        except ValueError:
-            packet = Raw()
+        packet = _packet(_text(app, "c"))
         meta = app.get("m")
         if meta is not None and not isinstance(meta, dict):
             raise NetError("'m' is not an object")
@@ -175,10 +191,9 @@ def encode_pose(host: str, epoch_ns: int, vehicle: str, t: float, position: Any,
 
 
 def decode_pose(data: bytes) -> dict[str, Any]:
-    try:
-        message = safejson.loads(data)
-    except ValueError as exc:
-        raise NetError(f"bad pose: {exc}") from None
+    if len(data) > MAX_HEADER:
+        raise NetError("a pose that long")
+    message = _loads(data)
     if not isinstance(message, dict):
         raise NetError("a pose is an object")
     result = {"host": _text(message, "h"), "epoch_ns": _integer(message, "e"), "vehicle": _text(message, "v"),
