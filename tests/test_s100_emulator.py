@@ -1,0 +1,227 @@
+"""The emulated Seatooth S100 behaves like the real one on its serial line (issue 13 item 10).
+
+- the line is paced at the scene's baud, 10 bits a byte (8N1): on a pty, which takes no time, a frame
+  reaches the channel when its last byte would have crossed the real line;
+- without RTS/CTS the modem holds 45 bytes and sends them at the air bitrate: bytes that come when it is
+  full are lost, counted and traced (``overflow``); with RTS/CTS nothing is;
+- bytes that are no frame of the link's packet class pass through, as through the real transparent pipe.
+
+The client on the other end of each pty is independent: pyserial, its own SimplePacket bytes (``55``,
+17 bytes, CRC-16/XMODEM big-endian, checked against dccomms' bridge: ``55 41..51 A6 72``) and its own
+line splitting, not hilgate's codec.
+"""
+
+import binascii
+import time
+from fractions import Fraction
+
+import serial
+
+from daemon_kit import Daemon, unique
+from hilgate.drivers.s100_codec import InputBuffer, SerialLine, byte_time
+
+
+def simple20(seq: int) -> bytes:
+    payload = bytes([seq]) + b"hilgate-s100-abc"[:16]
+    assert len(payload) == 17
+    return b"\x55" + payload + binascii.crc_hqx(payload, 0).to_bytes(2, "big")
+
+
+def test_independent_packet_builder_matches_the_bridge_bytes():
+    payload = bytes(range(0x41, 0x52))
+    assert binascii.crc_hqx(payload, 0).to_bytes(2, "big") == b"\xa6\x72"
+
+
+# -- the line and the buffer, without a port ---------------------------------------------------------------
+
+
+def test_a_byte_takes_ten_bits_on_the_line():
+    assert byte_time(19200) == 10 / 19200  # ~0.52 ms: what a real 19 200-baud line adds per byte
+    line = SerialLine(9600)
+    assert line.send(1.0, 22) == 1.0 + 22 * 10 / 9600
+    assert line.send(1.0, 10) == 1.0 + 32 * 10 / 9600  # written meanwhile: after the first write
+    assert line.send(5.0, 1) == 5.0 + 10 / 9600  # the line was free again
+
+
+def expected_kept(size: int, bt: Fraction, drain: Fraction, capacity: int = 45) -> int:
+    """The leaky bucket, by hand in exact arithmetic: a byte every bt, drained at drain B/s."""
+    level, kept = Fraction(0), 0
+    for i in range(size):
+        if i:
+            level = max(Fraction(0), level - bt * drain)
+        if level + 1 <= capacity:
+            level += 1
+            kept += 1
+    return kept
+
+
+def test_without_flow_control_the_modem_holds_45_bytes():
+    # nothing drains: exactly 45 of 60 bytes fit
+    assert InputBuffer(0.0).accept(0.0, 60, 0.001).count(True) == 45
+    # a 100-byte write at 19 200 baud, 1800 bit/s on air: the modem drains 0.117 B per byte time
+    bt = byte_time(19200)
+    fits = InputBuffer(1800 / 8).accept(0.0, 100, bt)
+    assert fits.count(True) == expected_kept(100, Fraction(10, 19200), Fraction(1800, 8)) == 56
+    assert all(fits[:50]) and not fits[50]
+    # a writer pacing 45-byte pieces at the air bitrate, as dccomms' bridge and hilgate's driver do, loses nothing
+    buffer = InputBuffer(1800 / 8)
+    for k in range(5):
+        assert all(buffer.accept(k * 45 * 8 / 1800, 45, bt))
+
+
+# -- over ptys, with the daemon -------------------------------------------------------------------------------
+
+
+def scene(tmp_path, ea, eb, baud, rtscts=False, bitrate=1000):
+    return f"""\
+channels: {{ac: {{speed_mps: 1500}}}}
+vehicles:
+  va: {{pose: {{static: [0, 0, 0]}}}}
+  vb: {{pose: {{static: [150, 0, 0]}}}}
+links:
+  {ea}: {{vehicle: va, address: 1, bitrate_bps: {bitrate}, packet: simple:20,
+         emulate: {{protocol: s100, pty: {tmp_path / 'a'}, baud: {baud}, rtscts: {str(rtscts).lower()}}}}}
+  {eb}: {{vehicle: vb, address: 2, bitrate_bps: {bitrate}, packet: simple:20,
+         emulate: {{protocol: s100, pty: {tmp_path / 'b'}, baud: {baud}, rtscts: {str(rtscts).lower()}}}}}
+"""
+
+
+def read_lines(port: serial.Serial, count: int) -> list[bytes]:
+    """The client's own splitting: lines ending in CR LF (these payloads hold none)."""
+    lines = []
+    for _ in range(count):
+        line = port.read_until(b"\r\n")
+        assert line.endswith(b"\r\n"), (lines, line)
+        lines.append(line)
+    return lines
+
+
+def test_frames_reach_the_channel_when_their_cr_lf_would_have_crossed_the_line(tmp_path):
+    ea, eb = unique("sa"), unique("sb")
+    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb, baud=1200), [ea, eb])
+    try:
+        daemon.wait_for("READY=1")
+        a = serial.Serial(str(tmp_path / "a"), 1200, timeout=10)
+        b = serial.Serial(str(tmp_path / "b"), 1200, timeout=10)
+        frames = [simple20(1), simple20(2)]
+        a.write(b"".join(f + b"\r\n" for f in frames))  # 44 bytes at once; a pty takes no time
+        assert read_lines(b, 2) == [f + b"\r\n" for f in frames]
+        a.close(), b.close()
+        daemon.stop()
+        events = daemon.trace_events()
+        enq = [e["t"] for e in events if e.get("link") == ea and e["ev"] == "enq"]
+        # the second frame's CR LF is in 22 bytes (frame + CR LF) of 10 bits at 1200 baud after the first's
+        assert len(enq) == 2 and abs((enq[1] - enq[0]) - 22 * 10 / 1200) <= 2e-9  # the trace rounds to 1 ns
+        assert [e["size"] for e in events if e.get("link") == eb and e["ev"] == "rx"] == [20, 20]
+        assert not [e for e in events if e["ev"] == "drop"]
+    finally:
+        daemon.close()
+
+
+def test_received_frames_reach_the_host_at_the_lines_pace(tmp_path):
+    """At 300 baud a 22-byte line takes 0.733 s each way: the far host cannot have the frame before
+    in-line + air time + propagation + out-line (a lower bound only: the machine may be slow)."""
+    ea, eb = unique("sa"), unique("sb")
+    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb, baud=300, rtscts=True), [ea, eb])
+    try:
+        daemon.wait_for("READY=1")
+        a = serial.Serial(str(tmp_path / "a"), 300, timeout=10)
+        b = serial.Serial(str(tmp_path / "b"), 300, timeout=10)
+        start = time.monotonic()
+        a.write(simple20(7) + b"\r\n")
+        assert read_lines(b, 1) == [simple20(7) + b"\r\n"]
+        seen = time.monotonic() - start
+        model = 22 * 10 / 300 + 20 * 8 / 1000 + 150 / 1500 + 22 * 10 / 300
+        assert seen >= model - 0.002, (seen, model)
+        a.close(), b.close()
+    finally:
+        daemon.close()
+
+
+def test_bytes_that_are_no_frame_pass_through_as_the_real_pipe_would(tmp_path):
+    ea, eb = unique("sa"), unique("sb")
+    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb, baud=115200), [ea, eb])
+    try:
+        daemon.wait_for("READY=1")
+        a = serial.Serial(str(tmp_path / "a"), 115200, timeout=10)
+        b = serial.Serial(str(tmp_path / "b"), 115200, timeout=10)
+        text = b"$GPGGA,123519,4807.038,N*47"  # no 0x55 ('U') in it: no SimplePacket preamble
+        a.write(text + b"\r\n")
+        assert read_lines(b, 1) == [text + b"\r\n"]
+        bad = bytearray(simple20(3))
+        bad[5] ^= 0xFF  # a frame with a bad CRC is bytes like any other for the modem
+        a.write(bytes(bad) + b"\r\n")
+        assert read_lines(b, 1) == [bytes(bad) + b"\r\n"]
+        a.write(b"hello" + simple20(4) + b"\r\n")  # text without CR LF, then a frame: both, in order
+        assert read_lines(b, 2) == [b"hello\r\n", simple20(4) + b"\r\n"]
+        a.close(), b.close()
+        daemon.stop()
+        events = daemon.trace_events()
+        assert [e["size"] for e in events if e.get("link") == ea and e["ev"] == "tx"] == [len(text), 20, 5, 20]
+        # the emulators took everything; the link's dccomms queue door cannot hold more than a SimplePacket's
+        # 17 bytes of payload, so it counts the two longer raw frames as its own loss
+        drops = [(e["link"], e["cause"], e["size"]) for e in events if e["ev"] in ("drop", "err")]
+        assert drops == [(eb, "size", len(text)), (eb, "size", 20)]
+    finally:
+        daemon.close()
+
+
+def test_without_flow_control_a_long_write_overflows_and_the_loss_is_traced(tmp_path):
+    ea, eb = unique("sa"), unique("sb")
+    burst = b"".join(simple20(i) + b"\r\n" for i in range(5))  # 110 bytes at once, not paced
+    kept = expected_kept(len(burst), Fraction(10, 19200), Fraction(1000, 8))
+    assert kept == 52
+    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb, baud=19200), [ea, eb])
+    try:
+        daemon.wait_for("READY=1")
+        a = serial.Serial(str(tmp_path / "a"), 19200, timeout=10)
+        a.write(burst)
+        deadline = time.monotonic() + 15
+        while time.monotonic() < deadline and daemon.link_status(ea)["drop_causes"].get("overflow", 0) == 0:
+            time.sleep(0.1)
+        a.close()
+        daemon.stop()
+        drops = [e for e in daemon.trace_events() if e["ev"] == "drop" and e.get("link") == ea]
+        assert [(e["cause"], e["size"]) for e in drops] == [("overflow", len(burst) - kept)]
+    finally:
+        daemon.close()
+
+
+def test_with_flow_control_the_same_write_is_carried_whole(tmp_path):
+    ea, eb = unique("sa"), unique("sb")
+    frames = [simple20(i) for i in range(5)]
+    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb, baud=19200, rtscts=True), [ea, eb])
+    try:
+        daemon.wait_for("READY=1")
+        a = serial.Serial(str(tmp_path / "a"), 19200, timeout=10)
+        b = serial.Serial(str(tmp_path / "b"), 19200, timeout=10)
+        a.write(b"".join(f + b"\r\n" for f in frames))
+        assert read_lines(b, 5) == [f + b"\r\n" for f in frames]
+        a.close(), b.close()
+        daemon.stop()
+        assert not [e for e in daemon.trace_events() if e["ev"] == "drop"]
+    finally:
+        daemon.close()
+
+
+def test_the_line_options_are_checked_with_file_and_line():
+    import pytest
+    from hilgate.scene import SceneError, load_scene_text
+
+    base = """\
+channels: {{ac: {{speed_mps: 1500}}}}
+vehicles: {{v: {{pose: {{static: [0, 0, 0]}}}}}}
+links:
+  x: {{vehicle: v, emulate: {{protocol: {protocol}, pty: /tmp/tty{protocol}, {extra}}}}}
+"""
+    spec = load_scene_text(base.format(protocol="s100", extra="baud: 19200"), "/tmp/scene.yaml")
+    assert dict(spec.links["x"].emulate) == {"protocol": "s100", "pty": "/tmp/ttys100", "baud": 19200,
+                                             "rtscts": False}
+    for protocol, extra, message in [
+        ("s100", "baud: 10", "links.x.emulate.baud"),
+        ("s100", "rtscts: 3", "links.x.emulate.rtscts"),
+        ("evologics", "baud: 19200", "only for protocol s100 (this is evologics)"),
+    ]:
+        with pytest.raises(SceneError) as info:
+            load_scene_text(base.format(protocol=protocol, extra=extra), "/tmp/scene.yaml")
+        assert info.value.line == 4 and message in str(info.value), str(info.value)
