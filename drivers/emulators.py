@@ -29,7 +29,8 @@ from hilgate.core.packets import BROADCAST, Decoded, Raw
 from hilgate.core.streams import Connection, Listener
 
 from .evologics_codec import BadCommand, Command, Data, ModemCodec
-from .s100_codec import CRLF, IDLE_S, FrameHunter, InputBuffer, Notice, SerialLine, Skipped, wire_class
+from .s100_codec import (CRLF, IDLE_S, PIECE, TERMINATOR, FrameHunter, InputBuffer, Notice, SerialLine, Skipped,
+                         wire_class)
 from .table import emulator_for
 
 log = logging.getLogger(__name__)
@@ -391,10 +392,12 @@ class S100Emulator:
       traced (``cause: overflow``) (:class:`InputBuffer`).  With ``rtscts: true`` the modem stops the host
       instead: nothing is lost.
     - **Frames and other bytes.** Frames of the link's packet class (hunted by preamble, length and CRC)
-      go on air as one frame each, as the other doors of the link see them.  Bytes that are no such
-      frame (text, a frame with a bad CRC, a ``+++`` line) are passed through as a raw frame, as a real
-      S100 would carry them, when a CR LF or a frame ends them, or after :data:`IDLE_S` without bytes;
-      the far emulated S100 writes them unchanged, followed by CR LF.
+      go on air as one frame each, as the other doors of the link see them, and come out followed by
+      CR LF.  Bytes that are no such frame (text, a frame with a bad CRC, a ``+++`` line) are passed
+      through as a raw frame, CR LF included, as a real S100 would carry them: when a CR LF or a frame
+      ends them, after :data:`IDLE_S` without bytes, or (without flow control) 45 bytes at a time; the
+      far emulated S100 writes them unchanged.  So a frame longer than 45 bytes without flow control
+      crosses as 45-byte pieces, as on the real modem, and the far host's framing joins them again.
     """
 
     kind = "emulator"
@@ -443,8 +446,9 @@ class S100Emulator:
             state.waiting = None
             done = len(need) if data.startswith(need) else 0
             self.scheduler.at(arrivals[done - 1] if done else start, self._event, state, frame)
-        base = state.hunter.fed  # the stream offset of data[0]
-        for event, end in state.hunter.receive_data_at(data):
+        hunter = state.hunter
+        base = hunter.fed  # the stream offset of data[0]
+        for event, end in hunter.receive_data_at(data):
             local = end - base
             at = arrivals[local - 1] if local > 0 else start
             if isinstance(event, Decoded) and local > 0:
@@ -456,6 +460,11 @@ class S100Emulator:
                     state.waiting = (event, CRLF[len(after):])
                     continue
             self.scheduler.at(at, self._event, state, event)
+        while state.buffer is not None and hunter.held >= PIECE:
+            # without flow control the modem sends what it holds once it has 45 bytes, CR LF or not: a
+            # longer frame goes on air in 45-byte pieces (the far host's own framing joins them again)
+            local = hunter.consumed + PIECE - base
+            self.scheduler.at(arrivals[local - 1] if local > 0 else start, self._piece, state, hunter.take(PIECE))
         self.scheduler.cancel(state.idle_timer)
         state.idle_timer = self.scheduler.at(line.free_at + IDLE_S * self.speed, self._idle, state)
 
@@ -468,12 +477,23 @@ class S100Emulator:
             self.port.send(AppFrame(real, event.payload, packet, 0, self.port.address, event.dst,
                                     self.scheduler.now()))
         elif isinstance(event, Skipped):
+            if event.reason == TERMINATOR and not state.other:
+                return  # the CR LF after a frame
             state.other += event.data
             if state.other.endswith(CRLF):
                 self._send_other(state)
+            elif state.buffer is not None and len(state.other) >= PIECE:
+                self._piece(state, b"")
         elif isinstance(event, Notice):
-            state.other += event.text
+            state.other += event.text + CRLF
             self._send_other(state)  # its CR LF ended it
+
+    def _piece(self, state: _S100Host, data: bytes) -> None:
+        """45 bytes without flow control: what is pending goes as packets of 45 bytes (the rest waits)."""
+        state.other += data
+        while len(state.other) >= PIECE:
+            self._send_raw(bytes(state.other[:PIECE]))
+            del state.other[:PIECE]
 
     def _idle(self, state: _S100Host) -> None:
         """Nothing came for :data:`IDLE_S`: a frame still waiting for its CR LF goes (the modem's
@@ -486,10 +506,13 @@ class S100Emulator:
         self._send_other(state)
 
     def _send_other(self, state: _S100Host) -> None:
-        data = bytes(state.other).strip(b"\r\n")  # CR LF ends a packet: the far modem writes its own
+        data = bytes(state.other)
         state.other.clear()
-        if not data:
-            return
+        if data:
+            self._send_raw(data)
+
+    def _send_raw(self, data: bytes) -> None:
+        """Bytes that are no frame, on air as they are (CR LF included): the far S100 writes them unchanged."""
         frame = AppFrame(data, data, Raw(), 0, self.port.address, BROADCAST, self.scheduler.now())
         frame.meta = {"s100": "raw"}
         self.port.send(frame)
@@ -500,14 +523,13 @@ class S100Emulator:
         packet = self.port.packet
         wire = wire_class(packet)
         if (frame.meta or {}).get("s100") == "raw":
-            data = frame.payload  # another S100's bytes, as they were
+            data = frame.payload  # another S100's bytes, as they were (with their CR LF, if they had one)
         elif isinstance(packet, Raw):
-            data = wire.encode(frame.payload)
+            data = wire.encode(frame.payload) + CRLF
         elif frame.packet.name == packet.name:
-            data = frame.real
+            data = frame.real + CRLF
         else:
-            data = packet.encode(frame.payload, src=frame.src, dst=frame.dst)
-        data += CRLF
+            data = packet.encode(frame.payload, src=frame.src, dst=frame.dst) + CRLF
         for host, state in list(self.states.items()):
             done = state.line_out.send(t, len(data))
             self.scheduler.at(done, host.write, data)  # the host has the whole line when its last byte is in

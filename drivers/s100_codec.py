@@ -19,6 +19,7 @@ PIECE = 45
 MAX_NOTICE = 200
 EPS = 1e-9
 LINE_BITS = 10  # 8N1: a start bit, 8 data bits and a stop bit on the serial line for each byte
+TERMINATOR = "terminator"  # the reason of a Skipped that is only CR and LF between frames
 IDLE_S = 0.1
 """How long the emulated S100 holds bytes that are no frame (yet) before it sends them as they are.
 The real modem sends a packet under 45 bytes "after a timeout" unless CR LF arrives; its value is
@@ -139,6 +140,18 @@ class FrameHunter:
         """Bytes given to the hunter so far: the stream offset where the next data will start."""
         return self.consumed + len(self._buffer)
 
+    @property
+    def held(self) -> int:
+        """Bytes the hunter holds (the start of a frame still arriving, a notice without its end…)."""
+        return len(self._buffer)
+
+    def take(self, count: int) -> bytes:
+        """Take the first ``count`` held bytes out of the stream (an emulated S100 sends them on)."""
+        data = bytes(self._buffer[:count])
+        del self._buffer[:count]
+        self.consumed += len(data)
+        return data
+
     def flush(self) -> bytes:
         """Give up on what is held (a frame that will not complete, a notice without end): the bytes."""
         rest = bytes(self._buffer)
@@ -180,8 +193,11 @@ class FrameHunter:
         buffer = self._buffer
         packet = self.packet
         preamble = packet.preamble
-        while buffer[:1] in (b"\r", b"\n"):
-            del buffer[:1]
+        ends = 0
+        while buffer[ends:ends + 1] in (b"\r", b"\n"):
+            ends += 1
+        if ends:
+            return self._skip(ends, TERMINATOR)  # a packet's CR LF (an emulated pipe passes them on)
         if not buffer:
             return None
         if buffer[:3] == b"+++":

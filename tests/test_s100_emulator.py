@@ -15,6 +15,7 @@ import binascii
 import time
 from fractions import Fraction
 
+import pytest
 import serial
 
 from daemon_kit import Daemon, unique
@@ -153,15 +154,17 @@ def test_bytes_that_are_no_frame_pass_through_as_the_real_pipe_would(tmp_path):
         a.write(bytes(bad) + b"\r\n")
         assert read_lines(b, 1) == [bytes(bad) + b"\r\n"]
         a.write(b"hello" + simple20(4) + b"\r\n")  # text without CR LF, then a frame: both, in order
-        assert read_lines(b, 2) == [b"hello\r\n", simple20(4) + b"\r\n"]
+        assert read_lines(b, 1) == [b"hello" + simple20(4) + b"\r\n"]
         a.close(), b.close()
         daemon.stop()
         events = daemon.trace_events()
-        assert [e["size"] for e in events if e.get("link") == ea and e["ev"] == "tx"] == [len(text), 20, 5, 20]
+        # on air: the text and the bad frame with their CR LF, as written; "hello"; the good frame (its CR LF
+        # is the S100's packet end, added back by the far modem)
+        assert [e["size"] for e in events if e.get("link") == ea and e["ev"] == "tx"] == [len(text) + 2, 22, 5, 20]
         # the emulators took everything; the link's dccomms queue door cannot hold more than a SimplePacket's
         # 17 bytes of payload, so it counts the two longer raw frames as its own loss
         drops = [(e["link"], e["cause"], e["size"]) for e in events if e["ev"] in ("drop", "err")]
-        assert drops == [(eb, "size", len(text)), (eb, "size", 20)]
+        assert drops == [(eb, "size", len(text) + 2), (eb, "size", 22)]
     finally:
         daemon.close()
 
@@ -205,7 +208,6 @@ def test_with_flow_control_the_same_write_is_carried_whole(tmp_path):
 
 
 def test_the_line_options_are_checked_with_file_and_line():
-    import pytest
     from hilgate.scene import SceneError, load_scene_text
 
     base = """\
@@ -225,3 +227,48 @@ links:
         with pytest.raises(SceneError) as info:
             load_scene_text(base.format(protocol=protocol, extra=extra), "/tmp/scene.yaml")
         assert info.value.line == 4 and message in str(info.value), str(info.value)
+
+
+def driver_scene(tmp_path, a, b, ea, eb, rtscts):
+    flow = f"rtscts: {str(rtscts).lower()}"
+    return f"""\
+channels: {{ac: {{speed_mps: 1500}}}}
+vehicles:
+  va: {{pose: {{static: [0, 0, 0]}}}}
+  vb: {{pose: {{static: [150, 0, 0]}}}}
+links:
+  {a}: {{vehicle: va, backend: s100, port: {tmp_path / 'a'}, baud: 19200, {flow}, address: 1, bitrate_bps: 1000,
+        packet: simple:100}}
+  {b}: {{vehicle: vb, backend: s100, port: {tmp_path / 'b'}, baud: 19200, {flow}, address: 2, bitrate_bps: 1000,
+        packet: simple:100}}
+  {ea}: {{vehicle: va, address: 1, bitrate_bps: 1000, packet: simple:100,
+         emulate: {{protocol: s100, pty: {tmp_path / 'a'}, baud: 19200, {flow}}}}}
+  {eb}: {{vehicle: vb, address: 2, bitrate_bps: 1000, packet: simple:100,
+         emulate: {{protocol: s100, pty: {tmp_path / 'b'}, baud: 19200, {flow}}}}}
+"""
+
+
+@pytest.mark.parametrize("rtscts,on_air", [(False, [45, 45, 12]), (True, [100])])
+def test_hilgates_driver_gets_a_long_frame_across_in_45_byte_pieces_without_flow_control(tmp_path, rtscts, on_air):
+    """hilgate's S100 driver writes a 100-byte SimplePacket as 45 + 45 + 10 bytes paced at the air bitrate, then
+    CR LF: the emulated S100 sends each piece as the real one would (45, 45, then 10 + CR LF) and loses none;
+    the far driver joins them.  With RTS/CTS the frame goes whole."""
+    from hilgate.client import Link
+    from test_modems_e2e import wait_up
+
+    a, b, ea, eb = unique("da"), unique("db"), unique("ea"), unique("eb")
+    daemon = Daemon(tmp_path, driver_scene(tmp_path, a, b, ea, eb, rtscts), [a, b, ea, eb])
+    try:
+        daemon.wait_for("READY=1")
+        wait_up(daemon, [a, b])
+        with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
+            payload = bytes(range(60)) + b"\r\n+++" + bytes(range(200, 230))
+            la.send(payload, dst=2)
+            message = lb.recv(timeout=15)
+            assert message is not None and message.data.rstrip(b"\0") == payload
+        daemon.stop()
+        events = daemon.trace_events()
+        assert [e["size"] for e in events if e.get("link") == ea and e["ev"] == "tx"] == on_air
+        assert not [e for e in events if e["ev"] in ("drop", "err") and e.get("link") in (a, b, ea)]
+    finally:
+        daemon.close()
