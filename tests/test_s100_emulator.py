@@ -17,8 +17,14 @@ from fractions import Fraction
 
 import pytest
 import serial
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from daemon_kit import Daemon, unique
+from fuzzkit import examples
+from hilgate.core.packets import packet_class
+from hilgate.core.scheduler import VirtualScheduler
+from hilgate.drivers.emulators import S100Emulator
 from hilgate.drivers.s100_codec import InputBuffer, SerialLine, byte_time
 
 
@@ -272,3 +278,84 @@ def test_hilgates_driver_gets_a_long_frame_across_in_45_byte_pieces_without_flow
         assert not [e for e in events if e["ev"] in ("drop", "err") and e.get("link") in (a, b, ea)]
     finally:
         daemon.close()
+
+
+# -- the pipe is transparent, for any bytes and any chunking ---------------------------------------------------
+
+
+class _Loop(VirtualScheduler):
+    """Virtual time; the emulators' ptys are real but nothing is read from them here: the host's writes
+    are handed to the emulator as its loop would, at chosen times."""
+
+    def add_reader(self, fd, fn):
+        pass
+
+    def remove_reader(self, fd):
+        pass
+
+
+class _Link:
+    """The simulated link between two emulated S100s, reduced to what they use: frames one after the
+    other at 1000 bit/s, delivered to the other emulator when their last bit is in."""
+
+    def __init__(self, name, clock):
+        self.id, self.packet, self.address, self.clock = name, packet_class("simple:20"), 1, clock
+        self.free, self.peer, self.lost_bytes = 0.0, None, 0
+
+    def airtime(self, size):
+        return size * 8 / 1000
+
+    def send(self, frame):
+        self.free = max(self.clock.now(), self.free) + self.airtime(len(frame.real))
+        self.clock.at(self.free, self.peer.deliver, frame, self.free)
+
+    def lost(self, cause, size, src="medium"):
+        assert cause == "overflow"
+        self.lost_bytes += size
+
+
+class _Host:
+    def __init__(self):
+        self.out = bytearray()
+
+    def write(self, data):
+        self.out += data
+
+
+_parts = st.one_of(st.integers(0, 255).map(simple20).map(lambda f: f + b"\r\n"), st.integers(0, 255).map(simple20),
+                   st.sampled_from([b"\r\n", b"\r", b"\n", b"+++NOTICE\r\n", b"hello", b"U", b"UU\x14", b"+++"]),
+                   st.binary(max_size=50))
+
+
+@settings(max_examples=examples(200), deadline=None)
+@given(st.lists(_parts, min_size=1, max_size=8).map(b"".join), st.booleans(),
+       st.lists(st.tuples(st.integers(1, 40), st.sampled_from([0.0, 0.001, 0.05, 0.3])), min_size=1, max_size=30))
+def test_fuzz_the_emulated_s100_is_transparent(tmp_path_factory, stream, rtscts, chunks):
+    """Whatever the host writes, in whatever pieces, the far host gets the same bytes in the same order
+    (the emulators add a CR LF after a frame that had none, and drop CR/LF between frames); without
+    flow control, unless the modem's 45 bytes overflowed."""
+    folder = tmp_path_factory.mktemp("s100")
+    clock = _Loop()
+    la, lb = _Link("a", clock), _Link("b", clock)
+    spec = {"baud": 9600, "rtscts": rtscts}
+    ea = S100Emulator(la, {**spec, "pty": str(folder / "a")}, clock)
+    eb = S100Emulator(lb, {**spec, "pty": str(folder / "b")}, clock)
+    try:
+        la.peer, lb.peer = eb, ea
+        host_a, host_b = _Host(), _Host()
+        ea.states = {host_a: next(iter(ea.states.values()))}
+        eb.states = {host_b: next(iter(eb.states.values()))}
+        t, i, k = 0.0, 0, 0
+        while i < len(stream):
+            size, gap = chunks[k % len(chunks)]
+            clock.at(t, ea._on_data, host_a, stream[i:i + size])
+            i, k, t = i + size, k + 1, t + gap
+        clock.run(t + 1000)
+        plain = lambda data: bytes(data).replace(b"\r", b"").replace(b"\n", b"")
+        if la.lost_bytes == 0:
+            assert plain(host_b.out) == plain(stream)
+        else:
+            assert not rtscts
+    finally:
+        ea.close()
+        eb.close()
