@@ -359,3 +359,17 @@ def test_fuzz_the_emulated_s100_is_transparent(tmp_path_factory, stream, rtscts,
     finally:
         ea.close()
         eb.close()
+
+
+def test_hilgate_emulate_takes_the_line_options_and_the_scene_checks_them(tmp_path):
+    import subprocess
+    import sys
+
+    scene_file = tmp_path / "scene.yaml"
+    scene_file.write_text("channels: {ac: {speed_mps: 1500}}\nvehicles: {v: {pose: {static: [0, 0, 0]}}}\n"
+                          "links: {x: {vehicle: v, address: 4}}\n")
+    for protocol, extra, message in [("s100", ["--baud", "10"], "links.x.emulate.baud: must be at least 50, not 10"),
+                                     ("evologics", ["--rtscts"], "links.x.emulate.rtscts: only for protocol s100")]:
+        result = subprocess.run([sys.executable, "-m", "hilgate", "emulate", protocol, str(scene_file), "--link", "x",
+                                 "--pty", str(tmp_path / "tty"), *extra], capture_output=True, text=True, timeout=60)
+        assert result.returncode == 2 and message in result.stderr, result.stderr
