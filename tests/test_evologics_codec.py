@@ -166,6 +166,18 @@ def test_s100_pieces_and_hunting():
     assert events[2] == Decoded(real, bytes(range(0x41, 0x52)), 0, 255, 255)
 
 
+def test_s100_hunter_a_preamble_inside_a_notice_does_not_hold_the_frames_behind_it():
+    """Found by the fuzz test: the "U" of "EFAULT" is vl1b's preamble with a length of "L" (76), so the
+    hunter waited for 76 bytes before ending the notice, holding back three whole frames behind it."""
+    wire = wire_class(packet_class("vl1b"))
+    frames = [wire.encode(b"\x00")] * 3
+    stream = b"+++ATERROR EFAULT\r\nRECVIM," + b"\r\n".join(frames) + b"\r\n"
+    hunter = FrameHunter(packet_class("vl1b"))
+    found = [e.real for i in range(0, len(stream), 5) for e in hunter.receive_data(stream[i:i + 5])
+             if isinstance(e, Decoded)]
+    assert found == frames
+
+
 # -- fuzz ----------------------------------------------------------------------------------------------
 
 _pieces = st.sampled_from([b"RECVIM,", b"RECV,", b"RECVPBM,", b"+++AT", b":", b"\r\n", b"\r", b"\n", b",", b"5",
