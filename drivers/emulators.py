@@ -9,8 +9,9 @@ emulated modem prints ``RECVIM,5,1,2,ack,…`` when the model delivers the frame
 ``AT?T`` answers the model's propagation time; settings answer as a modem does.  Like a modem just
 powered on, it starts in command mode (``ATO`` enters data mode, ``+++AT`` escapes work there).
 
-The S100 emulator is the byte pipe the real one is: frames of the link's packet class followed by
-CR LF in, the same bytes out on the other side.
+The S100 emulator is the byte pipe the real one is, on a serial line paced as the real one: frames
+of the link's packet class followed by CR LF in, the same bytes out on the other side; other bytes
+pass through as they are (:class:`S100Emulator`).
 """
 
 from __future__ import annotations
@@ -24,11 +25,12 @@ from typing import Any, Callable
 
 from hilgate.core.backend import AppFrame
 from hilgate.core.endpoint import TAKEN, LinkPort
-from hilgate.core.packets import BROADCAST, Raw
+from hilgate.core.packets import BROADCAST, Decoded, Raw
 from hilgate.core.streams import Connection, Listener
 
 from .evologics_codec import BadCommand, Command, Data, ModemCodec
-from .s100_codec import CRLF, FrameHunter, Notice, Skipped, wire_class
+from .s100_codec import (CRLF, IDLE_S, PIECE, TERMINATOR, FrameHunter, InputBuffer, Notice, SerialLine, Skipped,
+                         wire_class)
 from .table import emulator_for
 
 log = logging.getLogger(__name__)
@@ -363,8 +365,40 @@ class EvologicsEmulator:
         return self.pending_ack is not None
 
 
+class _S100Host:
+    """What the emulated S100 keeps for one host: its frame hunter, both directions of its serial
+    line, its 45-byte input buffer (without flow control) and the bytes that are no frame yet."""
+
+    def __init__(self, emulator: "S100Emulator"):
+        self.hunter = FrameHunter(emulator.port.packet)
+        self.line_in = SerialLine(emulator.baud, emulator.speed)
+        self.line_out = SerialLine(emulator.baud, emulator.speed)
+        self.buffer: InputBuffer | None = None  # made with the first bytes (the link's modem may come later)
+        self.other = bytearray()  # bytes that are no frame of the link's class: passed on as they are
+        self.waiting: tuple[Decoded, bytes] | None = None  # a frame and the part of its CR LF still to come
+        self.idle_timer = None
+
+
 class S100Emulator:
-    """A Seatooth S100 in front of a simulated link: frames of the link's packet class + CR LF."""
+    """A Seatooth S100 in front of a simulated link: a transparent byte pipe on a serial line.
+
+    - **The line.** A pty takes no time per byte; the real line takes 10 bits per byte (8N1) at the
+      scene's ``baud`` (default 9600, as dccomms' bridge).  Each byte the host writes is taken to
+      arrive when the real line would bring it (:class:`SerialLine`), and a frame goes to the channel
+      when the CR LF that ends it is in (as the real modem sends a packet; without a CR LF, after
+      :data:`IDLE_S`); received frames (+ CR LF) reach the host when their last byte would.
+    - **45 bytes without flow control** (``rtscts: false``, the default): the modem holds at most 45
+      bytes and sends them at the air bitrate; bytes that arrive when it is full are lost, counted and
+      traced (``cause: overflow``) (:class:`InputBuffer`).  With ``rtscts: true`` the modem stops the host
+      instead: nothing is lost.
+    - **Frames and other bytes.** Frames of the link's packet class (hunted by preamble, length and CRC)
+      go on air as one frame each, as the other doors of the link see them, and come out followed by
+      CR LF.  Bytes that are no such frame (text, a frame with a bad CRC, a ``+++`` line) are passed
+      through as a raw frame, CR LF included, as a real S100 would carry them: when a CR LF or a frame
+      ends them, after :data:`IDLE_S` without bytes, or (without flow control) 45 bytes at a time; the
+      far emulated S100 writes them unchanged.  So a frame longer than 45 bytes without flow control
+      crosses as 45-byte pieces, as on the real modem, and the far host's framing joins them again.
+    """
 
     kind = "emulator"
     busy = False
@@ -373,43 +407,140 @@ class S100Emulator:
         self.port = port
         self.options = spec
         self.scheduler = scheduler
-        self.hunters: dict[Any, FrameHunter] = {}
+        self.baud = int(spec.get("baud", 9600))
+        self.rtscts = bool(spec.get("rtscts", False))
+        self.speed = getattr(scheduler, "speed", 1.0)  # line times are wall-clock seconds
+        self.states: dict[Any, _S100Host] = {}
         self.hosts = _open_hosts(spec, scheduler, self._on_data, self._on_connect, port.id)
 
     def _on_connect(self, host: Any) -> None:
-        self.hunters[host] = FrameHunter(self.port.packet)
+        self.states[host] = _S100Host(self)
+
+    # -- host → channel ---------------------------------------------------------------------------------
 
     def _on_data(self, host: Any, data: bytes) -> None:
-        hunter = self.hunters.setdefault(host, FrameHunter(self.port.packet))
-        for event in hunter.receive_data(data):
-            if isinstance(event, Skipped) and event.reason == "crc":
-                self.port.lost("crc", event.count, src="app")
-            elif isinstance(event, Notice):
-                continue
-            elif not isinstance(event, Skipped):
-                packet = self.port.packet
-                real = event.real if not isinstance(packet, Raw) else event.payload
-                # S100 frames carry no address of their own (a DataLinkFrame's header does): broadcast
-                frame = AppFrame(real, event.payload, packet, 0, self.port.address, event.dst, self.scheduler.now())
-                self.port.send(frame)
+        state = self.states.get(host)
+        if state is None:
+            state = self.states[host] = _S100Host(self)
+        now = self.scheduler.now()
+        line = state.line_in
+        start = max(now, line.free_at)
+        line.send(now, len(data))
+        bt = line.byte_time
+        arrivals = [start + (i + 1) * bt for i in range(len(data))]
+        if state.buffer is None and not self.rtscts:
+            airtime = self.port.airtime(1)
+            if airtime:
+                state.buffer = InputBuffer(1.0 / airtime)  # drained at the air bitrate
+        if state.buffer is not None:
+            fits = state.buffer.accept(start, len(data), bt)
+            lost = fits.count(False)
+            if lost:
+                self.port.lost("overflow", lost, src="app")
+                data = bytes(b for b, kept in zip(data, fits) if kept)
+                arrivals = [t for t, kept in zip(arrivals, fits) if kept]
+        if state.waiting is not None:
+            # a frame whose chunk ended before its CR LF: it goes when the CR LF is in (or at once if
+            # something else came instead)
+            frame, need = state.waiting
+            state.waiting = None
+            done = len(need) if data.startswith(need) else 0
+            self.scheduler.at(arrivals[done - 1] if done else start, self._event, state, frame)
+        hunter = state.hunter
+        base = hunter.fed  # the stream offset of data[0]
+        for event, end in hunter.receive_data_at(data):
+            local = end - base
+            at = arrivals[local - 1] if local > 0 else start
+            if isinstance(event, Decoded) and local > 0:
+                # the S100 sends a packet when the CR LF that ends it is in, not at the frame's last byte
+                after = data[local:local + 2]
+                if after == CRLF:
+                    at = arrivals[local + 1]
+                elif CRLF.startswith(after):  # the chunk ends inside the frame's CR LF, or right after it
+                    state.waiting = (event, CRLF[len(after):])
+                    continue
+            self.scheduler.at(at, self._event, state, event)
+        while state.buffer is not None and hunter.held >= PIECE:
+            # without flow control the modem sends what it holds once it has 45 bytes, CR LF or not: a
+            # longer frame goes on air in 45-byte pieces (the far host's own framing joins them again)
+            local = hunter.consumed + PIECE - base
+            self.scheduler.at(arrivals[local - 1] if local > 0 else start, self._piece, state, hunter.take(PIECE))
+        self.scheduler.cancel(state.idle_timer)
+        state.idle_timer = self.scheduler.at(line.free_at + IDLE_S * self.speed, self._idle, state)
+
+    def _event(self, state: _S100Host, event: object) -> None:
+        if isinstance(event, Decoded):
+            self._send_other(state)  # what came before the frame goes first
+            packet = self.port.packet
+            real = event.real if not isinstance(packet, Raw) else event.payload
+            # S100 frames carry no address of their own (a DataLinkFrame's header does): broadcast
+            self.port.send(AppFrame(real, event.payload, packet, 0, self.port.address, event.dst,
+                                    self.scheduler.now()))
+        elif isinstance(event, Skipped):
+            if event.reason == TERMINATOR and not state.other:
+                return  # the CR LF after a frame
+            state.other += event.data
+            if state.other.endswith(CRLF):
+                self._send_other(state)
+            elif state.buffer is not None and len(state.other) >= PIECE:
+                self._piece(state, b"")
+        elif isinstance(event, Notice):
+            state.other += event.text + CRLF
+            self._send_other(state)  # its CR LF ended it
+
+    def _piece(self, state: _S100Host, data: bytes) -> None:
+        """45 bytes without flow control: what is pending goes as packets of 45 bytes (the rest waits)."""
+        state.other += data
+        while len(state.other) >= PIECE:
+            self._send_raw(bytes(state.other[:PIECE]))
+            del state.other[:PIECE]
+
+    def _idle(self, state: _S100Host) -> None:
+        """Nothing came for :data:`IDLE_S`: a frame still waiting for its CR LF goes (the modem's
+        timeout), and what the hunter holds will not become a frame: send it as it is."""
+        state.idle_timer = None
+        if state.waiting is not None:
+            self._event(state, state.waiting[0])
+            state.waiting = None
+        state.other += state.hunter.flush()
+        self._send_other(state)
+
+    def _send_other(self, state: _S100Host) -> None:
+        data = bytes(state.other)
+        state.other.clear()
+        if data:
+            self._send_raw(data)
+
+    def _send_raw(self, data: bytes) -> None:
+        """Bytes that are no frame, on air as they are (CR LF included): the far S100 writes them unchanged."""
+        frame = AppFrame(data, data, Raw(), 0, self.port.address, BROADCAST, self.scheduler.now())
+        frame.meta = {"s100": "raw"}
+        self.port.send(frame)
+
+    # -- channel → host ---------------------------------------------------------------------------------
 
     def deliver(self, frame: AppFrame, t: float) -> str:
         packet = self.port.packet
         wire = wire_class(packet)
-        if isinstance(packet, Raw):
-            data = wire.encode(frame.payload)
+        if (frame.meta or {}).get("s100") == "raw":
+            data = frame.payload  # another S100's bytes, as they were (with their CR LF, if they had one)
+        elif isinstance(packet, Raw):
+            data = wire.encode(frame.payload) + CRLF
         elif frame.packet.name == packet.name:
-            data = frame.real
+            data = frame.real + CRLF
         else:
-            data = packet.encode(frame.payload, src=frame.src, dst=frame.dst)
-        for host in list(self.hunters):
-            host.write(data + CRLF)
+            data = packet.encode(frame.payload, src=frame.src, dst=frame.dst) + CRLF
+        for host, state in list(self.states.items()):
+            done = state.line_out.send(t, len(data))
+            self.scheduler.at(done, host.write, data)  # the host has the whole line when its last byte is in
         return TAKEN
 
     def state(self, ready: bool) -> None:
         pass
 
     def close(self) -> None:
+        for state in self.states.values():
+            self.scheduler.cancel(state.idle_timer)
         self.hosts.close()
 
 

@@ -17,6 +17,64 @@ from hilgate.core.packets import BROADCAST, Decoded, HilgateFrame, PacketClass, 
 CRLF = b"\r\n"
 PIECE = 45
 MAX_NOTICE = 200
+EPS = 1e-9
+LINE_BITS = 10  # 8N1: a start bit, 8 data bits and a stop bit on the serial line for each byte
+TERMINATOR = "terminator"  # the reason of a Skipped that is only CR and LF between frames
+IDLE_S = 0.1
+"""How long the emulated S100 holds bytes that are no frame (yet) before it sends them as they are.
+The real modem sends a packet under 45 bytes "after a timeout" unless CR LF arrives; its value is
+not documented, this one is hilgate's choice."""
+
+
+def byte_time(baud: int) -> float:
+    """Seconds one byte takes on a serial line at ``baud`` (8N1): 10 / baud, ~0.52 ms at 19 200."""
+    return LINE_BITS / baud
+
+
+class SerialLine:
+    """One direction of a serial line, without I/O: when each byte written has crossed it.
+
+    A pty carries bytes at once; a real line at ``baud`` one byte every :func:`byte_time`, one write
+    after the other.  :meth:`send` says when the last byte of a write made at ``t`` arrives."""
+
+    def __init__(self, baud: int, speed: float = 1.0):
+        self.byte_time = byte_time(baud) * speed  # in the clock's seconds (a clock may run ``speed`` times faster)
+        self.free_at = float("-inf")
+
+    def send(self, t: float, size: int) -> float:
+        """The write of ``size`` bytes at ``t`` starts when the line is free; the time its last byte is in."""
+        start = max(t, self.free_at)
+        self.free_at = start + size * self.byte_time
+        return self.free_at
+
+
+class InputBuffer:
+    """The S100's 45 bytes without flow control, without I/O: the modem sends what it holds at the
+    air bitrate (``drain_Bps``), and a byte that arrives when the buffer is full is lost (nothing tells
+    the host to wait).  A writer that paces itself at the air bitrate, as dccomms' bridge and hilgate's
+    driver do, loses nothing; one that writes a long frame at once loses its tail."""
+
+    def __init__(self, drain_Bps: float, capacity: int = PIECE):
+        self.drain_Bps = drain_Bps
+        self.capacity = capacity
+        self.level = 0.0
+        self.t = float("-inf")
+
+    def accept(self, t: float, size: int, byte_time: float) -> list[bool]:
+        """Bytes arriving one every ``byte_time`` from ``t`` (the first at ``t + byte_time``): whether
+        each one fits."""
+        kept = []
+        for i in range(1, size + 1):
+            now = t + i * byte_time
+            if now > self.t:
+                self.level = max(0.0, self.level - (now - self.t) * self.drain_Bps)
+                self.t = now
+            fits = self.level + 1 <= self.capacity + EPS
+            if fits:
+                self.level += 1
+            kept.append(fits)
+        return kept
+
 
 
 def wire_class(packet: PacketClass) -> PacketClass:
@@ -43,10 +101,11 @@ class Notice:
 
 @dataclass(frozen=True)
 class Skipped:
-    """Bytes that were no frame (line noise, a frame with a bad CRC…), with why."""
+    """Bytes that were no frame (line noise, a frame with a bad CRC…), with why, and the bytes."""
 
     count: int
     reason: str
+    data: bytes = b""
 
 
 @dataclass
@@ -54,18 +113,51 @@ class FrameHunter:
     packet: PacketClass
     _buffer: bytearray = field(default_factory=bytearray)
 
+    consumed: int = 0  # bytes taken out of the stream so far (events end there)
+
     def __post_init__(self) -> None:
         self.packet = wire_class(self.packet)
 
     def receive_data(self, data: bytes) -> list[object]:
+        return [event for event, _ in self.receive_data_at(data)]
+
+    def receive_data_at(self, data: bytes) -> list[tuple[object, int]]:
+        """As :meth:`receive_data`, each event with the stream offset where it ends (after the bytes
+        it took, leading CR/LF included): an emulator times each frame by its own last byte."""
         self._buffer += data
-        events: list[object] = []
+        events: list[tuple[object, int]] = []
+        fed = self.consumed + len(self._buffer)
         while True:
             event = self._next()
             if event is None:
                 break
-            events.append(event)
+            events.append((event, fed - len(self._buffer)))
+        self.consumed = fed - len(self._buffer)
         return events
+
+    @property
+    def fed(self) -> int:
+        """Bytes given to the hunter so far: the stream offset where the next data will start."""
+        return self.consumed + len(self._buffer)
+
+    @property
+    def held(self) -> int:
+        """Bytes the hunter holds (the start of a frame still arriving, a notice without its end…)."""
+        return len(self._buffer)
+
+    def take(self, count: int) -> bytes:
+        """Take the first ``count`` held bytes out of the stream (an emulated S100 sends them on)."""
+        data = bytes(self._buffer[:count])
+        del self._buffer[:count]
+        self.consumed += len(data)
+        return data
+
+    def flush(self) -> bytes:
+        """Give up on what is held (a frame that will not complete, a notice without end): the bytes."""
+        rest = bytes(self._buffer)
+        self.consumed += len(rest)
+        self._buffer.clear()
+        return rest
 
     def _frame_at(self, position: int) -> str:
         """``frame`` if a whole valid frame starts at ``position``, ``more`` if it may once more bytes
@@ -83,16 +175,29 @@ class FrameHunter:
             return "no"
         return "frame"
 
+    def _frame_after(self, start: int) -> bool:
+        """Whether a whole valid frame starts at or after ``start``."""
+        position = self._buffer.find(self.packet.preamble, start)
+        while position >= 0:
+            if self._frame_at(position) == "frame":
+                return True
+            position = self._buffer.find(self.packet.preamble, position + 1)
+        return False
+
     def _skip(self, count: int, reason: str) -> Skipped:
+        data = bytes(self._buffer[:count])
         del self._buffer[:count]
-        return Skipped(count, reason)
+        return Skipped(count, reason, data)
 
     def _next(self) -> object | None:
         buffer = self._buffer
         packet = self.packet
         preamble = packet.preamble
-        while buffer[:1] in (b"\r", b"\n"):
-            del buffer[:1]
+        ends = 0
+        while buffer[ends:ends + 1] in (b"\r", b"\n"):
+            ends += 1
+        if ends:
+            return self._skip(ends, TERMINATOR)  # a packet's CR LF (an emulated pipe passes them on)
         if not buffer:
             return None
         if buffer[:3] == b"+++":
@@ -110,9 +215,11 @@ class FrameHunter:
                     return Notice(text)
                 arriving = arriving or found == "more"
                 position = buffer.find(preamble, position + 1, limit)
-            if end >= 0 and arriving and self._frame_at(end + 2) != "frame":
+            if end >= 0 and arriving and not self._frame_after(end + 2):
                 # a frame that starts before the CR LF is still arriving and nothing proves the CR LF
-                # ends the notice: it may be inside that frame's payload, so wait (one frame at most)
+                # ends the notice: it may be inside that frame's payload, so wait (one frame at most).
+                # A whole valid frame after the CR LF is such a proof, even behind other junk: a "U"
+                # in "EFAULT" must not hold good frames back until its would-be length has come
                 return None
             if end >= 0:
                 text = bytes(buffer[:end])

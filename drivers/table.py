@@ -32,7 +32,7 @@ from dataclasses import MISSING, Field, dataclass, field, fields
 from typing import Any, Callable, Iterator
 
 __all__ = [
-    "Option", "Driver", "DRIVERS", "EvologicsOptions", "S100Options", "option", "from_link", "scene_options",
+    "Option", "Driver", "DRIVERS", "EvologicsOptions", "S100Options", "S100EmulatorOptions", "option", "from_link", "scene_options", "emulator_options",
     "driver_names", "emulated_protocols", "open_backend", "emulator_for",
 ]
 
@@ -111,6 +111,15 @@ class S100Options:
 
 
 @dataclass(frozen=True)
+class S100EmulatorOptions:
+    """``emulate: {protocol: s100}`` (:class:`hilgate.drivers.emulators.S100Emulator`): the serial line
+    the emulated S100 models, so that a pty (which takes no time per byte) behaves like the real line."""
+
+    baud: int = option(Option("integer", 50, 4_000_000), 9600)  # 8N1: 10 bits on the line per byte
+    rtscts: bool = option(BOOLEAN, False)  # without it, the modem takes at most 45 bytes at a time
+
+
+@dataclass(frozen=True)
 class Driver:
     """One row of the table (see the module's docstring)."""
 
@@ -120,13 +129,14 @@ class Driver:
     backend: str    # "module:Class" of the backend
     emulator: str | None = None  # "module:Class" of the emulated device, if there is one
     emulator_tcp: bool = False   # the emulated device also listens on a loopback TCP port
+    emulator_options: type | None = None  # the emulated device's own ``emulate:`` keys (option() fields)
 
 
 DRIVERS: dict[str, Driver] = {driver.name: driver for driver in (
     Driver("evologics", "EvoLogics modem", EvologicsOptions, "hilgate.drivers.evologics:EvologicsBackend",
            "hilgate.drivers.emulators:EvologicsEmulator", emulator_tcp=True),
     Driver("s100", "S100", S100Options, "hilgate.drivers.s100:S100Backend",
-           "hilgate.drivers.emulators:S100Emulator"),
+           "hilgate.drivers.emulators:S100Emulator", emulator_options=S100EmulatorOptions),
 )}
 
 
@@ -142,6 +152,14 @@ def scene_options(driver: Driver) -> Iterator[tuple[str, Option, bool]]:
 
 def _required(f: Field) -> bool:
     return f.default is MISSING and f.default_factory is MISSING
+
+
+def emulator_options(driver: Driver) -> Iterator[tuple[str, Option, Any]]:
+    """(key, check, default) of each ``emulate:`` option of ``driver``'s emulated device."""
+    if driver.emulator_options is not None:
+        for f in fields(driver.emulator_options):
+            if SCENE in f.metadata:
+                yield f.name, f.metadata[SCENE], f.default
 
 
 def driver_names() -> tuple[str, ...]:

@@ -311,7 +311,9 @@ def cmd_emulate(args: argparse.Namespace) -> int:
     where = {"pty": args.pty} if args.pty else {"tcp": args.tcp}
     if not args.pty and args.tcp is None:
         raise SceneError("hilgate emulate", 0, "", "give --pty PATH or --tcp PORT")
-    args.overrides = [*args.overrides, f"links.{args.link}.emulate={json.dumps({'protocol': args.protocol, **where})}"]
+    line = {key: value for key, value in (("baud", args.baud), ("rtscts", args.rtscts)) if value is not None}
+    emulate = {"protocol": args.protocol, **where, **line}  # the scene checks the line options (S100 only)
+    args.overrides = [*args.overrides, f"links.{args.link}.emulate={json.dumps(emulate)}"]
     args.tcp = None  # here --tcp is the emulated modem's port, not a GLI listener
     from .core.paths import default_scene
 
@@ -421,6 +423,9 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--link", required=True, help="the simulated link to expose")
     e.add_argument("--pty", help="link the emulated device's pseudo-terminal here (e.g. /tmp/ttyEVO0)")
     e.add_argument("--tcp", type=int, help="listen on this loopback port instead (EvoLogics only)")
+    e.add_argument("--baud", type=int, help="the serial line the emulated S100 paces itself at (default 9600)")
+    e.add_argument("--rtscts", action=argparse.BooleanOptionalAction, default=None,
+                   help="the emulated S100 has RTS/CTS flow control (default: without, 45 bytes at a time)")
     for action in p._actions:  # the daemon's own options (speed, runtime dir, trace…), not its --tcp
         if action.dest not in ("help", "scene", "overrides", "plugins", "preset_dirs", "tcp") and action.option_strings:
             e._add_action(action)

@@ -3,7 +3,14 @@
 Time is divided into slots shared by every node (slot k starts at k·slot from time 0).  A slot is
 long enough for a control frame sent at its start to reach anyone in range before it ends:
 
-    slot = τ_max + max(T_RTS, T_CTS) + tx_delay        (τ_max = min_delay + max_range / speed)
+    slot = τ_max + max(T_RTS, T_CTS, T_ACK) + tx_delay        (τ_max = min_delay + max_range / speed)
+
+Molins & Stojanovic size the slot as τ_max + γ, γ "the transmission time of a CTS", with every
+control frame as long as a CTS; what the rule guarantees is that a control frame sent at a slot
+start is heard within that slot.  The ACK is such a frame (sent at a slot start, awaited by the
+end of its slot), so when ``ack_bytes`` exceeds the RTS/CTS the slot is sized from the ACK:
+otherwise every ACK would end after the deadline and each delivered frame would be sent again
+until given up.  With the default sizes (all 5 bytes) this is the paper's slot.
 
 The exchange, with the RTS sent at the start of slot k:
 
@@ -77,7 +84,8 @@ class SFama(Mac):
         if max_range == float("inf"):
             raise ValueError("s-fama: give max_range_m (the modem's range is unlimited)")
         self.tau_max = modem.tau_at(max_range)
-        self.slot = self.tau_max + modem.airtime(max(self.rts_bytes, self.cts_bytes)) + modem.tx_delay
+        control = max(self.rts_bytes, self.cts_bytes, self.ack_bytes)  # see the module's docstring
+        self.slot = self.tau_max + modem.airtime(control) + modem.tx_delay
 
     @classmethod
     def check(cls, modem: Any, params: dict[str, Any]) -> str | None:

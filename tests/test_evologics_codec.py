@@ -159,8 +159,23 @@ def test_s100_pieces_and_hunting():
     hunter = FrameHunter(simple)
     events = hunter.receive_data(b"\r\n+++NOTICE\r\njunk" + real[:7])
     events += hunter.receive_data(real[7:] + b"\r\n")
-    assert events[0] == Notice(b"+++NOTICE") and isinstance(events[1], Skipped)
+    # CR and LF between frames are reported (an emulated S100 passes them on; the driver ignores them)
+    assert events[0] == Skipped(2, "terminator", b"\r\n") and events[-1] == Skipped(2, "terminator", b"\r\n")
+    events = [e for e in events if not (isinstance(e, Skipped) and e.reason == "terminator")]
+    assert events[0] == Notice(b"+++NOTICE") and events[1] == Skipped(4, "no preamble", b"junk")
     assert events[2] == Decoded(real, bytes(range(0x41, 0x52)), 0, 255, 255)
+
+
+def test_s100_hunter_a_preamble_inside_a_notice_does_not_hold_the_frames_behind_it():
+    """Found by the fuzz test: the "U" of "EFAULT" is vl1b's preamble with a length of "L" (76), so the
+    hunter waited for 76 bytes before ending the notice, holding back three whole frames behind it."""
+    wire = wire_class(packet_class("vl1b"))
+    frames = [wire.encode(b"\x00")] * 3
+    stream = b"+++ATERROR EFAULT\r\nRECVIM," + b"\r\n".join(frames) + b"\r\n"
+    hunter = FrameHunter(packet_class("vl1b"))
+    found = [e.real for i in range(0, len(stream), 5) for e in hunter.receive_data(stream[i:i + 5])
+             if isinstance(e, Decoded)]
+    assert found == frames
 
 
 # -- fuzz ----------------------------------------------------------------------------------------------

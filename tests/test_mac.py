@@ -79,6 +79,66 @@ def test_sfama_no_cts_backs_off_whole_slots_and_gives_up():
     assert [ev for _, ev, *_ in net.events.events if ev == "giveup"] == ["giveup"]
 
 
+def test_sfama_slot_is_sized_from_the_largest_control_frame_the_ack_included():
+    # 1400 m apart, max range 1500 m: tau_max = 1.0 s; a 50-byte ACK takes 0.4 s, the 5-byte RTS/CTS 0.04 s.
+    # The slot must let an ACK sent at a slot start arrive within that slot: 1.0 + 0.4 = 1.4 s (with the
+    # RTS/CTS alone it was 1.04 s, and the ACK, sent at 4.16, arrived at 5.493, after its deadline 5.2).
+    net = Net(Channel("ac", 1500.0))
+    params = dict(bitrate_bps=1000, range_m=(0.0, 1500.0))
+    net.modem("a", (0, 0, 0), mac=SFama(ack_bytes=50), **params)
+    net.modem("b", (1400, 0, 0), mac=SFama(ack_bytes=50), **params)
+    assert net.modems["a"].mac.slot == pytest.approx(1.4, **R)
+    net.send("a", "b", 100, at=0.0)
+    net.run(20)
+    # RTS at 0, CTS at 1.4, DATA at 2.8 (0.8 s on air, arrives by 2.8 + 0.8 + 0.9333 = 4.5333),
+    # n = ceil((0.8 + 1.0) / 1.4) = 2; ACK at the next boundary (5.6), heard by 5.6 + 0.4 + 0.9333 = 6.9333,
+    # before the end of the ACK slot (slot 4, ending at 7.0)
+    assert tx_times(net, "a", "rts") == [0.0]
+    assert tx_times(net, "b", "cts") == [1.4]
+    assert tx_times(net, "a", "data") == [2.8]
+    assert tx_times(net, "b", "ack") == [5.6]
+    assert [round(t, 9) for t, _ in net.delivered["b"]] == [round(2.8 + 0.8 + 1400 / 1500, 9)]
+    assert [ev for _, ev, *_ in net.events.events if ev in ("retx", "backoff", "giveup", "dup")] == []
+    assert not net.modems["a"].mac.holding and net.modems["a"].idle
+
+
+@pytest.mark.parametrize("sizes,control", [(dict(rts_bytes=20), 20), (dict(cts_bytes=30, ack_bytes=10), 30),
+                                           (dict(ack_bytes=5), 5)])
+def test_sfama_slot_takes_the_longest_of_rts_cts_and_ack(sizes, control):
+    net, params, _ = sfama_net()
+    net.modem("a", (0, 0, 0), mac=SFama(**sizes), **params)
+    assert net.modems["a"].mac.slot == pytest.approx(0.2 + control * 8 / 1000, **R)
+
+
+LONG_ACK = """\
+seed: 1
+duration_s: 2000
+channels: {ac: {speed_mps: 1500}}
+vehicles:
+  a: {pose: {static: [0, 0, 0]}}
+  b: {pose: {static: [1400, 0, 0]}}
+links:
+  la: {vehicle: a, bitrate_bps: 1000, range_m: [0, 1500], mac: {protocol: s-fama, ack_bytes: 50}}
+  lb: {vehicle: b, bitrate_bps: 1000, range_m: [0, 1500], mac: {protocol: s-fama, ack_bytes: 50}}
+flows:
+  - {from: la, to: lb, size_bytes: 100, interval_s: 60, start_s: 0, stop_s: 1200}
+"""
+
+
+def test_sfama_long_acks_at_the_edge_of_range_are_in_time():
+    """Issue 13 item 11: with the slot sized from the RTS/CTS only, this scene sent 120 DATA frames for 20
+    (100 retransmissions, 100 duplicates, 20 give-ups, efficiency 0.104) although every frame arrived
+    the first time.  Each frame now takes one RTS, CTS, DATA and ACK: efficiency 100 / (5 + 5 + 100 + 50)."""
+    summary, text = trace_of(LONG_ACK)
+    events = [json.loads(line) for line in text.splitlines()]
+    count = lambda ev, kind=None: sum(1 for e in events if e["ev"] == ev and e.get("kind") == kind)
+    assert [count("tx", k) for k in ("rts", "cts", None, "ack")] == [20, 20, 20, 20]
+    assert [count(ev) for ev in ("retx", "dup", "giveup", "backoff")] == [0, 0, 0, 0]
+    flow = summary["flows"][0]
+    assert (flow["offered"], flow["tx_packets"], flow["rx_packets"], flow["tx_bytes"]) == (20, 20, 20, 3200)
+    assert flow["efficiency"] == pytest.approx(0.625, abs=1e-9)
+
+
 # -- CS-ALOHA ----------------------------------------------------------------------------------------
 
 

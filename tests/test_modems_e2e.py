@@ -78,6 +78,7 @@ def test_application_to_application_through_real_drivers_and_emulators(tmp_path,
         assert [round(e["t"] - enq[e["pkt"]], 6) for e in sim_rx] == [round(x, 6) for x in expected]
         driver_rx = [e for e in events if e.get("link") == b and e["ev"] == "rx"]
         assert len(driver_rx) == 3
+        assert not [e for e in events if e["ev"] == "drop" and e.get("cause") == "overflow"]
         if protocol == "evologics":
             assert sum(e["ev"] == "delivered" for e in events if e.get("link") == a) == 3
             ptimes = [e for e in events if e["ev"] == "ptime" and e["link"] == a]

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..drivers.table import DRIVERS, Option, emulated_protocols, scene_options
+from ..drivers.table import DRIVERS, Option, emulated_protocols, emulator_options, scene_options
 from .checks import Checker, Fields, boolean, choice, integer, number, path_value, text
 from .yaml_nodes import Node
 
@@ -74,9 +74,17 @@ def _port(node: Node, path: str) -> str:
 
 
 def emulated_device(node: Node, path: str) -> tuple[tuple[str, Any], ...]:
-    """``emulate: {protocol, pty | tcp}``: an emulated device in front of a simulated link."""
-    f = Fields(node, path, ("protocol", "pty", "tcp"))
+    """``emulate: {protocol, pty | tcp, <the device's own options>}``: an emulated device in front of a
+    simulated link (its own options, e.g. the S100's ``baud``, come from the backend table)."""
+    own = {name: list(emulator_options(driver)) for name, driver in DRIVERS.items()}
+    keys = tuple(dict.fromkeys(key for options in own.values() for key, _, _ in options))
+    f = Fields(node, path, ("protocol", "pty", "tcp", *keys))
     protocol = f.get("protocol", choice(*emulated_protocols()))
+    for key in keys:
+        if key in f and key not in (k for k, _, _ in own[protocol]):
+            users = [name for name, options in own.items() if key in (k for k, _, _ in options)]
+            raise f.child(key).error(f.sub(key), f"only for protocol {' or '.join(users)} (this is {protocol})")
+    extra = tuple((key, f.get(key, checker(check)) if key in f else default) for key, check, default in own[protocol])
     if ("pty" in f) == ("tcp" in f):
         raise f.error("give exactly one of pty (a path for the device link) or tcp (a loopback port)")
     if "tcp" in f:
@@ -84,5 +92,5 @@ def emulated_device(node: Node, path: str) -> tuple[tuple[str, Any], ...]:
             speakers = " or the ".join(d.title for d in DRIVERS.values() if d.emulator and d.emulator_tcp)
             raise f.child("tcp").error(f.sub("tcp"), f"only the {speakers} speaks TCP; "
                                                      f"the {DRIVERS[protocol].title} is serial")
-        return (("protocol", protocol), ("tcp", f.get("tcp", integer(1, 65535))))
-    return (("protocol", protocol), ("pty", f.get("pty", path_value)))
+        return (("protocol", protocol), ("tcp", f.get("tcp", integer(1, 65535))), *extra)
+    return (("protocol", protocol), ("pty", f.get("pty", path_value)), *extra)

@@ -1,0 +1,375 @@
+"""The emulated Seatooth S100 behaves like the real one on its serial line (issue 13 item 10).
+
+- the line is paced at the scene's baud, 10 bits a byte (8N1): on a pty, which takes no time, a frame
+  reaches the channel when its last byte would have crossed the real line;
+- without RTS/CTS the modem holds 45 bytes and sends them at the air bitrate: bytes that come when it is
+  full are lost, counted and traced (``overflow``); with RTS/CTS nothing is;
+- bytes that are no frame of the link's packet class pass through, as through the real transparent pipe.
+
+The client on the other end of each pty is independent: pyserial, its own SimplePacket bytes (``55``,
+17 bytes, CRC-16/XMODEM big-endian, checked against dccomms' bridge: ``55 41..51 A6 72``) and its own
+line splitting, not hilgate's codec.
+"""
+
+import binascii
+import time
+from fractions import Fraction
+
+import pytest
+import serial
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from daemon_kit import Daemon, unique
+from fuzzkit import examples
+from hilgate.core.packets import packet_class
+from hilgate.core.scheduler import VirtualScheduler
+from hilgate.drivers.emulators import S100Emulator
+from hilgate.drivers.s100_codec import InputBuffer, SerialLine, byte_time
+
+
+def simple20(seq: int) -> bytes:
+    payload = bytes([seq]) + b"hilgate-s100-abc"[:16]
+    assert len(payload) == 17
+    return b"\x55" + payload + binascii.crc_hqx(payload, 0).to_bytes(2, "big")
+
+
+def test_independent_packet_builder_matches_the_bridge_bytes():
+    payload = bytes(range(0x41, 0x52))
+    assert binascii.crc_hqx(payload, 0).to_bytes(2, "big") == b"\xa6\x72"
+
+
+# -- the line and the buffer, without a port ---------------------------------------------------------------
+
+
+def test_a_byte_takes_ten_bits_on_the_line():
+    assert byte_time(19200) == 10 / 19200  # ~0.52 ms: what a real 19 200-baud line adds per byte
+    line = SerialLine(9600)
+    assert line.send(1.0, 22) == 1.0 + 22 * 10 / 9600
+    assert line.send(1.0, 10) == 1.0 + 32 * 10 / 9600  # written meanwhile: after the first write
+    assert line.send(5.0, 1) == 5.0 + 10 / 9600  # the line was free again
+
+
+def expected_kept(size: int, bt: Fraction, drain: Fraction, capacity: int = 45) -> int:
+    """The leaky bucket, by hand in exact arithmetic: a byte every bt, drained at drain B/s."""
+    level, kept = Fraction(0), 0
+    for i in range(size):
+        if i:
+            level = max(Fraction(0), level - bt * drain)
+        if level + 1 <= capacity:
+            level += 1
+            kept += 1
+    return kept
+
+
+def test_without_flow_control_the_modem_holds_45_bytes():
+    # nothing drains: exactly 45 of 60 bytes fit
+    assert InputBuffer(0.0).accept(0.0, 60, 0.001).count(True) == 45
+    # a 100-byte write at 19 200 baud, 1800 bit/s on air: the modem drains 0.117 B per byte time
+    bt = byte_time(19200)
+    fits = InputBuffer(1800 / 8).accept(0.0, 100, bt)
+    assert fits.count(True) == expected_kept(100, Fraction(10, 19200), Fraction(1800, 8)) == 56
+    assert all(fits[:50]) and not fits[50]
+    # a writer pacing 45-byte pieces at the air bitrate, as dccomms' bridge and hilgate's driver do, loses nothing
+    buffer = InputBuffer(1800 / 8)
+    for k in range(5):
+        assert all(buffer.accept(k * 45 * 8 / 1800, 45, bt))
+
+
+# -- over ptys, with the daemon -------------------------------------------------------------------------------
+
+
+def scene(tmp_path, ea, eb, baud, rtscts=False, bitrate=1000):
+    return f"""\
+channels: {{ac: {{speed_mps: 1500}}}}
+vehicles:
+  va: {{pose: {{static: [0, 0, 0]}}}}
+  vb: {{pose: {{static: [150, 0, 0]}}}}
+links:
+  {ea}: {{vehicle: va, address: 1, bitrate_bps: {bitrate}, packet: simple:20,
+         emulate: {{protocol: s100, pty: {tmp_path / 'a'}, baud: {baud}, rtscts: {str(rtscts).lower()}}}}}
+  {eb}: {{vehicle: vb, address: 2, bitrate_bps: {bitrate}, packet: simple:20,
+         emulate: {{protocol: s100, pty: {tmp_path / 'b'}, baud: {baud}, rtscts: {str(rtscts).lower()}}}}}
+"""
+
+
+def read_lines(port: serial.Serial, count: int) -> list[bytes]:
+    """The client's own splitting: lines ending in CR LF (these payloads hold none)."""
+    lines = []
+    for _ in range(count):
+        line = port.read_until(b"\r\n")
+        assert line.endswith(b"\r\n"), (lines, line)
+        lines.append(line)
+    return lines
+
+
+def test_frames_reach_the_channel_when_their_cr_lf_would_have_crossed_the_line(tmp_path):
+    ea, eb = unique("sa"), unique("sb")
+    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb, baud=1200), [ea, eb])
+    try:
+        daemon.wait_for("READY=1")
+        a = serial.Serial(str(tmp_path / "a"), 1200, timeout=10)
+        b = serial.Serial(str(tmp_path / "b"), 1200, timeout=10)
+        frames = [simple20(1), simple20(2)]
+        a.write(b"".join(f + b"\r\n" for f in frames))  # 44 bytes at once; a pty takes no time
+        assert read_lines(b, 2) == [f + b"\r\n" for f in frames]
+        a.close(), b.close()
+        daemon.stop()
+        events = daemon.trace_events()
+        enq = [e["t"] for e in events if e.get("link") == ea and e["ev"] == "enq"]
+        # the second frame's CR LF is in 22 bytes (frame + CR LF) of 10 bits at 1200 baud after the first's
+        assert len(enq) == 2 and abs((enq[1] - enq[0]) - 22 * 10 / 1200) <= 2e-9  # the trace rounds to 1 ns
+        assert [e["size"] for e in events if e.get("link") == eb and e["ev"] == "rx"] == [20, 20]
+        assert not [e for e in events if e["ev"] == "drop"]
+    finally:
+        daemon.close()
+
+
+def test_received_frames_reach_the_host_at_the_lines_pace(tmp_path):
+    """At 300 baud a 22-byte line takes 0.733 s each way: the far host cannot have the frame before
+    in-line + air time + propagation + out-line (a lower bound only: the machine may be slow)."""
+    ea, eb = unique("sa"), unique("sb")
+    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb, baud=300, rtscts=True), [ea, eb])
+    try:
+        daemon.wait_for("READY=1")
+        a = serial.Serial(str(tmp_path / "a"), 300, timeout=10)
+        b = serial.Serial(str(tmp_path / "b"), 300, timeout=10)
+        start = time.monotonic()
+        a.write(simple20(7) + b"\r\n")
+        assert read_lines(b, 1) == [simple20(7) + b"\r\n"]
+        seen = time.monotonic() - start
+        model = 22 * 10 / 300 + 20 * 8 / 1000 + 150 / 1500 + 22 * 10 / 300
+        assert seen >= model - 0.002, (seen, model)
+        a.close(), b.close()
+    finally:
+        daemon.close()
+
+
+def test_bytes_that_are_no_frame_pass_through_as_the_real_pipe_would(tmp_path):
+    ea, eb = unique("sa"), unique("sb")
+    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb, baud=115200), [ea, eb])
+    try:
+        daemon.wait_for("READY=1")
+        a = serial.Serial(str(tmp_path / "a"), 115200, timeout=10)
+        b = serial.Serial(str(tmp_path / "b"), 115200, timeout=10)
+        text = b"$GPGGA,123519,4807.038,N*47"  # no 0x55 ('U') in it: no SimplePacket preamble
+        a.write(text + b"\r\n")
+        assert read_lines(b, 1) == [text + b"\r\n"]
+        bad = bytearray(simple20(3))
+        bad[5] ^= 0xFF  # a frame with a bad CRC is bytes like any other for the modem
+        a.write(bytes(bad) + b"\r\n")
+        assert read_lines(b, 1) == [bytes(bad) + b"\r\n"]
+        a.write(b"hello" + simple20(4) + b"\r\n")  # text without CR LF, then a frame: both, in order
+        assert read_lines(b, 1) == [b"hello" + simple20(4) + b"\r\n"]
+        a.close(), b.close()
+        daemon.stop()
+        events = daemon.trace_events()
+        # on air: the text and the bad frame with their CR LF, as written; "hello"; the good frame (its CR LF
+        # is the S100's packet end, added back by the far modem)
+        assert [e["size"] for e in events if e.get("link") == ea and e["ev"] == "tx"] == [len(text) + 2, 22, 5, 20]
+        # the emulators took everything; the link's dccomms queue door cannot hold more than a SimplePacket's
+        # 17 bytes of payload, so it counts the two longer raw frames as its own loss
+        drops = [(e["link"], e["cause"], e["size"]) for e in events if e["ev"] in ("drop", "err")]
+        assert drops == [(eb, "size", len(text) + 2), (eb, "size", 22)]
+    finally:
+        daemon.close()
+
+
+def test_without_flow_control_a_long_write_overflows_and_the_loss_is_traced(tmp_path):
+    ea, eb = unique("sa"), unique("sb")
+    burst = b"".join(simple20(i) + b"\r\n" for i in range(5))  # 110 bytes at once, not paced
+    kept = expected_kept(len(burst), Fraction(10, 19200), Fraction(1000, 8))
+    assert kept == 52
+    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb, baud=19200), [ea, eb])
+    try:
+        daemon.wait_for("READY=1")
+        a = serial.Serial(str(tmp_path / "a"), 19200, timeout=10)
+        a.write(burst)
+        deadline = time.monotonic() + 15
+        while time.monotonic() < deadline and daemon.link_status(ea)["drop_causes"].get("overflow", 0) == 0:
+            time.sleep(0.1)
+        a.close()
+        daemon.stop()
+        drops = [e for e in daemon.trace_events() if e["ev"] == "drop" and e.get("link") == ea]
+        assert [(e["cause"], e["size"]) for e in drops] == [("overflow", len(burst) - kept)]
+    finally:
+        daemon.close()
+
+
+def test_with_flow_control_the_same_write_is_carried_whole(tmp_path):
+    ea, eb = unique("sa"), unique("sb")
+    frames = [simple20(i) for i in range(5)]
+    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb, baud=19200, rtscts=True), [ea, eb])
+    try:
+        daemon.wait_for("READY=1")
+        a = serial.Serial(str(tmp_path / "a"), 19200, timeout=10)
+        b = serial.Serial(str(tmp_path / "b"), 19200, timeout=10)
+        a.write(b"".join(f + b"\r\n" for f in frames))
+        assert read_lines(b, 5) == [f + b"\r\n" for f in frames]
+        a.close(), b.close()
+        daemon.stop()
+        assert not [e for e in daemon.trace_events() if e["ev"] == "drop"]
+    finally:
+        daemon.close()
+
+
+def test_the_line_options_are_checked_with_file_and_line():
+    from hilgate.scene import SceneError, load_scene_text
+
+    base = """\
+channels: {{ac: {{speed_mps: 1500}}}}
+vehicles: {{v: {{pose: {{static: [0, 0, 0]}}}}}}
+links:
+  x: {{vehicle: v, emulate: {{protocol: {protocol}, pty: /tmp/tty{protocol}, {extra}}}}}
+"""
+    spec = load_scene_text(base.format(protocol="s100", extra="baud: 19200"), "/tmp/scene.yaml")
+    assert dict(spec.links["x"].emulate) == {"protocol": "s100", "pty": "/tmp/ttys100", "baud": 19200,
+                                             "rtscts": False}
+    for protocol, extra, message in [
+        ("s100", "baud: 10", "links.x.emulate.baud"),
+        ("s100", "rtscts: 3", "links.x.emulate.rtscts"),
+        ("evologics", "baud: 19200", "only for protocol s100 (this is evologics)"),
+    ]:
+        with pytest.raises(SceneError) as info:
+            load_scene_text(base.format(protocol=protocol, extra=extra), "/tmp/scene.yaml")
+        assert info.value.line == 4 and message in str(info.value), str(info.value)
+
+
+def driver_scene(tmp_path, a, b, ea, eb, rtscts):
+    flow = f"rtscts: {str(rtscts).lower()}"
+    return f"""\
+channels: {{ac: {{speed_mps: 1500}}}}
+vehicles:
+  va: {{pose: {{static: [0, 0, 0]}}}}
+  vb: {{pose: {{static: [150, 0, 0]}}}}
+links:
+  {a}: {{vehicle: va, backend: s100, port: {tmp_path / 'a'}, baud: 19200, {flow}, address: 1, bitrate_bps: 1000,
+        packet: simple:100}}
+  {b}: {{vehicle: vb, backend: s100, port: {tmp_path / 'b'}, baud: 19200, {flow}, address: 2, bitrate_bps: 1000,
+        packet: simple:100}}
+  {ea}: {{vehicle: va, address: 1, bitrate_bps: 1000, packet: simple:100,
+         emulate: {{protocol: s100, pty: {tmp_path / 'a'}, baud: 19200, {flow}}}}}
+  {eb}: {{vehicle: vb, address: 2, bitrate_bps: 1000, packet: simple:100,
+         emulate: {{protocol: s100, pty: {tmp_path / 'b'}, baud: 19200, {flow}}}}}
+"""
+
+
+@pytest.mark.parametrize("rtscts,on_air", [(False, [45, 45, 12]), (True, [100])])
+def test_hilgates_driver_gets_a_long_frame_across_in_45_byte_pieces_without_flow_control(tmp_path, rtscts, on_air):
+    """hilgate's S100 driver writes a 100-byte SimplePacket as 45 + 45 + 10 bytes paced at the air bitrate, then
+    CR LF: the emulated S100 sends each piece as the real one would (45, 45, then 10 + CR LF) and loses none;
+    the far driver joins them.  With RTS/CTS the frame goes whole."""
+    from hilgate.client import Link
+    from test_modems_e2e import wait_up
+
+    a, b, ea, eb = unique("da"), unique("db"), unique("ea"), unique("eb")
+    daemon = Daemon(tmp_path, driver_scene(tmp_path, a, b, ea, eb, rtscts), [a, b, ea, eb])
+    try:
+        daemon.wait_for("READY=1")
+        wait_up(daemon, [a, b])
+        with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
+            payload = bytes(range(60)) + b"\r\n+++" + bytes(range(200, 230))
+            la.send(payload, dst=2)
+            message = lb.recv(timeout=15)
+            assert message is not None and message.data.rstrip(b"\0") == payload
+        daemon.stop()
+        events = daemon.trace_events()
+        assert [e["size"] for e in events if e.get("link") == ea and e["ev"] == "tx"] == on_air
+        assert not [e for e in events if e["ev"] in ("drop", "err") and e.get("link") in (a, b, ea)]
+    finally:
+        daemon.close()
+
+
+# -- the pipe is transparent, for any bytes and any chunking ---------------------------------------------------
+
+
+class _Loop(VirtualScheduler):
+    """Virtual time; the emulators' ptys are real but nothing is read from them here: the host's writes
+    are handed to the emulator as its loop would, at chosen times."""
+
+    def add_reader(self, fd, fn):
+        pass
+
+    def remove_reader(self, fd):
+        pass
+
+
+class _Link:
+    """The simulated link between two emulated S100s, reduced to what they use: frames one after the
+    other at 1000 bit/s, delivered to the other emulator when their last bit is in."""
+
+    def __init__(self, name, clock):
+        self.id, self.packet, self.address, self.clock = name, packet_class("simple:20"), 1, clock
+        self.free, self.peer, self.lost_bytes = 0.0, None, 0
+
+    def airtime(self, size):
+        return size * 8 / 1000
+
+    def send(self, frame):
+        self.free = max(self.clock.now(), self.free) + self.airtime(len(frame.real))
+        self.clock.at(self.free, self.peer.deliver, frame, self.free)
+
+    def lost(self, cause, size, src="medium"):
+        assert cause == "overflow"
+        self.lost_bytes += size
+
+
+class _Host:
+    def __init__(self):
+        self.out = bytearray()
+
+    def write(self, data):
+        self.out += data
+
+
+_parts = st.one_of(st.integers(0, 255).map(simple20).map(lambda f: f + b"\r\n"), st.integers(0, 255).map(simple20),
+                   st.sampled_from([b"\r\n", b"\r", b"\n", b"+++NOTICE\r\n", b"hello", b"U", b"UU\x14", b"+++"]),
+                   st.binary(max_size=50))
+
+
+@settings(max_examples=examples(200), deadline=None)
+@given(st.lists(_parts, min_size=1, max_size=8).map(b"".join), st.booleans(),
+       st.lists(st.tuples(st.integers(1, 40), st.sampled_from([0.0, 0.001, 0.05, 0.3])), min_size=1, max_size=30))
+def test_fuzz_the_emulated_s100_is_transparent(tmp_path_factory, stream, rtscts, chunks):
+    """Whatever the host writes, in whatever pieces, the far host gets the same bytes in the same order
+    (the emulators add a CR LF after a frame that had none, and drop CR/LF between frames); without
+    flow control, unless the modem's 45 bytes overflowed."""
+    folder = tmp_path_factory.mktemp("s100")
+    clock = _Loop()
+    la, lb = _Link("a", clock), _Link("b", clock)
+    spec = {"baud": 9600, "rtscts": rtscts}
+    ea = S100Emulator(la, {**spec, "pty": str(folder / "a")}, clock)
+    eb = S100Emulator(lb, {**spec, "pty": str(folder / "b")}, clock)
+    try:
+        la.peer, lb.peer = eb, ea
+        host_a, host_b = _Host(), _Host()
+        ea.states = {host_a: next(iter(ea.states.values()))}
+        eb.states = {host_b: next(iter(eb.states.values()))}
+        t, i, k = 0.0, 0, 0
+        while i < len(stream):
+            size, gap = chunks[k % len(chunks)]
+            clock.at(t, ea._on_data, host_a, stream[i:i + size])
+            i, k, t = i + size, k + 1, t + gap
+        clock.run(t + 1000)
+        plain = lambda data: bytes(data).replace(b"\r", b"").replace(b"\n", b"")
+        if la.lost_bytes == 0:
+            assert plain(host_b.out) == plain(stream)
+        else:
+            assert not rtscts
+    finally:
+        ea.close()
+        eb.close()
+
+
+def test_hilgate_emulate_takes_the_line_options_and_the_scene_checks_them(tmp_path):
+    import subprocess
+    import sys
+
+    scene_file = tmp_path / "scene.yaml"
+    scene_file.write_text("channels: {ac: {speed_mps: 1500}}\nvehicles: {v: {pose: {static: [0, 0, 0]}}}\n"
+                          "links: {x: {vehicle: v, address: 4}}\n")
+    for protocol, extra, message in [("s100", ["--baud", "10"], "links.x.emulate.baud: must be at least 50, not 10"),
+                                     ("evologics", ["--rtscts"], "links.x.emulate.rtscts: only for protocol s100")]:
+        result = subprocess.run([sys.executable, "-m", "hilgate", "emulate", protocol, str(scene_file), "--link", "x",
+                                 "--pty", str(tmp_path / "tty"), *extra], capture_output=True, text=True, timeout=60)
+        assert result.returncode == 2 and message in result.stderr, result.stderr
