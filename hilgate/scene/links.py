@@ -95,6 +95,8 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
         error=f.get("error", _error_model, ErrorModel("packet", "0")),
         duplex=f.get("duplex", choice("half", "full"), "half"),
         promiscuous=f.get("promiscuous", boolean, False),
+        ack_bytes=f.get("ack_bytes", integer(1, 65535), 6),
+        ack_turnaround_s=f.get("ack_turnaround_s", number(0), 0.0),
     )
     mac = f.get("mac", lambda n, p: mac_spec(n, p, ctx.plugins), MacSpec("none"))
     try:
