@@ -12,8 +12,9 @@ The exchange, for a data frame that asks for an ACK with ``retries`` allowed (``
 - the addressed receiver that hears it good at t_e answers at t_e + ``ack_turnaround_s`` with an ACK
   of ``ack_bytes`` bytes, straight to its PHY (no FIFO, no MAC, no ``tx_delay``: the turnaround is the
   modem's whole reaction time); if its PHY is busy then, the ACK goes as soon as it is free;
-- the receiver hands the data frame up every time it hears it good: a retransmission whose ACK was
-  lost is delivered again, as the reference says real receivers see duplicates;
+- the receiver hands an application's frame up every time it hears it good: a retransmission whose
+  ACK was lost is delivered again, as the reference says real receivers see duplicates (traced ``dup``);
+  a built-in flow's duplicate is traced ``dup`` and not counted again;
 - the sender waits, after each transmission, ``wait_s`` = 2·τ_max + ``ack_turnaround_s`` + T_ack +
   ``rx_delay_s`` + :data:`GUARD_S`, τ_max the propagation delay at the sender's maximum range: never
   shorter than a round trip at maximum range.  An ACK heard good in time reports *delivered* at its
@@ -33,6 +34,7 @@ import math
 from typing import TYPE_CHECKING, Any, Callable
 
 from .frame import BROADCAST, DATA
+from .mac import Duplicates
 
 if TYPE_CHECKING:
     from .frame import Frame
@@ -61,6 +63,7 @@ class Acknowledger:
         self.on_outcome: Outcome | None = None  # set by whoever sends ACKed frames (the backend)
         self.waiting: dict[int, _Wait] = {}  # frame id → the wait for its ACK
         self.owed: list["Frame"] = []  # ACKs due while the PHY was busy, in order
+        self.duplicates = Duplicates()  # acknowledged frames heard before (their ACK was lost)
 
     @property
     def busy(self) -> bool:
@@ -147,12 +150,17 @@ class Acknowledger:
 
     # -- receiver -------------------------------------------------------------------------------
 
-    def heard_data(self, frame: "Frame") -> None:
-        """A good frame addressed to this modem that asks for an ACK: answer after the turnaround."""
+    def heard_data(self, frame: "Frame") -> bool:
+        """A good frame addressed to this modem that asks for an ACK: answer after the turnaround.
+        True when it was heard before (a retransmission whose ACK was lost), traced as ``dup``."""
         modem = self.modem
         ack = modem.new_frame(frame.src_link, frame.src_addr, modem.params.ack_bytes, flow=frame.flow,
                               kind=MODEM_ACK, ref=frame)
         modem.clock.at(modem.clock.now() + modem.params.ack_turnaround_s, self._answer, ack)
+        if self.duplicates.seen(frame):
+            modem.observer.mac(modem.clock.now(), modem, frame, "dup")
+            return True
+        return False
 
     def _answer(self, ack: "Frame") -> None:
         if self.modem.phy_busy:

@@ -308,7 +308,8 @@ class SimModem:
                 self.acks.heard_ack(frame)
             return
         if cause is None and frame.ack is not None and frame.dst_addr == address and frame.kind == DATA:
-            self.acks.heard_data(frame)
+            if self.acks.heard_data(frame) and frame.app_frame is None:
+                return  # a flow's duplicate: traced, not delivered (an application's is, as on a real modem)
         if addressed or self.mac.hears_all:
             self.mac.on_frame(frame, cause, addressed)
 

@@ -36,9 +36,11 @@ def acked_net(distance, a_extra=None, b_extra=None, seed=1):
     return net, a, b, outcomes
 
 
-def send_acked(net, size, retries, at=None):
+def send_acked(net, size, retries, at=None, app=True):
     frame = net.send("a", "b", size, at=at)
     frame.ack = retries
+    if app:
+        frame.app_frame = "an application's frame"  # delivered again when retransmitted (flows' are not)
     return frame
 
 
@@ -85,6 +87,7 @@ def test_an_ack_lost_to_the_error_model_brings_retries_then_a_failure_at_the_mod
     assert [e[0] for e in net.of("giveup", "a")] == pytest.approx([(retries + 1) * attempt], **EXACT)
     # every transmission reached b and was answered; each ACK was lost at a, traced with its cause
     assert len(net.delivered["b"]) == retries + 1  # duplicates, as real receivers see them
+    assert len(net.of("dup", "b")) == retries
     assert len(net.of("tx", "b")) == retries + 1
     assert [e[4] for e in net.of("err", "a")] == ["prop"] * (retries + 1)
     assert a.idle
@@ -186,3 +189,54 @@ def test_broadcasts_and_frames_without_the_request_are_not_acknowledged():
     net.send("a", "b", 10)
     net.run()
     assert not outcomes and not net.of("tx", "b") and a.idle
+
+
+def test_a_flows_duplicates_are_traced_and_not_delivered_again():
+    net, a, b, outcomes = acked_net(800.0, a_extra=dict(error=ErrorModel("packet", "1")))
+    send_acked(net, 10, 2, app=False)
+    net.run()
+    assert len(net.delivered["b"]) == 1 and len(net.of("dup", "b")) == 2 and len(net.of("tx", "b")) == 3
+
+
+ACKED_FLOW = """\
+name: acked
+seed: 4
+duration_s: 100
+channels: {ac: {speed_mps: 1500}}
+vehicles:
+  a: {pose: {static: [0, 0, 0]}}
+  b: {pose: {static: [750, 0, 0]}}
+links:
+  la: {vehicle: a, model: evologics-s2cr-7-17, range_m: [0, 1500], error: {expr: "0.5"}}
+  lb: {vehicle: b, model: evologics-s2cr-7-17, range_m: [0, 1500]}
+flows:
+  - {from: la, to: lb, size_bytes: 20, interval_s: 10, stop_s: 95, ack_retries: 2}
+"""
+
+
+def test_hilgate_sim_runs_acknowledged_flows_with_acks_on_the_channel():
+    import io
+    import json
+
+    from hilgate.scene import load_scene_text
+    from hilgate.sim.simulate import simulate
+
+    trace = io.StringIO()
+    summary = simulate(load_scene_text(ACKED_FLOW, "acked.yaml"), trace=trace)
+    events = [json.loads(line) for line in trace.getvalue().splitlines()]
+
+    def of(ev, link, kind=None):
+        return [e for e in events if e["ev"] == ev and e["link"] == link and e.get("kind") == kind]
+
+    data_tx, acks_tx = of("tx", "la"), of("tx", "lb", MODEM_ACK)
+    retx, giveups, dups = of("retx", "la"), of("giveup", "la"), of("dup", "lb")
+    [flow] = summary["flows"]
+    assert flow["offered"] == 10 and len(data_tx) == 10 + len(retx)
+    assert retx and len(retx) < 20  # some ACKs lost (PER 0.5 at la), some frames recovered by a retry
+    assert len(acks_tx) == len(data_tx)  # b answered every transmission it heard
+    assert len(dups) == len(retx) and flow["rx_packets"] == 10  # duplicates are traced, not counted twice
+    assert len(giveups) == 10 - len(of("rx", "la", MODEM_ACK))
+    t_im, tau = 20 * 8 / BITRATE, 750 / 1500
+    for ack in acks_tx:  # each ACK leaves b a turnaround after the data frame it answers has arrived
+        sent = max(e["t"] for e in data_tx if e["t"] < ack["t"])
+        assert ack["t"] == pytest.approx(sent + t_im + tau + TURN, **EXACT)
