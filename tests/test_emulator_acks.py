@@ -192,3 +192,21 @@ links:
             client.close()
     finally:
         daemon.close()
+
+
+def test_an_ack_im_dropped_before_the_air_is_failed_at_once_and_the_modem_is_free_again(tmp_path):
+    daemon, a, b, ca, cb = two_modems(tmp_path, 100, a_extra=", fifo_bytes: 8")
+    try:
+        ca.send(b"AT*SENDIM,20,2,ack,01234567890123456789")  # more than the FIFO holds
+        assert ca.expect(b"OK")[0] == b"OK"
+        assert ca.expect(b"FAILEDIM")[0] == b"FAILEDIM,2"
+        assert ca.ask(b"AT?DI") == b"EMPTY"
+        ca.send(b"AT*SENDIM,4,2,ack,abcd")
+        assert ca.expect(b"OK")[0] == b"OK"
+        assert ca.expect(b"DELIVEREDIM")[0] == b"DELIVEREDIM,2"
+        assert cb.expect(b"RECVIM")[1] == b"abcd"
+        ca.close(), cb.close()
+        daemon.stop()
+        assert [e["cause"] for e in daemon.trace_events() if e.get("link") == a and e["ev"] == "drop"] == ["fifo"]
+    finally:
+        daemon.close()

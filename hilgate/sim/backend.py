@@ -45,7 +45,11 @@ class SimBackend(Backend):
         sim_frame = modem.new_frame(dst_name, dst, len(frame.real), app_frame=frame)
         if frame.ack_retries is not None and dst != BROADCAST:
             sim_frame.ack = frame.ack_retries  # the modem acknowledges it on the channel (acoustic_ack.py)
-        return modem.send(sim_frame)
+        if modem.send(sim_frame):
+            return True
+        if sim_frame.ack is not None and frame.on_acknowledged is not None:
+            frame.on_acknowledged(frame, False, None)  # dropped before the air (FIFO full): it failed now
+        return False
 
     def _acknowledged(self, frame: Frame, delivered: bool, tau: float | None) -> None:
         app_frame = frame.app_frame
