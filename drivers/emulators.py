@@ -9,8 +9,9 @@ integrity and radial velocity of :mod:`hilgate.models.link_budget`; its modem an
 on the channel (:mod:`hilgate.models.acoustic_ack`) and the sender prints ``DELIVEREDIM,2`` when that
 ACK has reached it, or ``FAILEDIM,2`` once the ``!RI`` retries went unanswered; ``AT?T`` answers the
 one-way time measured from that round trip.  A link with ``usbl:`` prints ``USBLLONG`` and
-``USBLANGLES`` (after ``AT@ZU1``) from the simulated geometry after each exchange; settings answer as a modem does.  Like a modem just
-powered on, it starts in command mode (``ATO`` enters data mode, ``+++AT`` escapes work there).
+``USBLANGLES`` (after ``AT@ZU1``) from the simulated geometry after each exchange; settings answer as
+a modem does.  Like a modem just powered on, it starts in command mode (``ATO`` enters data mode,
+``+++AT`` escapes work there).
 
 The S100 emulator is the byte pipe the real one is: frames of the link's packet class followed by
 CR LF in, the same bytes out on the other side.
