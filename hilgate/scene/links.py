@@ -27,13 +27,13 @@ from .yaml_nodes import Node
 
 __all__ = ["LINK_KEYS", "BACKENDS", "Context", "link_spec", "assign_addresses"]
 
-OWN_KEYS = ("vehicle", "backend", "model", "address", "channel", "tx_channel", "rx_channel")
+OWN_KEYS = ("vehicle", "backend", "model", "address", "channel", "tx_channel", "rx_channel", "usbl")
 
 
 def link_keys() -> tuple[str, ...]:
     """Every key a link may have: its own, the modem keys, every driver's options (from the backend
     table, read now), ``emulate`` and ``addressing``."""
-    return OWN_KEYS + MODEM_KEYS + driver_keys() + ("emulate", "addressing", "usbl")
+    return OWN_KEYS + MODEM_KEYS + driver_keys() + ("emulate", "addressing")
 
 
 LINK_KEYS = link_keys()  # with the drivers of hilgate.drivers.table; the loader asks link_keys() each time
