@@ -210,3 +210,24 @@ def test_an_ack_im_dropped_before_the_air_is_failed_at_once_and_the_modem_is_fre
         assert [e["cause"] for e in daemon.trace_events() if e.get("link") == a and e["ev"] == "drop"] == ["fifo"]
     finally:
         daemon.close()
+
+
+def test_a_burst_is_acknowledged_on_the_channel_too(tmp_path):
+    d = 300.0
+    daemon, a, b, ca, cb = two_modems(tmp_path, d)
+    try:
+        ca.send(b"AT*SEND,5,2,burst")
+        assert ca.expect(b"OK")[0] == b"OK"
+        text, body = cb.expect(b"RECV,")
+        assert body == b"burst" and text.split(b",")[7] == str(round(d / 1500 * 1e6)).encode()  # ptime µs
+        ca.settle(1.0)
+        ca.close(), cb.close()
+        daemon.stop()
+        events = daemon.trace_events()
+        [data_tx] = events_of(events, a, "tx")
+        [ack_tx] = events_of(events, b, "tx")
+        assert ack_tx["kind"] == "modem_ack"
+        assert ack_tx["t"] == pytest.approx(data_tx["t"] + 5 * 8 / BITRATE + d / 1500 + TURN, **EXACT)
+        assert [e.get("kind") for e in events_of(events, a, "rx")] == ["modem_ack"]
+    finally:
+        daemon.close()
