@@ -4,10 +4,14 @@
 slave is linked at that path (or ``tcp: 9200``, a loopback listener), and answers there like the
 modem would, with the link's simulated modem behind it.  Software written for the real modem runs
 unchanged against the simulation: ``AT*SENDIM,5,2,ack,hello`` gets ``OK``; the other vehicle's
-emulated modem prints ``RECVIM,5,1,2,ack,…`` when the model delivers the frame; the sender gets
-``DELIVEREDIM,2`` one propagation time later, or ``FAILEDIM,2`` if the model loses the frame;
-``AT?T`` answers the model's propagation time; settings answer as a modem does.  Like a modem just
-powered on, it starts in command mode (``ATO`` enters data mode, ``+++AT`` escapes work there).
+emulated modem prints ``RECVIM,5,1,2,ack,…`` when the model delivers the frame, with the RSSI,
+integrity and radial velocity of :mod:`hilgate.models.link_budget`; its modem answers with an ACK frame
+on the channel (:mod:`hilgate.models.acoustic_ack`) and the sender prints ``DELIVEREDIM,2`` when that
+ACK has reached it, or ``FAILEDIM,2`` once the ``!RI`` retries went unanswered; ``AT?T`` answers the
+one-way time measured from that round trip.  A link with ``usbl:`` prints ``USBLLONG`` and
+``USBLANGLES`` (after ``AT@ZU1``) from the simulated geometry after each exchange; settings answer as
+a modem does.  Like a modem just powered on, it starts in command mode (``ATO`` enters data mode,
+``+++AT`` escapes work there).
 
 The S100 emulator is the byte pipe the real one is, on a serial line paced as the real one: frames
 of the link's packet class followed by CR LF in, the same bytes out on the other side; other bytes
@@ -17,7 +21,6 @@ pass through as they are (:class:`S100Emulator`).
 from __future__ import annotations
 
 import logging
-import math
 import os
 import socket
 import tty
@@ -38,6 +41,7 @@ log = logging.getLogger(__name__)
 VERSION = "hilgate EvoLogics S2C emulator"
 IM_MAX = 64
 BURST_MAX = 1024
+FOREVER = 1 << 30  # !RI255: retry for ever
 
 
 class PtyHost:
@@ -154,17 +158,16 @@ class EvologicsEmulator:
                          "ZC": "1", "ZP": "500", "RC": "3", "RT": "1000", "KO": "0", "ZI": "120", "ZH": "30",
                          "ZS": "0", "CA": "1500", "RI": "3", "RP": "0", "ZL": "16384", "ZX": "0", "ZF": "0", "ZU": "0"}
         self.pending_ack: AppFrame | None = None
-        self.fail_timer = None
         self.last_ptime_us = 0
         self.last_rssi = -50
         self.last_integrity = 150
+        self.last_velocity = 0.0
         self.hosts = _open_hosts(spec, scheduler, self._on_data, self._on_connect, port.id)
 
     def _on_connect(self, host: Any) -> None:
         self.codecs[host] = ModemCodec()
 
     def close(self) -> None:
-        self.scheduler.cancel(self.fail_timer)
         self.hosts.close()
 
     # -- host → modem -------------------------------------------------------------------------------
@@ -289,35 +292,29 @@ class EvologicsEmulator:
     def _send(self, payload: bytes, dst: int, kind: str, ack: bool) -> None:
         frame = AppFrame(payload, payload, Raw(), 0, self.port.address, dst, self.scheduler.now())
         frame.meta = {"kind": kind, "ack": ack}
-        if ack and dst != BROADCAST:
-            self.pending_ack = frame
-            frame.on_delivered = self._delivered
-            airtime = self.port.airtime(len(payload))
-            self.fail_timer = self.scheduler.at(self.scheduler.now() + 2 * (airtime or 1.0) + 3.0, self._failed,
-                                                frame)
+        if dst != BROADCAST and (ack or kind == "burst"):
+            # the receiving modem answers on the channel (hilgate.models.acoustic_ack); an IM retries !RI
+            # times (255: for ever), a burst !RC times
+            retries = int(self.settings["RI" if ack else "RC"])
+            frame.ack_retries = FOREVER if ack and retries == 255 else retries
+            if ack:
+                self.pending_ack = frame
+                frame.on_acknowledged = self._acknowledged
         self.port.send(frame)
 
     # -- delivery reports -------------------------------------------------------------------------------
 
-    def _delivered(self, frame: AppFrame, receiver: LinkPort) -> None:
-        if frame is not self.pending_ack:
-            return
-        tau = self.port.delay_from(receiver.address, self.scheduler.now())  # the acknowledgement's way back
-        if tau is None:
-            return  # the acknowledgement cannot come back: FAILEDIM when the timer fires
-        self.last_ptime_us = round(tau * 1e6)
-        self.scheduler.cancel(self.fail_timer)
-        self.scheduler.at(self.scheduler.now() + tau, self._report, frame, "DELIVEREDIM")
-
-    def _failed(self, frame: AppFrame) -> None:
-        if frame is self.pending_ack:
-            self._report(frame, "FAILEDIM")
-
-    def _report(self, frame: AppFrame, what: str) -> None:
+    def _acknowledged(self, frame: AppFrame, delivered: bool, tau: float | None) -> None:
+        """The model's report on an ``ack`` IM: its ACK came back (``tau``: the one-way time the modem
+        measured from the round trip), or the last retry went unanswered."""
         if frame is not self.pending_ack:
             return
         self.pending_ack = None
-        self._notify(f"{what},{frame.dst}")
+        if delivered and tau is not None:
+            self.last_ptime_us = round(tau * 1e6)
+        self._notify(f"{'DELIVEREDIM' if delivered else 'FAILEDIM'},{frame.dst}")
+        if delivered:
+            self._usbl(frame.dst, self.scheduler.now(), tau)
         self.port.state_changed()
 
     def _notify(self, text: str, payload: bytes | None = None) -> None:
@@ -330,10 +327,14 @@ class EvologicsEmulator:
         meta = getattr(frame, "meta", None) or {}
         kind = meta.get("kind", "im")
         payload = frame.real
-        d = self.port.distance_from(frame.src, t) or 0.0
-        self.last_rssi = int(-20 - 20 * math.log10(max(d, 1.0)))
-        self.last_integrity = 150
-        duration_us = round((self.port.airtime(len(payload)) or 0.0) * 1e6)
+        heard = self.port.reception_from(frame.src, t)
+        d = heard.distance_m if heard is not None else 0.0
+        if heard is not None:  # the model's measurements (hilgate.models.link_budget), not constants
+            self.last_rssi, self.last_integrity, self.last_velocity = heard.rssi_db, heard.integrity, heard.velocity_mps
+        velocity = self.last_velocity
+        airtime = self.port.airtime(len(frame.real)) or 0.0  # the whole frame on air
+        duration_us = round(airtime * 1e6)
+        ptime_us = round((self.port.delay_from(frame.src, t) or d / 1500) * 1e6)
         for host, codec in list(self.codecs.items()):
             if kind == "burst":
                 if codec.data_mode:
@@ -342,20 +343,33 @@ class EvologicsEmulator:
                 bit_time = self.port.airtime(1)
                 bitrate = round(8 / bit_time) if bit_time else 0
                 text, body = ModemCodec.recv_burst(frame.src, frame.dst, payload, bitrate,
-                                                   self.last_rssi, self.last_integrity, round(d / 1500 * 1e6), 0.0)
+                                                   self.last_rssi, self.last_integrity, ptime_us, velocity)
             elif kind == "ims":
                 text = (f"RECVIMS,{len(payload)},{frame.src},{frame.dst},{round(t * 1e6)},{duration_us},"
-                        f"{self.last_rssi},{self.last_integrity},0.00,")
+                        f"{self.last_rssi},{self.last_integrity},{velocity:.2f},")
                 body = payload
             elif kind == "pbm":
                 text = (f"RECVPBM,{len(payload)},{frame.src},{frame.dst},{duration_us},{self.last_rssi},"
-                        f"{self.last_integrity},0.00,")
+                        f"{self.last_integrity},{velocity:.2f},")
                 body = payload
             else:
                 text, body = ModemCodec.recvim(frame.src, frame.dst, payload, bool(meta.get("ack")), duration_us,
-                                               self.last_rssi, self.last_integrity, 0.0)
+                                               self.last_rssi, self.last_integrity, velocity)
             host.write(codec.notify_line(text, body))
+        self._usbl(frame.src, t, ptime_us / 1e6, t - airtime)
         return TAKEN
+
+    def _usbl(self, address: int, t: float, tau: float | None, measured: float | None = None) -> None:
+        """After an exchange with ``address``: a USBL link with ``AT@ZU1`` prints its fix of that modem."""
+        if self.settings["ZU"] == "0":
+            return
+        found = self.port.usbl_fix(address, t)
+        if found is None:
+            return
+        heard, fix = found
+        for line in usbl_lines(heard, fix, address, t, t if measured is None else measured,
+                               tau if tau is not None else 0.0):
+            self._notify(line)
 
     def state(self, ready: bool) -> None:
         """A modem says nothing when its transmit buffer drains (AT?ZS / BUSY answers say it)."""
@@ -363,6 +377,22 @@ class EvologicsEmulator:
     @property
     def busy(self) -> bool:
         return self.pending_ack is not None
+
+
+def usbl_lines(heard: Any, f: Any, address: int, t: float, measured: float, tau: float) -> list[str]:
+    """``USBLLONG`` and ``USBLANGLES`` of a fix ``f`` (``models.usbl.UsblFix``) for a reception ``heard``
+    (``models.link_budget.Reception``), in the reference's field order and the precision real modems print
+    (times to the µs, metres and radians to 4 decimals)."""
+    x, y, z = f.local
+    e, n, u = f.enu
+    roll, pitch, yaw = f.orientation
+    common = f"{t:.6f},{measured:.6f},{address}"
+    return [
+        f"USBLLONG,{common},{x:.4f},{y:.4f},{z:.4f},{e:.4f},{n:.4f},{u:.4f},{roll:.4f},{pitch:.4f},{yaw:.4f},"
+        f"{round(tau * 1e6)},{heard.rssi_db},{heard.integrity},{f.accuracy_m:.4f}",
+        f"USBLANGLES,{common},{f.local_bearing:.4f},{f.local_elevation:.4f},{f.bearing:.4f},{f.elevation:.4f},"
+        f"{roll:.4f},{pitch:.4f},{yaw:.4f},{heard.rssi_db},{heard.integrity},{f.accuracy_m:.4f}",
+    ]
 
 
 class _S100Host:

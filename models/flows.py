@@ -21,6 +21,7 @@ class FlowSpec:
     poisson: bool = False
     start_s: float = 0.0
     stop_s: float = float("inf")
+    ack_retries: int | None = None  # the modems acknowledge each frame on the channel (acoustic_ack.py)
 
 
 class FlowSource:
@@ -73,7 +74,9 @@ class FlowSource:
         t = self.clock.now()
         spec = self.spec
         modem = self.modem
-        modem.send(modem.new_frame(spec.dst, self.dst_addr, spec.size_bytes, self.stats))
+        frame = modem.new_frame(spec.dst, self.dst_addr, spec.size_bytes, self.stats)
+        frame.ack = spec.ack_retries
+        modem.send(frame)
         self._count += 1
         if spec.poisson:
             self._schedule(t + self.rng.expovariate(1.0 / spec.interval_s))

@@ -23,7 +23,7 @@ class Frame:
     """
 
     __slots__ = ("id", "src_link", "dst_link", "dst_addr", "size", "t0", "flow", "app_frame", "kind", "ref", "seq",
-                 "src_addr")
+                 "src_addr", "ack")
 
     def __init__(
         self,
@@ -51,6 +51,7 @@ class Frame:
         self.ref = ref
         self.seq = seq
         self.src_addr = -1  # set by the sending modem
+        self.ack: int | None = None  # retries allowed when the modem acknowledges it (acoustic_ack.py)
 
     def __repr__(self) -> str:
         return f"Frame(#{self.id} {self.kind} {self.src_link}->{self.dst_link} {self.size}B)"

@@ -18,6 +18,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Callable
 
+from .acoustic_ack import MODEM_ACK, Acknowledger
 from .errormodel import NO_ERRORS, ErrorModel
 from .frame import BROADCAST, DATA, Frame
 from .mac import Mac, NoMac
@@ -47,6 +48,8 @@ class ModemParams:
     error: ErrorModel = field(default=NO_ERRORS)
     duplex: str = "half"
     promiscuous: bool = False
+    ack_bytes: int = 6  # the modem's own ACK frame (acoustic_ack.py), for frames that ask for one
+    ack_turnaround_s: float = 0.0  # end of a reception to its ACK on air
 
 
 @dataclass
@@ -89,6 +92,7 @@ class SimModem:
         self.phy_busy = False
         self.closed = False
         self.radio = Radio(self, medium, clock, rng)
+        self.acks = Acknowledger(self)
         self.radio.pose = pose
         self.configure(params)
         self.set_mac(mac or NoMac())
@@ -227,12 +231,29 @@ class SimModem:
     @property
     def idle(self) -> bool:
         """Nothing to send: FIFO empty, PHY free, and the MAC holds no frame (e.g. awaiting its ACK)."""
-        return not self.phy_busy and not self.fifo and not self.mac.holding
+        return not self.phy_busy and not self.fifo and not self.mac.holding and not self.acks.busy
 
     def check_idle(self) -> None:
         """Tell the GLI (READY) if the modem just became idle; MACs call it when they let go of a frame."""
         if self.on_idle is not None and self.idle:
             self.on_idle()
+
+    # -- what the acknowledgements use (acoustic_ack.py) ------------------------------------------
+
+    def requeue(self, frame: "Frame") -> None:
+        """Put a frame whose ACK did not come back at the head of the FIFO again (its retransmission)."""
+        if self.closed:
+            return
+        self.fifo.appendleft(frame)
+        self.queued_bytes += frame.size
+        if self.queued_bytes > self.stats.fifo_peak_bytes:
+            self.stats.fifo_peak_bytes = self.queued_bytes
+        self.mac.on_enqueue()
+
+    def transmit_now(self, frame: "Frame") -> None:
+        """Put the modem's own ACK on air now, bypassing FIFO, MAC and tx delay (the PHY is free)."""
+        self.phy_busy = True
+        self._on_air(frame)
 
     # -- inside the modem ---------------------------------------------------------------------
 
@@ -244,6 +265,7 @@ class SimModem:
         self.closed = True
         self.on_deliver = None
         self.on_idle = None
+        self.acks.forget()
         t = self.clock.now()
         while self.fifo:
             frame = self.fifo_pop()
@@ -263,6 +285,11 @@ class SimModem:
 
     def _off_air(self, frame: "Frame") -> None:
         self.phy_busy = False
+        if frame.ack is not None and self.acks.wants_ack(frame):
+            self.acks.sent(frame, self.clock.now())
+        owed = self.acks.next_owed() if self.acks.owed else None
+        if owed is not None and not self.closed:
+            self.transmit_now(owed)  # an ACK that came due while the PHY was busy goes first
         self.mac.on_tx_done(frame)
         self.check_idle()
 
@@ -276,6 +303,13 @@ class SimModem:
         addressed = frame.dst_addr == address or frame.dst_addr == BROADCAST or self.promiscuous
         if cause is not None and addressed:
             self.observer.err(self.clock.now(), self, frame, cause)
+        if frame.kind == MODEM_ACK:  # the modem's own: never a MAC's business
+            if cause is None and frame.dst_addr == address:
+                self.acks.heard_ack(frame)
+            return
+        if cause is None and frame.ack is not None and frame.dst_addr == address and frame.kind == DATA:
+            if self.acks.heard_data(frame) and frame.app_frame is None:
+                return  # a flow's duplicate: traced, not delivered (an application's is, as on a real modem)
         if addressed or self.mac.hears_all:
             self.mac.on_frame(frame, cause, addressed)
 

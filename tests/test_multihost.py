@@ -92,8 +92,18 @@ class AtClient:
     def command(self, text: str) -> None:
         self.port.write(text.encode() + b"\r\n")
 
-    def send_im(self, dst: int, data: bytes) -> None:
-        self.port.write(b"AT*SENDIM,%d,%d,noack," % (len(data), dst) + data + b"\r\n")
+    def send_im(self, dst: int, data: bytes, ack: bool = False) -> None:
+        kind = b"ack" if ack else b"noack"
+        self.port.write(b"AT*SENDIM,%d,%d,%s," % (len(data), dst, kind) + data + b"\r\n")
+
+    def wait_line(self, prefix: bytes, timeout: float = 15.0) -> bytes | None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            for line in self.buffer.split(b"\r\n")[:-1]:
+                if line.startswith(prefix):
+                    return line
+            self.buffer += self.port.read(4096)
+        return None
 
     def recvim(self, timeout: float = 10.0) -> tuple[int, bytes] | None:
         deadline = time.monotonic() + timeout
@@ -179,6 +189,9 @@ def test_three_hosts_share_one_channel_with_exact_model_times(network):
             message = lc.recv(timeout=10)
             assert (message.src, message.data) == (1, b"everyone")
             assert la.recv(timeout=0.5) is None and lc.recv(timeout=0.2) is None  # nothing else, no echo
+            at.send_im(1, b"ack me", ack=True)                # the acoustic ACK comes back from host A
+            assert la.recv(timeout=10).data == b"ack me"
+            assert at.wait_line(b"DELIVEREDIM") == b"DELIVEREDIM,1"
         # every host shows every vehicle; status --network lists each host's links
         for host in (A, B, C):
             assert {v["name"] for v in host.status()["vehicles"]} == {"va", "vb", "vc"}
@@ -207,7 +220,7 @@ def test_three_hosts_share_one_channel_with_exact_model_times(network):
             expected = t_tx + distance[frozenset(sender + receiver)] / 1500 + e["size"] * 8 / 1000
             assert e["t"] == pytest.approx(expected, abs=1e-6), (receiver, e)
             checked += 1
-    assert checked == 5  # A->B, B->A, C->A, and the broadcast at B and C
+    assert checked == 7  # A->B, B->A, C->A, the broadcast at B and C, B's acknowledged IM and A's ACK
     assert not [e for events in ev.values() for e in events if e.get("ev") in ("err", "late")]
 
 

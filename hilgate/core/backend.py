@@ -32,6 +32,9 @@ class AppFrame:
     meta: dict[str, Any] | None = None  # what an emulated modem needs to print it (IM, burst, ack…)
     lateness: float = 0.0  # the loop was this late reading it: t0 may be up to this much after the send
     on_delivered: Callable[["AppFrame", Any], Any] | None = field(default=None, repr=False)
+    ack_retries: int | None = None  # the simulated modem acknowledges it on the channel, retrying so often
+    on_acknowledged: Callable[["AppFrame", bool, "float | None"], Any] | None = field(default=None, repr=False)
+    """``(frame, delivered, one_way_tau_s)`` when its acknowledgement came back or the last retry failed."""
 
 
 class Backend(ABC):

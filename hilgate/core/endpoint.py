@@ -79,6 +79,12 @@ class LinkPort(Protocol):
 
     def distance_from(self, address: int, t: float) -> float | None: ...
 
+    def reception_from(self, address: int, t: float) -> Any:
+        """The receiving modem's measurements of a frame from ``address`` (a ``models.link_budget.Reception``)."""
+
+    def usbl_fix(self, address: int, t: float) -> Any:
+        """``(Reception, UsblFix)`` of the modem at ``address`` when the link is a USBL, else None."""
+
 
 class Endpoint(Protocol):
     """A way in and out of a link for applications."""

@@ -11,7 +11,8 @@ Header keys: ``h`` sending host, ``e`` its epoch (ns of the UNIX clock at its mo
 host's message counter (gaps are frames Zenoh dropped), ``l`` sending link, ``i`` frame id, ``dl``/``da``
 destination link and address, ``sa`` source address, ``s`` size on air, ``t`` start (the sender's model
 time), ``d`` duration, ``k`` kind (``data``, ``rts``, ``cts``, ``ack``), ``p`` the sender's position at
-``t`` (or null), ``r`` the frame a control frame serves (same keys, one level), ``a`` the application
+``t`` (or null), ``ak`` the retries of a frame its receiver acknowledges (null: none), ``r`` the frame a
+control frame or an acoustic ACK serves (same keys, one level), ``a`` the application
 frame (``c`` packet class, ``q`` seq, ``s`` src, ``d`` dst, ``t`` t0, ``m`` meta, ``rl`` real length).
 
 A **pose** is UTF-8 JSON ``{"h", "e", "v" vehicle, "t" measured (sender's model time), "p" [x, y, z],
@@ -64,7 +65,7 @@ def to_local(t_there: float, epoch_there_ns: int, epoch_here_ns: int) -> float:
 
 def _frame_fields(frame: Frame) -> dict[str, Any]:
     return {"l": frame.src_link, "i": frame.id, "dl": frame.dst_link, "da": frame.dst_addr, "sa": frame.src_addr,
-            "s": frame.size, "k": frame.kind, "q": frame.seq, "t0": frame.t0}
+            "s": frame.size, "k": frame.kind, "q": frame.seq, "t0": frame.t0, "ak": frame.ack}
 
 
 def encode_transmission(host: str, epoch_ns: int, number: int, frame: Frame, t: float, duration: float,
@@ -118,6 +119,8 @@ def _frame(fields: dict) -> Frame:
                   _integer(fields, "s", 0, 1 << 24), _number(fields, "t0"), None, None,
                   _text(fields, "k"), None, _integer(fields, "q"))
     frame.src_addr = _integer(fields, "sa", -1, 255)
+    if fields.get("ak") is not None:
+        frame.ack = _integer(fields, "ak", 0, 255)  # retries: the receiving modem answers with an ACK frame
     return frame
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import math
+import random
 from collections import Counter
 from typing import Any, Callable
 
@@ -21,6 +22,8 @@ from ..core.endpoint import ABSENT, KEPT, TAKEN, Door, Endpoint
 from ..core.packets import Decoded, PacketClass, packet_class
 from ..drivers.table import DRIVERS, open_backend
 from ..models.frame import BROADCAST
+from ..models.link_budget import Reception, SimpleLinkBudget, reception
+from ..models.usbl import UsblFix, fix as usbl_fix
 from ..scene import LinkSpec, Scene
 from ..scene.diff import diff
 from ..sim.backend import SimBackend
@@ -49,6 +52,7 @@ class RoutedLink:
         self.lock: LinkLock | None = None
         self.unread_kept = 0  # frames nobody took, kept in the queue for an application that starts late
         self._state_pending = False
+        self._usbl_rng: random.Random | None = None
 
     # -- set-up ----------------------------------------------------------------------------------
 
@@ -128,6 +132,29 @@ class RoutedLink:
             return None
         a, b = theirs.pose.position(t), mine.pose.position(t)
         return None if a is None or b is None else math.dist(a, b)
+
+    def reception_from(self, address: int, t: float) -> Reception | None:
+        """What this link's modem measures of a frame from ``address`` heard at ``t`` (positions, distance,
+        radial speed, RSSI, integrity: :mod:`hilgate.models.link_budget`); None if unknown."""
+        mine, theirs = self._sender(address)
+        if theirs is None:
+            return None
+        return reception(theirs.pose, mine.pose, t, SimpleLinkBudget(theirs.range_m[1]))
+
+    def usbl_fix(self, address: int, t: float) -> tuple[Reception, UsblFix] | None:
+        """The link's USBL fix of the modem at ``address`` at ``t`` (:mod:`hilgate.models.usbl`, with the
+        link's noise drawn from a stream of its own, seeded by the scene); None when the link is no USBL
+        or either position is unknown."""
+        params = self.spec.usbl
+        if params is None:
+            return None
+        heard = self.reception_from(address, t)
+        if heard is None:
+            return None
+        if self._usbl_rng is None:
+            seed = self.router.scene.seed if self.router.scene is not None else 0
+            self._usbl_rng = random.Random(f"{seed}/{self.id}/usbl")
+        return heard, usbl_fix(heard.receiver, heard.sender, params, self._usbl_rng)
 
     # -- application → medium --------------------------------------------------------------------
 

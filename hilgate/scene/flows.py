@@ -15,7 +15,7 @@ from .yaml_nodes import Node
 
 __all__ = ["FLOW_KEYS", "flow_spec"]
 
-FLOW_KEYS = ("from", "to", "size_bytes", "interval_s", "rate_hz", "poisson", "start_s", "stop_s")
+FLOW_KEYS = ("from", "to", "size_bytes", "interval_s", "rate_hz", "poisson", "start_s", "stop_s", "ack_retries")
 
 
 def flow_spec(node: Node, path: str, links: dict[str, LinkSpec], duration: float) -> FlowSpec:
@@ -47,4 +47,7 @@ def flow_spec(node: Node, path: str, links: dict[str, LinkSpec], duration: float
     stop = f.get("stop_s", number(0, allow_inf=True), math.inf)
     if stop <= start:
         raise f.child("stop_s").error(f.sub("stop_s"), f"must be after start_s ({start:g})")
-    return FlowSpec(src, dst, size, interval, poisson, start, stop)
+    ack_retries = f.get("ack_retries", integer(0, 255), None)
+    if ack_retries is not None and dst == "*":
+        raise f.child("ack_retries").error(f.sub("ack_retries"), "a broadcast flow is not acknowledged")
+    return FlowSpec(src, dst, size, interval, poisson, start, stop, ack_retries)

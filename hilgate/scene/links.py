@@ -16,6 +16,7 @@ from ..models.errormodel import UNITS, ErrorModel
 from ..models.expr import ExprError, compile_expression
 from ..models.frame import BROADCAST
 from ..models.modem import ModemParams
+from ..models.usbl import UsblParams
 from .backends import SIM, backend_names, driver_keys, driver_options, emulated_device
 from .hosts import host_name
 from .checks import Fields, boolean, choice, describe, integer, join_path, number, text
@@ -27,7 +28,8 @@ from .yaml_nodes import Node
 
 __all__ = ["LINK_KEYS", "BACKENDS", "Context", "link_spec", "assign_addresses"]
 
-OWN_KEYS = ("vehicle", "backend", "model", "address", "channel", "tx_channel", "rx_channel", "host")
+OWN_KEYS = ("vehicle", "backend", "model", "address", "channel", "tx_channel", "rx_channel", "host",
+            "usbl")
 
 
 def link_keys() -> tuple[str, ...]:
@@ -96,6 +98,8 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
         error=f.get("error", _error_model, ErrorModel("packet", "0")),
         duplex=f.get("duplex", choice("half", "full"), "half"),
         promiscuous=f.get("promiscuous", boolean, False),
+        ack_bytes=f.get("ack_bytes", integer(1, 65535), 6),
+        ack_turnaround_s=f.get("ack_turnaround_s", number(0), 0.0),
     )
     mac = f.get("mac", lambda n, p: mac_spec(n, p, ctx.plugins), MacSpec("none"))
     try:
@@ -113,9 +117,13 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
             raise f.child("emulate").error(f.sub("emulate"), "only a backend: sim link can emulate a modem")
         emulate = f.get("emulate", emulated_device)
     addressing = f.get("addressing", choice(*ADDRESSING), "auto")
+    usbl = f.get("usbl", _usbl, None)
+    if usbl is not None and dict(emulate).get("protocol") != "evologics":
+        raise f.child("usbl").error(f.sub("usbl"), "only an emulated EvoLogics modem reports USBL fixes "
+                                                   "(give the link emulate: {protocol: evologics, pty: …} or tcp)")
     host = f.get("host", host_name, None)
     return LinkSpec(link_id, vehicle, backend, model, params, mac, packet, node.file, node.line, options, emulate,
-                    addressing, host)
+                    addressing, host=host, usbl=usbl)
 
 
 def assign_addresses(links: dict[str, LinkSpec], nodes: dict[str, Node]) -> dict[str, LinkSpec]:
@@ -162,6 +170,25 @@ def _range_pair(node: Node, path: str) -> tuple[float, float]:
     if high < low:
         raise node.error(path, f"max {high:g} is below min {low:g}")
     return (low, high)
+
+
+def _usbl(node: Node, path: str) -> UsblParams | None:
+    """``usbl: true`` or ``{orientation_deg: [roll, pitch, yaw], bearing_sigma_deg, range_sigma_m}``."""
+    if isinstance(node.value, bool):
+        return UsblParams() if node.value else None
+    if not node.is_map:
+        raise node.error(path, f"must be true, false or a mapping of orientation_deg, bearing_sigma_deg, "
+                               f"range_sigma_m, not {describe(node)}")
+    f = Fields(node, path, ("orientation_deg", "bearing_sigma_deg", "range_sigma_m"))
+    orientation = (0.0, 0.0, 0.0)
+    child = f.child("orientation_deg")
+    if child is not None:
+        if not child.is_list or len(child.value) != 3:
+            raise child.error(f.sub("orientation_deg"), f"must be [roll, pitch, yaw] in degrees, not {describe(child)}")
+        orientation = tuple(math.radians(number(-360, 360)(item, join_path(f.sub("orientation_deg"), i)))
+                            for i, item in enumerate(child.value))
+    return UsblParams(orientation, math.radians(f.get("bearing_sigma_deg", number(0, 180), 0.0)),
+                      f.get("range_sigma_m", number(0), 0.0))
 
 
 def _error_model(node: Node, path: str) -> ErrorModel:

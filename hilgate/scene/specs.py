@@ -15,6 +15,7 @@ from ..models.mac import Mac
 from ..models.macs import REGISTRY as MAC_REGISTRY
 from ..models.medium import Channel
 from ..models.modem import ModemParams
+from ..models.usbl import UsblParams
 from .plugins import class_from_origin, origin_of
 
 __all__ = ["PoseSpec", "VehicleSpec", "CameraSpec", "MacSpec", "LinkSpec", "Scene"]
@@ -110,6 +111,7 @@ class LinkSpec:
     emulate: tuple[tuple[str, Any], ...] = ()  # emulated modem in front of a sim link
     addressing: str = "auto"  # auto: address-less packet classes without a MAC reach everyone in range
     host: str | None = None  # the host whose daemon serves it (None: a scene for one daemon)
+    usbl: UsblParams | None = None  # the emulated modem is a USBL: it reports fixes of whom it hears
 
     @property
     def everyone_in_range(self) -> bool:

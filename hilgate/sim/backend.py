@@ -21,11 +21,13 @@ class SimBackend(Backend):
         self.everyone_in_range = everyone_in_range  # see LinkSpec.everyone_in_range
         modem.on_deliver = self._deliver
         modem.on_idle = self._idle
+        modem.acks.on_outcome = self._acknowledged
 
     def rebind(self, modem: SimModem) -> None:
         self.modem = modem
         modem.on_deliver = self._deliver
         modem.on_idle = self._idle
+        modem.acks.on_outcome = self._acknowledged
 
     @property
     def state(self) -> str:
@@ -40,7 +42,19 @@ class SimBackend(Backend):
         # (an emulated EvoLogics modem's frames, with meta, carry the modem's own acoustic addresses)
         dst = BROADCAST if self.everyone_in_range and frame.meta is None else frame.dst
         dst_name = "*" if dst == BROADCAST else self._link_names(modem.tx_channel, dst)
-        return modem.send(modem.new_frame(dst_name, dst, len(frame.real), app_frame=frame))
+        sim_frame = modem.new_frame(dst_name, dst, len(frame.real), app_frame=frame)
+        if frame.ack_retries is not None and dst != BROADCAST:
+            sim_frame.ack = frame.ack_retries  # the modem acknowledges it on the channel (acoustic_ack.py)
+        if modem.send(sim_frame):
+            return True
+        if sim_frame.ack is not None and frame.on_acknowledged is not None:
+            frame.on_acknowledged(frame, False, None)  # dropped before the air (FIFO full): it failed now
+        return False
+
+    def _acknowledged(self, frame: Frame, delivered: bool, tau: float | None) -> None:
+        app_frame = frame.app_frame
+        if isinstance(app_frame, AppFrame) and app_frame.on_acknowledged is not None:
+            app_frame.on_acknowledged(app_frame, delivered, tau)
 
     def _deliver(self, frame: Frame) -> None:
         # Frames of built-in flows carry no application payload: they are background traffic.
@@ -59,3 +73,4 @@ class SimBackend(Backend):
     def close(self) -> None:
         self.modem.on_deliver = None
         self.modem.on_idle = None
+        self.modem.acks.on_outcome = None
