@@ -52,6 +52,7 @@ __all__ = ["Network", "zenoh_config"]
 REMEMBERED_FRAMES = 4096  # frames a control frame of another host may still refer to (S-FAMA's RTS → CTS)
 JOIN_WAIT_S = 2.0
 SWITCH_INTERVAL_S = 0.0002
+FIFO_DEPTH = 65536  # transmissions Zenoh keeps for the loop (beyond that it holds back its own reader)
 
 
 def zenoh_config(spec: Any, connect: list[str] | tuple[str, ...] = (), listen: list[str] | tuple[str, ...] = ()) -> Any:
@@ -195,8 +196,10 @@ class Network:
         liveliness = session.liveliness()
         self._entities.append(liveliness.declare_subscriber(
             f"{self.prefix}/alive/**", lambda s: post(self._on_alive, str(s.key_expr), "PUT" if s.kind == zenoh.SampleKind.PUT else "DELETE"), history=True))
-        self._entities.append(session.declare_subscriber(
-            f"{self.prefix}/tx/*", lambda s: post(self._on_transmission, s.payload.to_bytes())))
+        transmissions = session.declare_subscriber(f"{self.prefix}/tx/*", zenoh.handlers.FifoChannel(FIFO_DEPTH))
+        self._entities.append(transmissions)
+        threading.Thread(target=self._drain, args=(transmissions.handler,), name="network-tx",
+                         daemon=True).start()
         self._entities.append(session.declare_subscriber(
             f"{self.prefix}/pose/*", lambda s: post(self._on_pose, s.payload.to_bytes())))
         self._entities.append(session.declare_queryable(
@@ -286,6 +289,27 @@ class Network:
         publisher.put(encode_transmission(self.host, self.epoch_ns, self.number, frame, t, duration,
                                           sender.pose.position(t)))
         self.counters["published"] += 1
+
+    def _drain(self, handler: Any) -> None:
+        """The others' transmissions, from Zenoh's queue to the loop in batches: one wake-up (and one
+        hand-over of the GIL) for all that came meanwhile, not one per message, and in their order."""
+        post = self.scheduler.post
+        while True:
+            try:
+                sample = handler.recv()  # (waits with the GIL released)
+            except Exception:  # the subscriber was undeclared: the daemon is stopping
+                return
+            batch = [sample.payload.to_bytes()]
+            while len(batch) < 256:
+                sample = handler.try_recv()
+                if sample is None:
+                    break
+                batch.append(sample.payload.to_bytes())
+            post(self._on_transmissions, batch)
+
+    def _on_transmissions(self, batch: list[bytes]) -> None:
+        for data in batch:
+            self._on_transmission(data)
 
     def _on_transmission(self, data: bytes) -> None:
         try:
