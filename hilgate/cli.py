@@ -34,8 +34,15 @@ def _add_scene_args(parser: argparse.ArgumentParser, optional: bool = False) -> 
 def cmd_check(args: argparse.Namespace) -> int:
     from .scene.load import load_scene, scene_summary
 
+    from .sim.budget import format_budget, link_budget
+
     scene = load_scene(args.scene, args.overrides, plugins=args.plugins, preset_dirs=args.preset_dirs)
     print(scene_summary(scene))
+    rows = link_budget(scene, args.frame_bytes)
+    if rows:
+        sizes = f"{args.frame_bytes} bytes" if args.frame_bytes else "the sender's first flow's size, else 64 bytes"
+        print(f"\nlink budget (distances at t = 0; frames of {sizes}):")
+        print(format_budget(rows))
     print("ok")
     return 0
 
@@ -329,8 +336,11 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 
-    p = sub.add_parser("check", help="validate a scene file and print what it contains")
+    p = sub.add_parser("check", help="validate a scene file and print what it contains and what its error "
+                                      "models mean (SNR, PER now, where PER crosses 0.1 and 0.9)")
     _add_scene_args(p)
+    p.add_argument("--frame-bytes", type=int, metavar="N",
+                   help="PER of frames of N bytes (default: the size of the sender's first flow, else 64)")
 
     p = sub.add_parser("sim", help="run a scene in virtual time, as fast as possible")
     _add_scene_args(p)
