@@ -15,12 +15,13 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from .report.fit import Fit, bins, fit_function, fit_logistic, fit_power, power_parameters
+from .report.fit import Z95, Fit, bins, fit_function, fit_logistic, fit_power, fit_rssi, power_parameters
 from .report.observations import FitError, LinkInfo, Observations, observations, read_events
 
 __all__ = ["run_fit", "FitError", "FitResult"]
 
 MODELS = ("power", "logistic", "physical")
+MIN_RSSI = 10
 
 
 class FitResult:
@@ -48,6 +49,8 @@ def _scene_of(events: list[dict], scene_path: str | None, trace: str) -> str:
 
 
 def _physical_fit(scene: Any, data: Observations) -> tuple[Fit, dict, str]:
+    """The effective source level by binomial maximum likelihood, with the spreading factor k from the
+    frames' RSSI when at least ``MIN_RSSI`` delivered frames carry it (else the scene's k, held)."""
     from .models.acoustics import ber
     from .models.physical import PhysicalErrorModel
 
@@ -60,23 +63,30 @@ def _physical_fit(scene: Any, data: Observations) -> tuple[Fit, dict, str]:
     modulation = model.acoustic.modulation
     ber_of = np.vectorize(lambda ebn0: ber(modulation, ebn0), otypes=[float])
     alpha = model.alpha_db_per_km
+    heard = [(o.d, o.rssi) for o in data.frames if o.delivered and o.rssi is not None]
+    params: dict[str, tuple[float, float, float]] = {}
+    if len(heard) >= MIN_RSSI:
+        k, k_se, _, _ = fit_rssi([d for d, _ in heard], [r for _, r in heard], alpha)
+        params["spreading"] = (k, k - Z95 * k_se, k + Z95 * k_se)
+        k_note = f"from the RSSI of {len(heard)} frames"
+    else:
+        k = model.env.spreading
+        k_note = f"held at the scene's value: fewer than {MIN_RSSI} frames carry RSSI"
 
     def per(theta, d, size):
-        source, k = theta
         dd = np.maximum(d, 1.0)
-        snr = source - (k * 10 * np.log10(dd) + alpha * dd / 1000.0) - model.noise_db
+        snr = theta[0] - (k * 10 * np.log10(dd) + alpha * dd / 1000.0) - model.noise_db
         b = np.clip(ber_of(snr + model.ebn0_offset_db), 0.0, 1.0 - 1e-16)
         return -np.expm1(8 * size * np.log1p(-b))
 
-    d = [o.d for o in data.frames]
-    fit = fit_function("physical", ("source_level_db", "spreading"), per, (model.source_db, model.env.spreading),
-                       (5.0, 0.2), d, [o.size for o in data.frames], [o.delivered for o in data.frames])
-    params = {name: (float(fit.theta[i]), *fit.interval(i)) for i, name in enumerate(fit.names)}
-    sl, k = fit.theta
-    block = (f"acoustic: {{source_level_db: {sl:.1f}}}   # effective, at the level the modem sent with\n"
-             f"error: {{kind: physical, spreading: {k:.3f}}}")
+    fit = fit_function("physical", ("source_level_db",), per, (model.source_db,), (5.0,),
+                       [o.d for o in data.frames], [o.size for o in data.frames], [o.delivered for o in data.frames])
+    params = {"source_level_db": (float(fit.theta[0]), *fit.interval(0)), **params}
+    sl = fit.theta[0]
+    block = (f"acoustic: {{source_level_db: {sl:.1f}}}   # effective, at the AT!L level the modem sent with\n"
+             f"error: {{kind: physical, spreading: {k:.3f}}}   # k {k_note}")
     if not 1.0 <= k <= 2.0:
-        block += f"\n# spreading {k:.3f} is outside [1, 2], what a scene accepts: the water is not this model's"
+        block += f"\n# k = {k:.3f} is outside [1, 2], what a scene accepts: this water is not the model's"
     return fit, params, block
 
 
@@ -135,7 +145,7 @@ def _excluded(data: Observations) -> str:
 FORMS = {
     "power": "PER = 1 - (1 - a*d^b)^(8L)",
     "logistic": "PER = 1 / (1 + exp(-(beta0 + beta1*d)))",
-    "physical": "PER from SNR = SL - k*10*log10(d) - alpha*d - NL (the receivers' physical model)",
+    "physical": "PER from SNR = SL - k*10*log10(d) - alpha*d - NL (the receivers' physical model; SL fitted)",
 }
 
 

@@ -9,7 +9,9 @@ Forms:
   the two parameters nearly uncorrelated; a's interval comes back through the delta method.
 - ``logistic``: PER = 1 / (1 + exp(−(β₀ + β₁·d))), per frame whatever its size.
 - ``physical``: the physical model's free parameters, as a function ``per(θ, d, size)`` handed in
-  by the caller (``hilgate fit`` fits the effective source level and the spreading factor k).
+  by the caller (``hilgate fit`` fits the effective source level; the spreading factor k comes from
+  the frames' RSSI when they carry it, :func:`fit_rssi`, since delivered/lost alone hardly separate
+  k from the level).
 
 The optimiser is Nelder–Mead followed by Newton steps on a finite-difference Hessian (two or three
 parameters; numpy is the only dependency — scipy would bring 40 MB for this).  The covariance is the
@@ -25,7 +27,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-__all__ = ["Fit", "fit_power", "fit_logistic", "fit_function", "bins", "Z95"]
+__all__ = ["Fit", "fit_power", "fit_logistic", "fit_function", "fit_rssi", "bins", "Z95"]
 
 Z95 = 1.959963984540054
 EPS = 1e-300
@@ -158,8 +160,12 @@ def fit_function(form: str, names: Sequence[str], per_fn, x0: Sequence[float], s
             break
     hess = _hessian(nll, theta)
     try:
-        cov = np.linalg.inv(hess)
+        # an optimum must curve upwards in every direction; where it does not, the data cannot tell
+        # the parameters apart, and the intervals say so (infinite) rather than look precise
+        cov = np.linalg.inv(hess) if np.all(np.linalg.eigvalsh(hess) > 0) else None
     except np.linalg.LinAlgError:
+        cov = None
+    if cov is None:
         cov = np.full((len(theta), len(theta)), np.inf)
     return Fit(form, tuple(names), theta, cov, -nll(theta), len(d_arr), per_fn)
 
@@ -210,6 +216,22 @@ def fit_logistic(d, size, delivered) -> Fit:
         return 1.0 / (1.0 + np.exp(-(theta_[0] + theta_[1] * dd)))
 
     return Fit("logistic", fit.names, theta, jac @ fit.cov @ jac, fit.loglik, fit.n, per)
+
+
+def fit_rssi(d, rssi, alpha_db_per_km: float) -> tuple[float, float, float, float]:
+    """Least squares of RSSI = c − k·10·log10(d) − α·d/1000 (α known): returns k, its standard error,
+    c and the residual standard deviation.  RSSI is in the modem's own unit (dB re 1 V for EvoLogics):
+    only its slope against distance is used."""
+    d_arr = np.maximum(np.asarray(d, dtype=float), 1.0)
+    y = np.asarray(rssi, dtype=float) + alpha_db_per_km * d_arr / 1000.0
+    x = -10.0 * np.log10(d_arr)
+    design = np.column_stack([np.ones_like(x), x])
+    coef, *_ = np.linalg.lstsq(design, y, rcond=None)
+    residual = y - design @ coef
+    dof = max(len(y) - 2, 1)
+    sigma2 = float(residual @ residual) / dof
+    cov = sigma2 * np.linalg.pinv(design.T @ design)
+    return float(coef[1]), float(math.sqrt(max(cov[1, 1], 0.0))), float(coef[0]), math.sqrt(sigma2)
 
 
 def bins(d: Sequence[float], delivered: Sequence[bool], count: int = 10) -> list[tuple[float, float, int, int]]:
