@@ -104,6 +104,12 @@ namespace hilper {
     return modes;
   }
   void SendOne(ns3::Ptr<ns3::Socket> s, uint32_t size) { s->Send(ns3::Create<ns3::Packet>(size)); }
+  void SendMany(ns3::Ptr<ns3::Socket> s, uint32_t size, uint32_t n, double start, double interval) {
+    for (uint32_t i = 0; i < n; ++i) {
+      ns3::Simulator::Schedule(ns3::Seconds(start + i * interval), &SendOne, s, size);
+    }
+  }
+  ns3::Address ToAddress(const ns3::PacketSocketAddress& a) { return ns3::Address(a); }
 }
 """
 
@@ -146,12 +152,11 @@ def ns3_per(a, d: float) -> tuple[int, int]:
     dst.SetProtocol(0)
     socket = ns.Socket.CreateSocket(nodes.Get(1), ns.TypeId.LookupByName("ns3::PacketSocketFactory"))
     socket.Bind()
-    socket.Connect(ns.Address(dst))
+    socket.Connect(hp.ToAddress(dst))
     if not hp.Hook(0):
         raise RuntimeError("ns-3: could not connect the PHY traces")
     interval = 8 * (a.payload + UAN_HEADER) / a.bitrate + d / 1500.0 + 0.1
-    for i in range(a.frames):
-        ns.Simulator.Schedule(ns.Seconds(1.0 + i * interval), hp.SendOne, socket, a.payload)
+    hp.SendMany(socket, a.payload, a.frames, 1.0, interval)
     ns.Simulator.Stop(ns.Seconds(2.0 + a.frames * interval))
     ns.Simulator.Run()
     ns.Simulator.Destroy()
