@@ -38,11 +38,14 @@ def cmd_check(args: argparse.Namespace) -> int:
 
     scene = load_scene(args.scene, args.overrides, plugins=args.plugins, preset_dirs=args.preset_dirs)
     print(scene_summary(scene))
-    rows = link_budget(scene, args.frame_bytes)
+    limit = None if args.budget_rows == 0 else args.budget_rows
+    rows = link_budget(scene, args.frame_bytes, limit)
     if rows:
         sizes = f"{args.frame_bytes} bytes" if args.frame_bytes else "the sender's first flow's size, else 64 bytes"
         print(f"\nlink budget (distances at t = 0; frames of {sizes}):")
-        print(format_budget(rows))
+        print(format_budget(rows[:limit]))
+        if limit is not None and len(rows) > limit:
+            print("... more pairs not shown (--budget-rows 0 shows them all)")
     print("ok")
     return 0
 
@@ -358,6 +361,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_scene_args(p)
     p.add_argument("--frame-bytes", type=int, metavar="N",
                    help="PER of frames of N bytes (default: the size of the sender's first flow, else 64)")
+    p.add_argument("--budget-rows", type=int, default=50, metavar="N",
+                   help="show at most N pairs in the link budget (default 50; 0: all)")
 
     p = sub.add_parser("fit", help="fit an error: block (loss against distance) to the frames of a trace")
     p.add_argument("trace", help="a trace (JSON lines) of hilgate run with real links, or of hilgate sim with "

@@ -255,3 +255,13 @@ def test_spreading_from_rssi():
     rssi = [-40 - 15 * math.log10(x) - alpha * x / 1000 + rng.gauss(0, 1) for x in d]
     k, se, c, sigma = fit_rssi(d, rssi, alpha)
     assert abs(k - 1.5) <= 5 * se and se < 0.05 and sigma == pytest.approx(1.0, abs=0.15)
+
+
+def test_plot_draws_the_fit(tmp_path):
+    pytest.importorskip("matplotlib")
+    from hilgate.fitcmd import plot_fit
+
+    trace, scene = simulated_trace(tmp_path, 9)
+    result = run_fit(trace, scene, "power", simulated=True)
+    plot_fit(result, str(tmp_path / "fit.png"))
+    assert (tmp_path / "fit.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

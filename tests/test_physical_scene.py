@@ -172,3 +172,9 @@ def test_sinr_in_a_scene_captures_the_near_sender(tmp_path):
     strict = load(SINR.replace("collisions: sinr", "collisions: overlap"))
     summary = simulate(strict, until=20)
     assert summary["flows"][0]["rx_packets"] == 0 and summary["flows"][1]["rx_packets"] == 0
+
+
+def test_budget_rows_are_limited():
+    scene = load(SCENE)
+    assert len(link_budget(scene, limit=1)) == 2  # one more than the limit: the caller says "more"
+    assert len(link_budget(scene, limit=10)) == 4

@@ -71,9 +71,10 @@ def _frame_size(scene: Scene, link_id: str, default: int) -> int:
     return default
 
 
-def link_budget(scene: Scene, frame_bytes: int | None = None) -> list[PairBudget]:
+def link_budget(scene: Scene, frame_bytes: int | None = None, limit: int | None = None) -> list[PairBudget]:
     """Pairs of simulated links (sender → receiver on its transmit channel) that can lose frames;
-    error-free paths are left out."""
+    error-free paths are left out.  With ``limit``, at most that many plus one (so the caller knows
+    there are more): a scene of a thousand links has a million pairs."""
     poses = {name: build_pose(vehicle) for name, vehicle in scene.vehicles.items()}
     sims = [link for link in scene.links.values() if link.backend == "sim"]
     rows = []
@@ -99,6 +100,8 @@ def link_budget(scene: Scene, frame_bytes: int | None = None) -> list[PairBudget
                 crossings[key] = (crossing(lambda x: model.per(x, size), 0.1, rmin, high),
                                   crossing(lambda x: model.per(x, size), 0.9, rmin, high))
             rows.append(PairBudget(sender.id, receiver.id, size, d, snr, per, *crossings[key], (rmin, rmax)))
+            if limit is not None and len(rows) > limit:
+                return rows
     return rows
 
 
