@@ -198,8 +198,8 @@ class Radio:
         live.append(arrival)
         self.pending = live
         if not arrival.collided:
-            for span in self.noise:
-                if span[0] < end - OVERLAP_EPS and start < span[1] - OVERLAP_EPS:
+            for other_start, other_end in self.noise:  # 2-tuples: only collisions: sinr keeps powers
+                if other_start < end - OVERLAP_EPS and start < other_end - OVERLAP_EPS:
                     arrival.collided = True
                     break
             if self.half_duplex and self.tx_end - OVERLAP_EPS > start and self.tx_start < end - OVERLAP_EPS:
