@@ -243,3 +243,27 @@ def test_sinr_capture_threshold_either_side_of_the_margin():
     margin = m.received_db(100.0) - m.received_db(1000.0)
     assert outcome(capture_net("sinr", margin + 0.5, 1000.0)[1]) == {"strong": "col", "weak": "mult"}
     assert outcome(capture_net("sinr", margin - 0.5, 1000.0)[1]) == {"strong": "rx", "weak": "mult"}
+
+
+# -- any valid configuration ----------------------------------------------------------------------------
+
+from hypothesis import given, settings, strategies as st  # noqa: E402
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    low=st.floats(0.5, 100), width=st.floats(0.5, 100), sl=st.floats(80, 220), level=st.integers(0, 3),
+    modulation=st.sampled_from(["bpsk", "qpsk", "bfsk", "bfsk-coherent"]), gain=st.floats(0, 30),
+    absorption=st.sampled_from(["thorp", "francois-garrison"]), k=st.floats(1, 2), s=st.floats(0, 1),
+    w=st.floats(0, 100), floor=st.one_of(st.none(), st.floats(-100, 200)), bitrate=st.floats(1, 1e6),
+    t=st.floats(-2, 40), sal=st.floats(0, 45), depth=st.floats(0, 11000), ph=st.floats(6, 10),
+)
+def test_any_valid_configuration_gives_a_per_that_grows_with_distance(low, width, sl, level, modulation, gain,
+                                                                     absorption, k, s, w, floor, bitrate, t, sal,
+                                                                     depth, ph):
+    env = Environment(absorption=absorption, spreading=k, shipping=s, wind_mps=w, noise_floor_db=floor,
+                      temperature_c=t, salinity_ppt=sal, depth_m=depth, ph=ph)
+    m = PhysicalErrorModel(env, Acoustic((low, low + width), sl, level, modulation, gain), bitrate)
+    pers = [m.per(d, 64) for d in (0.0, 0.5, 1.0, 10.0, 100.0, 1e3, 1e4, 1e5)]
+    assert all(0.0 <= p <= 1.0 for p in pers)
+    assert all(a <= b + 1e-12 for a, b in zip(pers, pers[1:]))
