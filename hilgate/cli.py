@@ -34,8 +34,18 @@ def _add_scene_args(parser: argparse.ArgumentParser, optional: bool = False) -> 
 def cmd_check(args: argparse.Namespace) -> int:
     from .scene.load import load_scene, scene_summary
 
+    from .sim.budget import format_budget, link_budget
+
     scene = load_scene(args.scene, args.overrides, plugins=args.plugins, preset_dirs=args.preset_dirs)
     print(scene_summary(scene))
+    limit = None if args.budget_rows == 0 else args.budget_rows
+    rows = link_budget(scene, args.frame_bytes, limit)
+    if rows:
+        sizes = f"{args.frame_bytes} bytes" if args.frame_bytes else "the sender's first flow's size, else 64 bytes"
+        print(f"\nlink budget (distances at t = 0; frames of {sizes}):")
+        print(format_budget(rows[:limit]))
+        if limit is not None and len(rows) > limit:
+            print("... more pairs not shown (--budget-rows 0 shows them all)")
     print("ok")
     return 0
 
@@ -340,8 +350,25 @@ def cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_fit(args: argparse.Namespace) -> int:
+    from .fitcmd import FitError, plot_fit, print_fit, run_fit
+
+    try:
+        result = run_fit(args.trace, args.scene, args.model, args.link, args.simulated, args.run, args.pose_gap,
+                         args.window, tuple(args.overrides))
+        print_fit(result, sys.stdout, args.bins)
+        if args.plot:
+            plot_fit(result, args.plot, args.bins)
+            print(f"\nplot: {args.plot}")
+    except FitError as exc:
+        print(f"hilgate: fit: {exc}", file=sys.stderr)
+        return EXIT_SCENE
+    return 0
+
+
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "report": cmd_report,
+    "fit": cmd_fit,
     "emulate": cmd_emulate,
     "queues": cmd_queues,
     "check": cmd_check,
@@ -371,8 +398,34 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 
-    p = sub.add_parser("check", help="validate a scene file and print what it contains")
+    p = sub.add_parser("check", help="validate a scene file and print what it contains and what its error "
+                                      "models mean (SNR, PER now, where PER crosses 0.1 and 0.9)")
     _add_scene_args(p)
+    p.add_argument("--frame-bytes", type=int, metavar="N",
+                   help="PER of frames of N bytes (default: the size of the sender's first flow, else 64)")
+    p.add_argument("--budget-rows", type=int, default=50, metavar="N",
+                   help="show at most N pairs in the link budget (default 50; 0: all)")
+
+    p = sub.add_parser("fit", help="fit an error: block (loss against distance) to the frames of a trace")
+    p.add_argument("trace", help="a trace (JSON lines) of hilgate run with real links, or of hilgate sim with "
+                                 "--simulated")
+    p.add_argument("--scene", help="the scene of the run (default: the one the trace's run line names)")
+    p.add_argument("--link", action="append", metavar="ID",
+                   help="fit the frames these links received (default: every receiver); repeatable")
+    p.add_argument("--model", choices=("power", "logistic", "physical"), default="power",
+                   help="power: BER = a*d^b per bit (default); logistic in d; physical: effective source level "
+                        "and spreading k of the receivers' error: {kind: physical}")
+    p.add_argument("--simulated", action="store_true",
+                   help="the trace is of a simulated run: fit its simulated links' frames")
+    p.add_argument("--run", help="which run of a daemon's trace (id or number; default: the last)")
+    p.add_argument("--pose-gap", type=float, default=2.0, metavar="S",
+                   help="leave out frames with no pose sample within S seconds (default 2)")
+    p.add_argument("--window", type=float, default=5.0, metavar="S",
+                   help="real links: a frame counts as received when the receiver traced it within S seconds")
+    p.add_argument("--bins", type=int, default=10, help="distance bins in the table and plot (default 10)")
+    p.add_argument("--plot", metavar="FILE.png", help="draw the fit, its band and the binned data (matplotlib)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY.PATH=VALUE",
+                   help="override a value of the scene, as for check and sim")
 
     p = sub.add_parser("sim", help="run a scene in virtual time, as fast as possible")
     _add_scene_args(p)

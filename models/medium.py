@@ -46,7 +46,7 @@ class _Neighbour:
     the distance, cached per frame size when neither vehicle moves."""
 
     __slots__ = ("radio", "static", "reach", "d", "tau", "in_range", "rmin", "rmax", "min_delay", "speed",
-                 "per_cache")
+                 "per_cache", "model", "power")
 
     def __init__(self, sender: "Radio", receiver: "Radio", channel: Channel):
         self.radio = receiver
@@ -54,6 +54,10 @@ class _Neighbour:
         self.min_delay = channel.min_delay_s
         self.speed = channel.speed_mps
         self.per_cache: dict[int, float] = {}
+        error = receiver.error
+        path_from = getattr(error, "path_from", None)  # a physical model takes the sender's source level
+        self.model = path_from(sender.error) if path_from is not None else error
+        self.power = -1.0  # received power on a static path, once asked (collisions: sinr)
         self.static = bool(sender.pose.static and receiver.pose.static)
         self.d = self.tau = 0.0
         self.in_range = False
@@ -73,9 +77,21 @@ class _Neighbour:
         if self.static:
             per = self.per_cache.get(size)
             if per is None:
-                per = self.per_cache[size] = self.radio.error.per(d, size)
+                per = self.per_cache[size] = self.model.per(d, size)
             return per
-        return self.radio.error.per(d, size)
+        return self.model.per(d, size)
+
+    def rx_power(self, d: float) -> float:
+        """Received power at ``d`` (physical models only: ``collisions: sinr``)."""
+        if self.static:
+            if self.power < 0.0:
+                self.power = self.model.rx_power(d)
+            return self.power
+        return self.model.rx_power(d)
+
+    def per_sinr(self, d: float, size: int, interference: float) -> float:
+        """Loss probability with ``interference`` added to the noise (``collisions: sinr``)."""
+        return self.model.per_sinr(d, size, interference)
 
 
 class Medium:

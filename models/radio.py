@@ -57,10 +57,18 @@ class LossModel(Protocol):
     def per(self, d: float, size: int) -> float: ...
 
 
+class SinrLossModel(LossModel, Protocol):
+    """With ``collisions: sinr``: the path's received power and its PER with interference added."""
+
+    def rx_power(self, d: float) -> float: ...
+
+    def per_sinr(self, d: float, size: int, interference: float) -> float: ...
+
+
 class Arrival:
     """One frame reaching one radio over ``[start, end]``; flags set as the radio learns more."""
 
-    __slots__ = ("frame", "start", "end", "d", "error", "collided")
+    __slots__ = ("frame", "start", "end", "d", "error", "collided", "power", "interference", "loss")
 
     def __init__(self, frame: "Frame", start: float, end: float, d: float):
         self.frame = frame
@@ -69,6 +77,9 @@ class Arrival:
         self.d = d
         self.error = False
         self.collided = False
+        self.power = 0.0  # collisions: sinr: received power, and the summed power of what overlaps it
+        self.interference = 0.0
+        self.loss: "SinrLossModel | None" = None
 
     def __repr__(self) -> str:
         return f"Arrival({self.frame!r} [{self.start:.6f}, {self.end:.6f}] d={self.d:.3f})"
@@ -89,7 +100,7 @@ class Radio:
         "host", "medium", "clock", "rng",
         "address", "tx_channel", "rx_channel", "range_m", "pose", "error", "error_free", "half_duplex", "judges_all",
         "listens",
-        "tx_start", "tx_end", "pending", "noise", "_noise_cap",
+        "tx_start", "tx_end", "pending", "noise", "_noise_cap", "capture",
     )
 
     def __init__(self, host: RadioHost, medium: "Medium", clock: "Clock", rng: "random.Random"):
@@ -111,6 +122,7 @@ class Radio:
         self.pending: list[Arrival] = []  # judged arrivals that may still be on air
         self.noise: list[tuple[float, float]] = []  # (start, end) of arrivals that only interfere
         self._noise_cap = NOISE_MIN  # prune ``noise`` when it grows past this
+        self.capture = 0.0  # collisions: sinr: the capture ratio (linear); 0: strict overlap (the default)
 
     # -- the modem's side ----------------------------------------------------------------------
 
@@ -124,6 +136,7 @@ class Radio:
         self.error = error
         self.error_free = error.constant_zero
         self.half_duplex = half_duplex
+        self.capture = error.capture if getattr(error, "sinr", False) else 0.0
 
     def transmit(self, frame: "Frame", t: float, duration: float) -> None:
         """Put ``frame`` on air from ``t`` for ``duration``: half duplex, it spoils what is arriving."""
@@ -143,8 +156,8 @@ class Radio:
         for arrival in self.pending:
             if arrival.start <= now < arrival.end:
                 return True
-        for start, end in self.noise:
-            if start <= now < end:
+        for span in self.noise:
+            if span[0] <= now < span[1]:
                 return True
         return False
 
@@ -157,6 +170,9 @@ class Radio:
         An arrival this radio judges goes to :meth:`_judge`; any other is only interference, kept
         as a span that may spoil what it judges (the common case, so it is handled right here)."""
         dst = frame.dst_addr
+        if self.capture:
+            self._arrive_sinr(frame, t, start, end, d, loss)  # type: ignore[arg-type]
+            return
         if self.judges_all or dst == self.address or dst == BROADCAST:
             self._judge(frame, t, start, end, d, loss)
             return
@@ -184,7 +200,7 @@ class Radio:
         live.append(arrival)
         self.pending = live
         if not arrival.collided:
-            for other_start, other_end in self.noise:
+            for other_start, other_end in self.noise:  # 2-tuples: only collisions: sinr keeps powers
                 if other_start < end - OVERLAP_EPS and start < other_end - OVERLAP_EPS:
                     arrival.collided = True
                     break
@@ -195,6 +211,59 @@ class Radio:
             if per > 0.0 and (per >= 1.0 or self.rng.random() < per):
                 arrival.error = True
         self.clock.at(end, self._arrival_over, arrival)
+
+    # -- collisions: sinr ------------------------------------------------------------------------
+
+    def _arrive_sinr(self, frame: "Frame", t: float, start: float, end: float, d: float,
+                     loss: SinrLossModel) -> None:
+        """An arrival under ``collisions: sinr``: instead of spoiling what it overlaps, it adds its
+        received power to their interference (and theirs to its own, if judged).  The outcome is drawn
+        at its end (:meth:`_sinr_over`), once every overlapping arrival is known.  The interference of
+        an arrival is the sum of the powers of all arrivals that overlap it at any time (conservative:
+        ns-3's UanPhyGen keeps the worst SINR seen during the reception)."""
+        power = loss.rx_power(d)
+        pending = self.pending
+        dst = frame.dst_addr
+        if not (self.judges_all or dst == self.address or dst == BROADCAST):
+            for other in pending:
+                if other.start < end - OVERLAP_EPS and start < other.end - OVERLAP_EPS:
+                    other.interference += power
+            noise = self.noise
+            noise.append((start, end, power))
+            if len(noise) > self._noise_cap:
+                noise = self.noise = [span for span in noise if span[1] > t]
+                self._noise_cap = NOISE_MIN + 2 * len(noise)
+            return
+        arrival = Arrival(frame, start, end, d)
+        arrival.power = power
+        arrival.loss = loss
+        live = []
+        for other in pending:
+            if other.end > t:
+                live.append(other)
+                if other.start < end - OVERLAP_EPS and start < other.end - OVERLAP_EPS:
+                    other.interference += power
+                    arrival.interference += other.power
+        live.append(arrival)
+        self.pending = live
+        for span in self.noise:
+            if span[0] < end - OVERLAP_EPS and start < span[1] - OVERLAP_EPS:
+                arrival.interference += span[2]
+        if self.half_duplex and self.tx_end - OVERLAP_EPS > start and self.tx_start < end - OVERLAP_EPS:
+            arrival.collided = True
+        self.clock.at(end, self._sinr_over, arrival)
+
+    def _sinr_over(self, arrival: Arrival) -> None:
+        """Capture: the arrival survives the overlap if its power is at least ``capture`` times the
+        interference; its loss is then drawn at the SINR (noise plus interference)."""
+        interference = arrival.interference
+        if interference > 0.0 and arrival.power < self.capture * interference:
+            arrival.collided = True
+        if not self.error_free:
+            per = arrival.loss.per_sinr(arrival.d, arrival.frame.size, interference)  # type: ignore[union-attr]
+            if per > 0.0 and (per >= 1.0 or self.rng.random() < per):
+                arrival.error = True
+        self._arrival_over(arrival)
 
     def unreachable(self, frame: "Frame") -> None:
         """A frame for this radio that cannot reach it (out of the sender's range, or no pose)."""

@@ -28,6 +28,10 @@ WORDS = sorted(set(TOP_KEYS + LINK_KEYS + VEHICLE_KEYS + FLOW_KEYS) - {"plugins"
     "static", "path", "waypoints", "start", "legs", "hold_s", "to", "speed_mps", "min_delay_s", "unit", "expr",
     "protocol", "none", "cs-aloha", "s-fama", "s100", "evologics-s2cr-7-17", "sim", "half", "full", "vl2b",
     "simple:20", "raw", "*", "bit", "byte", "packet", "d", "6e-13 * d^13.7", "rov0", "rov1", "rf", "acoustic",
+    # the physical channel model (issue 16)
+    "kind", "physical", "evologics-s2cr-18-34", "band_khz", "source_level_db", "level", "modulation", "bpsk",
+    "bfsk", "coding_gain_db", "absorption", "thorp", "francois-garrison", "spreading", "collisions", "sinr",
+    "capture_db", "noise_band", "centre", "noise_floor_db", "ph", "depth_m",
 ]
 TOKENS = WORDS + [
     "\n", "\n  ", "\n    ", " ", ": ", ":", "- ", "[", "]", "{", "}", ", ", "&a ", "*a", "&b ", "*b", "<<: ", "? ",

@@ -15,12 +15,14 @@ from typing import Any
 from ..models.errormodel import UNITS, ErrorModel
 from ..models.expr import ExprError, compile_expression
 from ..models.frame import BROADCAST
+from ..models.physical import PhysicalErrorModel
 from ..models.modem import ModemParams
 from ..models.usbl import UsblParams
 from .backends import SIM, backend_names, driver_keys, driver_options, emulated_device
 from .hosts import host_name
 from .checks import Fields, boolean, choice, describe, integer, join_path, number, text
 from .mac import mac_spec
+from .physics import ERROR_KEYS, acoustic_params, error_kind, physical_environment
 from .plugins import Plugin
 from .presets import MODEM_KEYS, load_preset, merge
 from .specs import LinkSpec, MacSpec
@@ -95,7 +97,7 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
         rx_jitter_s=f.get("rx_jitter_s", number(0), 0.0),
         fifo_bytes=f.get("fifo_bytes", integer(1), 500_000),
         range_m=f.get("range_m", _range_pair, (0.0, math.inf)),
-        error=f.get("error", _error_model, ErrorModel("packet", "0")),
+        error=_link_error(f),
         duplex=f.get("duplex", choice("half", "full"), "half"),
         promiscuous=f.get("promiscuous", boolean, False),
         ack_bytes=f.get("ack_bytes", integer(1, 65535), 6),
@@ -191,8 +193,33 @@ def _usbl(node: Node, path: str) -> UsblParams | None:
                       f.get("range_sigma_m", number(0), 0.0))
 
 
+def _link_error(link: Fields) -> ErrorModel | PhysicalErrorModel:
+    """The link's ``error:``: an expression of distance (kind ``expr``, the default), or the physical
+    model (kind ``physical``), which also reads the link's ``acoustic:`` front end and bit rate."""
+    node = link.child("error")
+    acoustic_node = link.child("acoustic")
+    acoustic = None if acoustic_node is None else acoustic_params(acoustic_node, link.sub("acoustic"))
+    if node is None:
+        return ErrorModel("packet", "0")
+    path = link.sub("error")
+    if error_kind(node, path) == "expr":
+        return _error_model(node, path)
+    env = physical_environment(node, path)
+    if acoustic is None:
+        raise node.error(path, "kind: physical needs the link's acoustic: {band_khz, source_level_db, …} "
+                               "(a preset such as evologics-s2cr-18-34 gives it)")
+    bitrate = link.get("bitrate_bps", number(above=0), 1000.0)
+    try:
+        return PhysicalErrorModel(env, acoustic, bitrate)
+    except ValueError as exc:
+        raise node.error(path, str(exc)) from None
+
+
 def _error_model(node: Node, path: str) -> ErrorModel:
-    f = Fields(node, path, ("unit", "expr"))
+    f = Fields(node, path, ERROR_KEYS)
+    for key in ERROR_KEYS:
+        if key not in ("kind", "unit", "expr") and key in f:
+            raise f.child(key).error(f.sub(key), "only for kind: physical")
     unit = f.get("unit", choice(*UNITS), "packet")
     expr_node = f.child("expr")
     if expr_node is None:

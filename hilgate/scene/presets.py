@@ -19,7 +19,7 @@ __all__ = ["MODEM_KEYS", "preset_names", "load_preset", "merge"]
 
 MODEM_KEYS = (
     "bitrate_bps", "tx_delay_s", "rx_delay_s", "tx_jitter_s", "rx_jitter_s", "fifo_bytes", "range_m",
-    "error", "mac", "packet", "duplex", "promiscuous", "ack_bytes", "ack_turnaround_s",
+    "error", "mac", "packet", "duplex", "promiscuous", "ack_bytes", "ack_turnaround_s", "acoustic",
 )
 PRESET_SUFFIXES = (".yaml", ".yml")
 MAX_PRESET_BYTES = 64 * 1024
@@ -87,8 +87,16 @@ def merge(base: Node, override: Node) -> Node:
         return override
     merged = dict(base.value)
     for key, value in override.items():
+        if key == "error" and key in merged and _error_kind(merged[key]) != _error_kind(value):
+            merged[key] = value  # another kind of error model: none of the preset's keys apply
+            continue
         merged[key] = merge(merged[key], value) if key in merged else value
     return Node(merged, override.file, override.line)
+
+
+def _error_kind(node: Node) -> object:
+    kind = node.value.get("kind") if node.is_map else None
+    return "expr" if kind is None else kind.value
 
 
 def _inside(path: str, folder: str) -> bool:
