@@ -173,6 +173,7 @@ class Network:
 def _echo(link: str, count: int, mode: str, result) -> None:
     """On link b: echo every frame back to address 1, or only count them."""
     tx, rx = open_queue(f"/{link}_tx_dlnk_phy"), open_queue(f"/{link}_rx_dlnk_phy")
+    tx.send(b"\x01")  # REQ_STATE, as a dccomms application says when it starts: the daemon knows it is there
     received = 0
     first = last = 0.0
     while received < count:
@@ -231,6 +232,7 @@ def throughput(count: int, size: int, rate: float | None) -> tuple[float, int, i
         result = SPAWN.Queue()
         counter = SPAWN.Process(target=_echo, args=(b, count, "count", result))
         counter.start()
+        time.sleep(1.0)  # (the counter is up and has said REQ_STATE)
         tx, rx = open_queue(f"/{a}_tx_dlnk_phy"), open_queue(f"/{a}_rx_dlnk_phy")
         stop = threading.Event()
 
@@ -257,7 +259,8 @@ def throughput(count: int, size: int, rate: float | None) -> tuple[float, int, i
         reader.join()
         tx.close()
         rx.close()
-        drops = sum(link["drops"] for link in network.status("A")["links"] + network.status("B")["links"])
+        links = network.status("A")["links"] + network.status("B")["links"]
+        drops = sum(link["drops"] + link["unread"] for link in links)
         gaps = sum(view["gaps"] for view in network.status("B")["network"]["hosts"])
         return received / (last - start), count - received, drops, gaps
     finally:

@@ -280,8 +280,10 @@ class Network:
             # DROP, not BLOCK: a peer that hangs must never stall this loop; what Zenoh drops shows as
             # a gap in the message numbers on the receiving host (traced net_gap, counted in status).
             # Batched, not express: a put costs a sixth, and a lone message is sent at once anyway.
+            # (only to other sessions: this host's own subscriber would decode each of its frames again)
             publisher = self._publishers[sender.tx_channel] = self.session.declare_publisher(
-                f"{self.prefix}/tx/{sender.tx_channel}", congestion_control=zenoh.CongestionControl.DROP)
+                f"{self.prefix}/tx/{sender.tx_channel}", congestion_control=zenoh.CongestionControl.DROP,
+                allowed_destination=zenoh.Locality.REMOTE)
         self._remember(self.sent, (frame.src_link, frame.id), frame)
         if not publisher.matching_status:
             return
@@ -374,7 +376,10 @@ class Network:
     def _pose_publisher(self, vehicle: str) -> Any:
         publisher = self._pose_publishers.get(vehicle)
         if publisher is None:
-            publisher = self._pose_publishers[vehicle] = self.session.declare_publisher(f"{self.prefix}/pose/{vehicle}")
+            import zenoh
+
+            publisher = self._pose_publishers[vehicle] = self.session.declare_publisher(
+                f"{self.prefix}/pose/{vehicle}", allowed_destination=zenoh.Locality.REMOTE)
         return publisher
 
     def _live_update(self, name: str, pose: LiveVehicle) -> Callable[[], None]:

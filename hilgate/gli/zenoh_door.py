@@ -73,8 +73,10 @@ class ZenohEndpoint:
     # -- link → applications (on the loop) --------------------------------------------------------
 
     def deliver(self, frame: AppFrame, t: float) -> str:
+        if not self.recv_pub.matching_status:
+            return ABSENT  # no application subscribes: nothing to encode or send
         self.recv_pub.put(_RECV.pack(frame.src & 0xFF, frame.dst & 0xFF, t) + bytes(frame.payload))
-        return TAKEN if self.recv_pub.matching_status else ABSENT
+        return TAKEN
 
     def state(self, ready: bool) -> None:
         if ready != self.ready:
