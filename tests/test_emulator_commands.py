@@ -26,9 +26,9 @@ links: {{{link}: {{vehicle: v, address: 4, emulate: {{protocol: evologics, pty: 
         assert ask("AT?AL") == "4"                      # a setting, from the link's address
         assert ask("AT!AL7") == "OK" and ask("AT?AL") == "7"
         assert ask("AT!AL") == "ERROR WRONG FORMAT"
-        assert ask("AT?MODE") == "AT"
+        assert ask("AT?MODE") == "NET"                  # the network interpreter (issue 18: DUNE wants it)
         assert ask("AT?T") == "0"                       # no delivery yet
-        assert ask("ATI7") == "EvoLogics GmbH (emulated)"
+        assert ask("ATI7") == "EvoLogics GmbH"
         assert ask("AT?NOSUCH") == "ERROR UNKNOWN COMMAND"
         assert ask("ATH") == "OK"
         port.close()
