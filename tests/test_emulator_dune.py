@@ -59,7 +59,7 @@ def fields(message) -> list[str]:
 def test_dune_start_up_polling_and_a_message_exchange_parse_as_dune_parses_them(tmp_path):
     la, lb = unique("da"), unique("db")
     pa, pb = free_port(), free_port()
-    daemon = Daemon(tmp_path, scene(la, lb, pa, pb), [la, lb])
+    daemon = Daemon(tmp_path, scene(la, lb, pa, pb), [la, lb], queue_budget_unlimited=True)
     a = b = None
     try:
         daemon.wait_for("READY=1")
