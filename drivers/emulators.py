@@ -8,6 +8,9 @@ emulated modem prints ``RECVIM,5,1,2,ack,…`` when the model delivers the frame
 ``DELIVEREDIM,2`` one propagation time later, or ``FAILEDIM,2`` if the model loses the frame;
 ``AT?T`` answers the model's propagation time; settings answer as a modem does.  Like a modem just
 powered on, it starts in command mode (``ATO`` enters data mode, ``+++AT`` escapes work there).
+Enough of the S2C's command surface is there for field drivers that poll and check it (LSTS DUNE's
+task: ``AT?MODE``, ``ATI1``, ``AT?CLOCK``, ``AT?P``, ``SENDEND``, burst reports); the README's
+conformance table lists what is and is not emulated.
 
 The S100 emulator is the byte pipe the real one is: frames of the link's packet class followed by
 CR LF in, the same bytes out on the other side.
@@ -299,6 +302,8 @@ class EvologicsEmulator:
             self.clock_offset = 0.0
             if isinstance(host, _TcpClient):
                 host.close()
+            else:
+                self.codecs[host] = ModemCodec()  # powered on again: command mode, nothing half-read
             return
         if which not in ("1", "2", "3", "4"):
             reply("ERROR WRONG FORMAT")
