@@ -120,6 +120,7 @@ def test_at_al_moves_the_modem_in_the_simulation(tmp_path):
         assert a.command(b"*SENDIM,2,2,ack,hi") == "OK"   # the old address: nobody answers to it now
         assert a.wait_message("FAILEDIM").text == "FAILEDIM,2"
         assert not any(m.name == "RECVIM" for m in b.messages)
+        daemon.stop()                                       # the trace is complete once the daemon stops
         trace = daemon.trace_events()
         # the trace names the new address's link, and the old one as an address nobody has
         sent = [e for e in trace if e["ev"] == "tx"]
@@ -153,6 +154,7 @@ def test_atz_clears_the_transmit_buffer_and_the_pool_refuses_beyond_its_size(tmp
         assert a.command(b"*SENDIM,64,2,noack," + payload) == "ERROR BUFFER FULL" and a.command("?ZO") == "1"
         assert a.command("@ZO") == "OK" and a.command("?ZO") == "0"
         assert a.command("@ZL0") == "ERROR OUT OF RANGE"
+        daemon.stop()                                       # the trace is complete once the daemon stops
         cleared = [e for e in daemon.trace_events() if e.get("cause") == "cleared"]
         assert len(cleared) == 2 and all(e["ev"] == "drop" for e in cleared)
         assert not any(m.name in ("DELIVEREDIM", "FAILEDIM") for m in a.messages)
@@ -187,6 +189,7 @@ def test_bursts_count_packets_and_report_delivered_and_failed_and_ar0_cannot_sen
         a.send(b"raw data")
         assert b.wait_message("RECV").payload == b"raw data"
         a.wait(lambda: "+++AT:13:DELIVERED,3,2" in a.replies, "DELIVERED in data mode")
+        daemon.stop()                                       # the trace is complete once the daemon stops
         assert any(e.get("cause") == "no_remote_address" for e in daemon.trace_events())
     finally:
         a.close()
