@@ -11,7 +11,9 @@ ACK has reached it, or ``FAILEDIM,2`` once the ``!RI`` retries went unanswered; 
 one-way time measured from that round trip.  A link with ``usbl:`` prints ``USBLLONG`` and
 ``USBLANGLES`` (after ``AT@ZU1``) from the simulated geometry after each exchange; settings answer as
 a modem does.  Like a modem just powered on, it starts in command mode (``ATO`` enters data mode,
-``+++AT`` escapes work there).
+``+++AT`` escapes work there). Enough of the S2C's command surface is there for field
+drivers that poll and check it (LSTS DUNE's task: ``AT?MODE``, ``ATI1``, ``AT?CLOCK``, ``AT?P``,
+``SENDEND``, burst reports); the README's conformance table lists what is and is not emulated.
 
 The S100 emulator is the byte pipe the real one is, on a serial line paced as the real one: frames
 of the link's packet class followed by CR LF in, the same bytes out on the other side; other bytes
@@ -26,22 +28,23 @@ import socket
 import tty
 from typing import Any, Callable
 
-from hilgate.core.backend import AppFrame
+from hilgate.core.backend import AppFrame, PhyEvent
 from hilgate.core.endpoint import TAKEN, LinkPort
 from hilgate.core.packets import BROADCAST, Decoded, Raw
 from hilgate.core.streams import Connection, Listener
 
 from .evologics_codec import BadCommand, Command, Data, ModemCodec
+from .evologics_settings import Firmware, Settings
 from .s100_codec import (CRLF, IDLE_S, PIECE, TERMINATOR, FrameHunter, InputBuffer, Notice, SerialLine, Skipped,
                          wire_class)
 from .table import emulator_for
 
 log = logging.getLogger(__name__)
 
-VERSION = "hilgate EvoLogics S2C emulator"
 IM_MAX = 64
 BURST_MAX = 1024
 FOREVER = 1 << 30  # !RI255: retry for ever
+BATTERY_V = 24.0  # AT?BV: no battery is modelled; a charged 24 V pack
 
 
 class PtyHost:
@@ -145,7 +148,13 @@ def _open_hosts(spec: dict, scheduler: Any, on_data, on_connect, name: str):
 
 
 class EvologicsEmulator:
-    """An EvoLogics S2C modem in front of a simulated link."""
+    """An EvoLogics S2C modem in front of a simulated link.
+
+    Its settings (:mod:`.evologics_settings`) are range-checked and kept as running, stored and factory
+    values; ``AT!AL`` moves the link to the new address in the simulation.  Its transmit pool holds what
+    it accepted until the model's transmission of it ends (``ERROR BUFFER FULL`` beyond ``ZL`` bytes;
+    ``ATZ1``/``ATZ3``/``ATZ4`` empty it).  With ``AT@ZX1`` it reports what the simulated PHY does
+    (SENDSTART/SENDEND, RECVSTART/RECVEND/RECVFAILED, BITRATE, SRCLEVEL) at the model's times."""
 
     kind = "emulator"
 
@@ -154,14 +163,21 @@ class EvologicsEmulator:
         self.options = spec
         self.scheduler = scheduler
         self.codecs: dict[Any, ModemCodec] = {}
-        self.settings = {"AL": str(port.address), "AR": "0", "AM": "254", "L": "3", "LC": "0", "G": "0", "C": "0",
-                         "ZC": "1", "ZP": "500", "RC": "3", "RT": "1000", "KO": "0", "ZI": "120", "ZH": "30",
-                         "ZS": "0", "CA": "1500", "RI": "3", "RP": "0", "ZL": "16384", "ZX": "0", "ZF": "0", "ZU": "0"}
+        self.firmware = Firmware.from_options(spec.get("firmware"))
+        self.settings = Settings(port.address)
         self.pending_ack: AppFrame | None = None
+        self.bursts: dict[int, AppFrame] = {}  # packet counter → burst awaiting its report
+        self.packet_counter = 0
+        self.pool: dict[int, AppFrame] = {}  # id → accepted frames whose transmission has not ended
+        self.receiving: dict[int, float] = {}  # id of a frame arriving → when its arrival began
+        self.dropped = 0     # AT?ZD: frames the modem dropped (buffer cleared, no remote address)
+        self.overflows = 0   # AT?ZO: frames refused because the transmit pool was full
+        self.clock_offset = 0.0  # AT!UT
         self.last_ptime_us = 0
         self.last_rssi = -50
         self.last_integrity = 150
         self.last_velocity = 0.0
+        self.received = False  # AT?P answers zeros until something was received
         self.hosts = _open_hosts(spec, scheduler, self._on_data, self._on_connect, port.id)
 
     def _on_connect(self, host: Any) -> None:
@@ -181,7 +197,22 @@ class EvologicsEmulator:
                 case BadCommand(reason=reason):
                     host.write(codec.error(None, reason))
                 case Data(payload=payload):
-                    self._send(payload, int(self.settings["AR"]), "burst", False)
+                    self._raw_data(payload)
+
+    def _raw_data(self, payload: bytes) -> None:
+        """Burst data in data mode goes to ``AR``; with ``AR`` 0 a modem cannot send it (dropped, counted
+        in ``AT?ZD`` and traced), nor beyond the transmit pool (``AT?ZO``)."""
+        remote = self.settings["AR"]
+        for start in range(0, len(payload), BURST_MAX):
+            piece = payload[start:start + BURST_MAX]
+            if remote == 0:
+                self.dropped += 1
+                self.port.lost("no_remote_address", len(piece), src="app")
+            elif self._pooled() + len(piece) > self.settings["ZL"]:
+                self.overflows += 1
+                self.port.lost("buffer_full", len(piece), src="app")
+            else:
+                self._send(piece, remote, "burst", True)
 
     def _command(self, host: Any, codec: ModemCodec, command: Command) -> None:
         """One AT command: a handler from :attr:`COMMANDS`, else a setting (``!X``/``@X`` to set,
@@ -195,16 +226,24 @@ class EvologicsEmulator:
             return
         name = command.name
         if name[:1] in ("!", "@") and name[1:] in self.settings:
-            value = command.args.strip()
-            if not value.lstrip("-").isdigit():
-                reply("ERROR WRONG FORMAT")
+            problem = self.settings.problem(name[1:], command.args)
+            if problem is not None:
+                reply(f"ERROR {problem}")
                 return
-            self.settings[name[1:]] = value
+            self._set(name[1:], command.args)
             reply("OK")
         elif name[:1] == "?" and name[1:] in self.settings:
-            reply(self.settings[name[1:]])
+            reply(str(self.settings[name[1:]]))
         else:
             reply("ERROR UNKNOWN COMMAND")
+
+    def _set(self, name: str, text: str) -> None:
+        before = self.settings[name]
+        self.settings.set(name, text)
+        if name == "AL":
+            self.port.set_address(self.settings["AL"])
+        elif name == "L" and self.settings["L"] != before:
+            self._extended(f"SRCLEVEL,{self.settings['L']}")
 
     # -- the command table: name → handler(self, host, codec, command, reply) -------------------------
 
@@ -221,19 +260,57 @@ class EvologicsEmulator:
         return handler
 
     def _settings(self, host: Any, codec: ModemCodec, command: Command, reply) -> None:
-        lines = [f"{key}: {value}" for key, value in sorted(self.settings.items())]
+        lines = [f"{key}: {value}" for key, value in sorted(self.settings.running.items())]
         host.write(codec.reply(command, "\r\n".join(lines) + "\r\n") if codec.data_mode else
                    ("\r\n".join(lines) + "\r\n\r\n").encode())
 
+    def _store(self, host: Any, codec: ModemCodec, command: Command, reply) -> None:
+        self.settings.store()
+        reply("OK")
+
+    def _factory(self, host: Any, codec: ModemCodec, command: Command, reply) -> None:
+        self.settings.factory_defaults()
+        self.port.set_address(self.settings["AL"])
+        reply("OK")
+
     def _information(self, host: Any, codec: ModemCodec, command: Command, reply) -> None:
-        reply({"0": "1.9 (" + VERSION + ")", "1": "phy: emulated, mac: hilgate", "7": "EvoLogics GmbH (emulated)"}
-              .get(command.args, VERSION))
+        reply(self.firmware.information(command.args))
+
+    def _set_time(self, host: Any, codec: ModemCodec, command: Command, reply) -> None:
+        """``AT!UT<s>``: the modem's system time (``AT?UT``) reads ``s`` now."""
+        if not command.args.strip().isdigit():
+            reply("ERROR WRONG FORMAT")
+            return
+        self.clock_offset = int(command.args.strip()) - self.scheduler.now()
+        reply("OK")
+
+    def _reset_counter(self, host: Any, codec: ModemCodec, command: Command, reply) -> None:
+        """``AT@ZD`` / ``AT@ZO``: the drop / overflow counter starts again from 0."""
+        if command.name == "@ZD":
+            self.dropped = 0
+        else:
+            self.overflows = 0
+        reply("OK")
 
     def _reset(self, host: Any, codec: ModemCodec, command: Command, reply) -> None:
-        if command.args == "0":  # reboot: no answer; a TCP host loses its connection
+        """``ATZ<n>`` as the reference says: 0 reboots (the stored settings run again, every buffer is
+        emptied, no answer, a TCP host loses its connection); 1 drops burst data, 3 instant messages,
+        4 the whole transmit buffer; 2 clears nothing the emulator holds."""
+        which = command.args.strip()
+        if which == "0":
+            self._clear(("burst", "im", "ims", "pbm"))
+            self.settings.restore()
+            self.port.set_address(self.settings["AL"])
+            self.clock_offset = 0.0
             if isinstance(host, _TcpClient):
                 host.close()
+            else:
+                self.codecs[host] = ModemCodec()  # powered on again: command mode, nothing half-read
             return
+        if which not in ("1", "2", "3", "4"):
+            reply("ERROR WRONG FORMAT")
+            return
+        self._clear({"1": ("burst",), "2": (), "3": ("im", "ims", "pbm"), "4": ("burst", "im", "ims", "pbm")}[which])
         reply("OK")
 
     def _sending(self, host: Any, codec: ModemCodec, command: Command, reply) -> None:
@@ -242,21 +319,64 @@ class EvologicsEmulator:
     COMMANDS: dict[str, Callable[..., None]] = {
         "*SENDIM": _sending, "*SENDIMS": _sending, "*SENDPBM": _sending, "*SEND": _sending,
         "O": _data_mode,
-        "": _ok, "C": _ok, "H": _ok, "D": _ok, "A": _ok, "N": _ok, "S": _ok, "P": _ok, "&W": _ok, "&F": _ok,
+        "": _ok, "C": _ok, "H": _ok, "D": _ok, "A": _ok, "N": _ok, "S": _ok, "P": _ok, "&W": _store, "&F": _factory,
         "@CTRL": _ok,
         "?T": _answer(lambda self: str(self.last_ptime_us)),
         "?E": _answer(lambda self: str(self.last_rssi)),
         "?I": _answer(lambda self: str(self.last_integrity)),
         "?V": _answer(lambda self: "0.00"),
-        "?MODE": _answer(lambda self: "AT"),
-        "?PID": _answer(lambda self: self.settings["ZS"]),
-        "?S": _answer(lambda self: "ONLINE NORMAL" if self.pending_ack is None else "ONLINE DELIVERING"),
+        "?P": _answer(lambda self: self._multipath()),
+        "?MODE": _answer(lambda self: self.firmware.mode),
+        "?PID": _answer(lambda self: str(self.settings["ZS"])),
+        "?AL": _answer(lambda self: str(self.port.address)),
+        "?S": _answer(lambda self: self._status()),
         "?DI": _answer(lambda self: "EMPTY" if self.pending_ack is None else "DELIVERING"),
+        "?PC": _answer(lambda self: str(self.packet_counter)),
+        "?CLOCK": _answer(lambda self: str(int(self.scheduler.now()))),
+        "?UT": _answer(lambda self: str(int(self.scheduler.now() + self.clock_offset))),
+        "!UT": _set_time,
+        "?BV": _answer(lambda self: f"{BATTERY_V:.2f}"),
+        "?BL": _answer(lambda self: str(self._bitrate())),
+        "?BR": _answer(lambda self: str(self._bitrate())),
+        "?ZD": _answer(lambda self: str(self.dropped)),
+        "?ZO": _answer(lambda self: str(self.overflows)),
+        "@ZD": _reset_counter, "@ZO": _reset_counter,
         "&V": _settings,
         "I": _information,
         "Z": _reset,
     }
     del _answer
+
+    def _status(self) -> str:
+        """``AT?S`` of the AT interpreter: state, substate, free bytes of the transmit pool."""
+        state = "ONLINE NORMAL" if self.pending_ack is None else "ONLINE DELIVERING"
+        return f"{state} {self.settings['ZL'] - self._pooled()}"
+
+    def _multipath(self) -> str:
+        """``AT?P``: 8 paths ``<t µs> <integrity>`` separated by bare LF (the model has one path)."""
+        paths = [f"0 {self.last_integrity if self.received else 0}"] + ["0 0"] * 7
+        return "\n".join(paths)
+
+    def _bitrate(self) -> int:
+        airtime = self.port.airtime(1)
+        return round(8 / airtime) if airtime else 0
+
+    def _pooled(self) -> int:
+        return sum(len(frame.real) for frame in self.pool.values())
+
+    def _clear(self, kinds: tuple[str, ...]) -> None:
+        """Drop what the transmit buffer holds of ``kinds``: frames not yet on air leave the model's
+        FIFO (traced, cause ``cleared``); no report comes for what was awaiting one."""
+        frames = [frame for frame in self.pool.values() if frame.meta and frame.meta["kind"] in kinds]
+        if frames:
+            self.dropped += self.port.withdraw(frames, "cleared")
+            for frame in frames:
+                self.pool.pop(id(frame), None)
+        if "im" in kinds and self.pending_ack is not None:
+            self.pending_ack = None
+            self.port.state_changed()
+        if "burst" in kinds:
+            self.bursts.clear()
 
     def _send_command(self, command: Command, reply) -> None:
         fields = command.fields
@@ -273,8 +393,10 @@ class EvologicsEmulator:
             if len(payload) > BURST_MAX:
                 reply("ERROR OUT OF RANGE")
                 return
+            if self._full(len(payload), reply):
+                return
             reply("OK")
-            self._send(payload, dst, "burst", False)
+            self._send(payload, dst, "burst", True)
             return
         if len(payload) > IM_MAX:
             reply("ERROR OUT OF RANGE")
@@ -286,40 +408,122 @@ class EvologicsEmulator:
         if ack and self.pending_ack is not None:
             reply("BUSY DELIVERING")
             return
+        if self._full(len(payload), reply):
+            return
         reply("OK")
         self._send(payload, dst, {"*SENDIMS": "ims", "*SENDPBM": "pbm"}.get(command.name, "im"), ack)
+
+    def _full(self, size: int, reply) -> bool:
+        if self._pooled() + size <= self.settings["ZL"]:
+            return False
+        self.overflows += 1
+        reply("ERROR BUFFER FULL")
+        return True
 
     def _send(self, payload: bytes, dst: int, kind: str, ack: bool) -> None:
         frame = AppFrame(payload, payload, Raw(), 0, self.port.address, dst, self.scheduler.now())
         frame.meta = {"kind": kind, "ack": ack}
+        if kind == "burst":  # AT?PC numbers it
+            self.packet_counter += 1
+            frame.meta["pc"] = self.packet_counter
         if dst != BROADCAST and (ack or kind == "burst"):
             # the receiving modem answers on the channel (hilgate.models.acoustic_ack); an IM retries !RI
-            # times (255: for ever), a burst !RC times
+            # times (255: for ever), a burst !RC times; the model's outcome is the report
             retries = int(self.settings["RI" if ack else "RC"])
             frame.ack_retries = FOREVER if ack and retries == 255 else retries
-            if ack:
+            frame.on_acknowledged = self._acknowledged
+            if kind == "burst":
+                self.bursts[frame.meta["pc"]] = frame
+            else:
                 self.pending_ack = frame
-                frame.on_acknowledged = self._acknowledged
+        self.pool[id(frame)] = frame
         self.port.send(frame)
 
     # -- delivery reports -------------------------------------------------------------------------------
 
+    def _awaited(self, frame: AppFrame) -> bool:
+        if frame is self.pending_ack:
+            return True
+        pc = (frame.meta or {}).get("pc")
+        return pc is not None and self.bursts.get(pc) is frame
+
     def _acknowledged(self, frame: AppFrame, delivered: bool, tau: float | None) -> None:
-        """The model's report on an ``ack`` IM: its ACK came back (``tau``: the one-way time the modem
-        measured from the round trip), or the last retry went unanswered."""
-        if frame is not self.pending_ack:
-            return
-        self.pending_ack = None
+        """The model's report on an ``ack`` IM or a burst: its ACK came back (``tau``: the one-way time
+        the modem measured from the round trip), or the last retry went unanswered."""
+        if not self._awaited(frame):
+            return  # (cleared by ATZ meanwhile: no report, as on a modem)
+        if frame is self.pending_ack:
+            self.pending_ack = None
+        else:
+            del self.bursts[frame.meta["pc"]]
         if delivered and tau is not None:
             self.last_ptime_us = round(tau * 1e6)
-        self._notify(f"{'DELIVEREDIM' if delivered else 'FAILEDIM'},{frame.dst}")
+        self._notify(self._delivery_line(frame, delivered))
         if delivered:
             self._usbl(frame.dst, self.scheduler.now(), tau)
         self.port.state_changed()
 
+    @staticmethod
+    def _delivery_line(frame: AppFrame, delivered: bool) -> str:
+        """The one place a delivery decision becomes a report: ``DELIVEREDIM,<dst>``/``FAILEDIM,<dst>``
+        for an instant message, ``DELIVERED,<pc>,<dst>``/``FAILED,<pc>,<dst>`` for a burst."""
+        if (frame.meta or {}).get("kind") == "burst":
+            return f"{'DELIVERED' if delivered else 'FAILED'},{frame.meta['pc']},{frame.dst}"
+        return f"{'DELIVEREDIM' if delivered else 'FAILEDIM'},{frame.dst}"
+
     def _notify(self, text: str, payload: bytes | None = None) -> None:
         for host, codec in list(self.codecs.items()):
             host.write(codec.notify_line(text, payload))
+
+    def _extended(self, text: str) -> None:
+        """An extended notification, printed only after ``AT@ZX1``."""
+        if self.settings["ZX"]:
+            self._notify(text)
+
+    # -- what the simulated PHY does (extended notifications, the transmit pool) ----------------------
+
+    def phy(self, event: PhyEvent) -> None:
+        frame = event.frame
+        if frame is None:
+            return  # background traffic and MAC frames: nothing a host of this modem sent or will read
+        if event.kind == "tx":
+            if id(frame) not in self.pool:
+                return
+            kind = frame.meta["kind"]
+            duration_us = round((event.end - event.start) * 1e6)
+            if kind == "burst":
+                self._extended(f"BITRATE,local,{self._bitrate()}")
+            self._extended(f"SENDSTART,{frame.dst},{kind},{duration_us},{round((event.start - frame.t0) * 1e6)}")
+            self.scheduler.at(event.end, self._sent, frame, duration_us)
+            return
+        if event.dst != self.port.address and event.dst != BROADCAST:
+            return
+        if event.kind == "rx_start":
+            self.receiving[id(frame)] = event.start
+            self._extended("RECVSTART")
+            return
+        start = self.receiving.pop(id(frame), None)
+        duration_us = round((event.end - start) * 1e6) if start is not None else 0
+        rssi, integrity = self._signal(frame.src, event.end)
+        if event.cause is None:
+            self._extended(f"RECVEND,{round(event.end * 1e6)},{duration_us},{rssi},{integrity}")
+        else:
+            self._extended(f"RECVFAILED,0.00,{rssi},0")
+
+    def _sent(self, frame: AppFrame, duration_us: int) -> None:
+        """The model's transmission of ``frame`` ended: it leaves the pool; ``SENDEND`` (a host waits for
+        it to free the modem after a ``noack`` message)."""
+        if self.pool.pop(id(frame), None) is not None:
+            now = self.scheduler.now()
+            self._extended(f"SENDEND,{frame.dst},{frame.meta['kind']},{round(now * 1e6)},{duration_us}")
+
+    def _signal(self, src: int, t: float) -> tuple[int, int]:
+        """RSSI (dB) and integrity of a frame from ``src`` heard at ``t`` (hilgate.models.link_budget)."""
+        heard = self.port.reception_from(src, t)
+        if heard is not None:
+            return heard.rssi_db, heard.integrity
+        d = self.port.distance_from(src, t) or 0.0
+        return int(-20 - 20 * math.log10(max(d, 1.0))), 150
 
     # -- medium → host ----------------------------------------------------------------------------------
 
@@ -335,6 +539,9 @@ class EvologicsEmulator:
         airtime = self.port.airtime(len(frame.real)) or 0.0  # the whole frame on air
         duration_us = round(airtime * 1e6)
         ptime_us = round((self.port.delay_from(frame.src, t) or d / 1500) * 1e6)
+        self.received = True
+        if kind == "burst":
+            self._extended(f"BITRATE,remote,{self._bitrate()}")
         for host, codec in list(self.codecs.items()):
             if kind == "burst":
                 if codec.data_mode:
@@ -361,7 +568,7 @@ class EvologicsEmulator:
 
     def _usbl(self, address: int, t: float, tau: float | None, measured: float | None = None) -> None:
         """After an exchange with ``address``: a USBL link with ``AT@ZU1`` prints its fix of that modem."""
-        if self.settings["ZU"] == "0":
+        if not self.settings["ZU"]:
             return
         found = self.port.usbl_fix(address, t)
         if found is None:

@@ -173,7 +173,16 @@ def _payload_frame(buffer: bytes | bytearray, keyword: bytes, fields_before: int
             raise AtProtocolError(f"bad protocol id in {_ascii(bytes(buffer[:40]))!r}")
         pid = int(match.group(1))
         start = comma + 1
-    fields = _split_fields(bytes(buffer[start:start + 200]), fields_before)
+    header = bytes(buffer[start:start + 200])
+    fields = _split_fields(header, fields_before)
+    # The fields before the payload are text on one line: a line end among them (``AT*SENDIM,5,1,ack``
+    # and Enter, without the data's comma) ends a malformed command now, rather than letting the length
+    # framing run on into the next commands in search of the missing commas.
+    end_of_fields = sum(len(f) + 1 for f in fields) if fields is not None else len(header)
+    line_end = next((i for i in (header.find(b"\r", 0, end_of_fields), header.find(b"\n", 0, end_of_fields))
+                     if i >= 0), -1)
+    if line_end >= 0:
+        raise AtProtocolError(f"{_ascii(keyword)}: a line end before its {fields_before} fields and the data")
     if fields is None:
         if len(buffer) - start > 200:
             raise AtProtocolError(f"header too long: {_ascii(bytes(buffer[:40]))!r}")

@@ -87,6 +87,9 @@ class SimModem:
         self.stats = LinkStats()
         self.on_deliver: Callable[["Frame"], Any] | None = None  # hands a good frame up (the backend)
         self.on_idle: Callable[[], Any] | None = None  # FIFO empty and PHY free again (GLI READY)
+        # What the PHY does, for an emulated modem that reports it (SENDSTART, RECVSTART…): called as
+        # on_phy(kind, frame, start, end, cause) with kind "tx", "rx_start" or "rx_end"; None costs nothing.
+        self.on_phy: Callable[..., Any] | None = None
         self.fifo: deque[Frame] = deque()
         self.queued_bytes = 0
         self.phy_busy = False
@@ -182,6 +185,30 @@ class SimModem:
         return True
 
     # -- what a MAC may use (MacHost) -----------------------------------------------------------
+
+    def set_address(self, address: int) -> None:
+        """The modem answers to ``address`` from now on (an emulated modem's ``AT!AL``): frames it sends
+        carry it, frames to it arrive; frames already queued keep the source they were given."""
+        self.radio.address = address
+        self.medium.topology_changed()
+
+    def withdraw(self, wanted: Callable[["Frame"], bool], cause: str) -> int:
+        """Take the queued frames ``wanted`` says out of the FIFO (an emulated modem's ``ATZ``): each is
+        traced as a drop with ``cause``.  Frames the MAC holds or already on air go on.  Returns how many."""
+        t = self.clock.now()
+        kept: deque[Frame] = deque()
+        taken = 0
+        for frame in self.fifo:
+            if wanted(frame):
+                self.queued_bytes -= frame.size
+                self.observer.drop(t, self, frame, cause)
+                taken += 1
+            else:
+                kept.append(frame)
+        self.fifo = kept
+        if taken:
+            self.check_idle()
+        return taken
 
     def fifo_pop(self) -> "Frame":
         frame = self.fifo.popleft()
@@ -281,6 +308,8 @@ class SimModem:
         self.stats.tx_packets += 1
         self.observer.tx(t, self, frame)
         self.radio.transmit(frame, t, duration)
+        if self.on_phy is not None:
+            self.on_phy("tx", frame, t, t + duration, None)
         self.clock.at(t + duration, self._off_air, frame)
 
     def _off_air(self, frame: "Frame") -> None:
@@ -303,6 +332,8 @@ class SimModem:
         addressed = frame.dst_addr == address or frame.dst_addr == BROADCAST or self.promiscuous
         if cause is not None and addressed:
             self.observer.err(self.clock.now(), self, frame, cause)
+        if addressed and self.on_phy is not None and frame.kind != MODEM_ACK:  # (an ACK: no RECVEND)
+            self.on_phy("rx_end", frame, None, self.clock.now(), cause)
         if frame.kind == MODEM_ACK:  # the modem's own: never a MAC's business
             if cause is None and frame.dst_addr == address:
                 self.acks.heard_ack(frame)
@@ -312,6 +343,11 @@ class SimModem:
                 return  # a flow's duplicate: traced, not delivered (an application's is, as on a real modem)
         if addressed or self.mac.hears_all:
             self.mac.on_frame(frame, cause, addressed)
+
+    def arrival_started(self, frame: "Frame", start: float, end: float) -> None:
+        """The radio began to hear ``frame`` (only scheduled while someone watches the PHY)."""
+        if not self.closed and self.on_phy is not None:
+            self.on_phy("rx_start", frame, start, end, None)
 
     def unreachable(self, frame: "Frame") -> None:
         """A frame for this modem was sent while it was out of the sender's range (or had no pose)."""

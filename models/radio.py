@@ -210,6 +210,8 @@ class Radio:
             per = loss.per(d, frame.size)
             if per > 0.0 and (per >= 1.0 or self.rng.random() < per):
                 arrival.error = True
+        if getattr(self.host, "on_phy", None) is not None:  # an emulated modem reports RECVSTART
+            self.clock.at(start, self.host.arrival_started, frame, start, end)
         self.clock.at(end, self._arrival_over, arrival)
 
     # -- collisions: sinr ------------------------------------------------------------------------

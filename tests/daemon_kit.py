@@ -27,9 +27,20 @@ def unique(prefix: str = "t") -> str:
     return f"{prefix}{uuid.uuid4().hex[:8]}"
 
 
+def _unlimited_queue_budget() -> None:
+    """In the daemon's process: LimitMSGQUEUE=infinity, as the systemd unit has it, where allowed (the
+    user's POSIX-queue budget is shared by every test run on the machine)."""
+    import resource
+
+    try:
+        resource.setrlimit(resource.RLIMIT_MSGQUEUE, (resource.RLIM_INFINITY, resource.RLIM_INFINITY))
+    except (ValueError, OSError):
+        pass
+
+
 class Daemon:
     def __init__(self, tmp_path, scene_text: str, links: list[str], *args: str, env: dict | None = None,
-                 runtime: str | None = None):
+                 runtime: str | None = None, queue_budget_unlimited: bool = False):
         self.tmp = tmp_path
         self.links = links
         self.scene = tmp_path / "scene.yaml"
@@ -45,7 +56,8 @@ class Daemon:
         self.process = subprocess.Popen(
             [sys.executable, "-m", "hilgate", "-v", "run", str(self.scene), "--runtime-dir", self.runtime,
              "--trace", str(self.trace), "--summary", str(self.summary), "--no-status-line", *args],
-            stdout=self.log, stderr=subprocess.STDOUT, env=environment)
+            stdout=self.log, stderr=subprocess.STDOUT, env=environment,
+            preexec_fn=_unlimited_queue_budget if queue_budget_unlimited else None)
         self.notifications: list[str] = []
 
     def wait_for(self, word: str, timeout: float = 20.0) -> list[str]:

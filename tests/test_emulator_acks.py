@@ -5,7 +5,7 @@ import math
 
 import pytest
 
-from at_client import AtClient
+from at_pty_client import AtClient
 from daemon_kit import Daemon, unique
 
 BITRATE, TX_DELAY, TURN, ACK_BYTES = 1900.0, 0.001, 0.27, 6  # models/evologics-s2cr-7-17.yaml

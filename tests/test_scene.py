@@ -137,6 +137,11 @@ links: {x: {vehicle: a, model: evologics-s2cr-7-17}}
     ("seed: -1\nchannels: {ac: {speed_mps: 1}}\nvehicles: {}\nlinks: {}\n", 1, "seed", "at least 0"),
     ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
      "links:\n  bad/id: {vehicle: a}\n", 4, "links.bad/id", "POSIX queues"),
+    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
+     "links:\n  x: {vehicle: a, emulate: {protocol: evologics, tcp: 9200},\n"
+     "      firmware: {version: 1.10}}\n", 5, "links.x.firmware.version", "in quotes"),
+    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
+     "links:\n  x: {vehicle: a, firmware: {phi: \"0.1\"}}\n", 4, "links.x.firmware.phi", "did you mean 'phy'"),
 ])
 def test_errors_name_file_line_and_key(text, where, key, words):
     error = error_of(text)

@@ -254,3 +254,49 @@ def test_frames_queued_at_the_receiver_do_not_block_reception_until_it_transmits
     net.run()
     assert math.isclose(net.delivered["b"][0][0], 1.08)
     assert math.isclose(net.delivered["a"][0][0], 1.08 + 1.08)
+
+
+def test_the_phy_report_for_an_emulated_modem_gives_the_models_times():
+    """What an emulated modem's SENDSTART/SENDEND/RECVSTART/RECVEND/RECVFAILED are made of: the
+    transmission [t_s, t_s + T] and the arrival [t_s + τ, t_s + τ + T], exactly; nothing is scheduled
+    for a modem nobody watches."""
+    net = Net(Channel("ac", 1500.0))
+    a = net.modem("a", (0, 0, 0), bitrate_bps=1000, tx_delay_s=0.01)
+    b = net.modem("b", (150, 0, 0), bitrate_bps=1000)
+    c = net.modem("c", (0, 150, 0), bitrate_bps=1000, error=ErrorModel("packet", "1"))
+    seen = []
+    for modem in (a, b, c):
+        modem.on_phy = lambda kind, frame, start, end, cause, name=modem.id: seen.append(
+            (name, kind, frame.id, start, end, cause))
+    first = net.send("a", "b", 50)   # T = 0.4, τ = 0.1
+    net.run()
+    lost = net.send("a", "c", 50)
+    net.run()
+    assert seen[:3] == [("a", "tx", first.id, 0.01, pytest.approx(0.41, **EXACT), None),
+                        ("b", "rx_start", first.id, pytest.approx(0.11, **EXACT), pytest.approx(0.51, **EXACT), None),
+                        ("b", "rx_end", first.id, None, pytest.approx(0.51, **EXACT), None)]
+    assert [(name, kind, cause) for name, kind, _, _, _, cause in seen[3:]] == [
+        ("a", "tx", None), ("c", "rx_start", None), ("c", "rx_end", "prop")]
+    assert all(frame_id == lost.id for _, _, frame_id, *_ in seen[3:])
+    events = net.clock.events
+    b.on_phy = c.on_phy = a.on_phy = None
+    net.send("a", "b", 50)
+    net.run()
+    assert net.clock.events - events == 3  # intrinsic delay, end of transmission, end of arrival
+
+
+def test_a_modem_readdressed_and_frames_withdrawn_from_its_fifo():
+    """AT!AL and ATZ as the models see them: the new address is what frames carry and what receivers
+    match; frames taken back from the FIFO are traced as drops and never go on air."""
+    net = Net(Channel("ac", 1500.0))
+    a = net.modem("a", (0, 0, 0), bitrate_bps=1000)
+    b = net.modem("b", (150, 0, 0), bitrate_bps=1000)
+    b.set_address(9)
+    frames = [net.send("a", "b", 50) for _ in range(3)]   # to 9 now; the first goes on air at once
+    assert frames[0].dst_addr == 9
+    assert a.withdraw(lambda frame: frame is frames[2], "cleared") == 1
+    assert a.queued_bytes == 50
+    net.run()
+    assert [f.id for _, f in net.delivered["b"]] == [frames[0].id, frames[1].id]
+    assert [(e[3], e[4]) for e in net.of("drop", "a")] == [(frames[2].id, "cleared")]
+    assert len(net.of("tx", "a")) == 2

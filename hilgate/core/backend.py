@@ -37,6 +37,23 @@ class AppFrame:
     """``(frame, delivered, one_way_tau_s)`` when its acknowledgement came back or the last retry failed."""
 
 
+@dataclass(frozen=True)
+class PhyEvent:
+    """What a simulated modem's PHY did, for an emulated modem that reports it (``AT@ZX1``): ``kind`` is
+    ``tx`` (a transmission over [start, end]), ``rx_start`` (an arrival for this modem begins; it ends
+    at ``end``) or ``rx_end`` (it ended at ``end``: good when ``cause`` is None, else lost by it).
+    ``frame`` is the application's frame on air (None for background traffic and MAC frames)."""
+
+    kind: str
+    frame: AppFrame | None
+    size: int
+    src: int
+    dst: int
+    start: float | None
+    end: float
+    cause: str | None = None
+
+
 class Backend(ABC):
     kind = "?"
 

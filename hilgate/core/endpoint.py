@@ -85,6 +85,12 @@ class LinkPort(Protocol):
     def usbl_fix(self, address: int, t: float) -> Any:
         """``(Reception, UsblFix)`` of the modem at ``address`` when the link is a USBL, else None."""
 
+    def set_address(self, address: int) -> None:
+        """Answer to ``address`` in the simulation from now on (an emulated modem's ``AT!AL``)."""
+
+    def withdraw(self, frames: list[AppFrame], cause: str) -> int:
+        """Take frames sent earlier back out of the backend's queue (``ATZ``); how many were still there."""
+
 
 class Endpoint(Protocol):
     """A way in and out of a link for applications."""
@@ -101,6 +107,9 @@ class Endpoint(Protocol):
         """The link's READY/BUSY (the endpoint says it only when it changed for its applications)."""
 
     def close(self) -> None: ...
+
+    # An endpoint may also have ``phy(event: PhyEvent)``: then the link reports its simulated modem's
+    # transmissions and arrivals to it (an emulated modem's extended notifications).
 
 
 class Door(Protocol):

@@ -17,7 +17,7 @@ from collections import Counter
 from typing import Any, Callable
 
 from .access import LinkLock
-from ..core.backend import AppFrame, Backend
+from ..core.backend import AppFrame, Backend, PhyEvent
 from ..core.endpoint import ABSENT, KEPT, TAKEN, Door, Endpoint
 from ..core.packets import Decoded, PacketClass, packet_class
 from ..drivers.table import DRIVERS, open_backend
@@ -53,6 +53,7 @@ class RoutedLink:
         self.unread_kept = 0  # frames nobody took, kept in the queue for an application that starts late
         self._state_pending = False
         self._usbl_rng: random.Random | None = None
+        self.readdressed: int | None = None  # the address an emulated modem's AT!AL gave the link
 
     # -- set-up ----------------------------------------------------------------------------------
 
@@ -67,11 +68,18 @@ class RoutedLink:
         backend.on_receive = self.deliver
         backend.on_idle = self.state_changed
         backend.on_state = lambda state: self.state_changed()
+        self._watch_phy()
         self.state_changed()
 
     def update(self, spec: LinkSpec, endpoints_changed: bool) -> None:
         self.spec = spec
         self.packet = packet_class(spec.packet)
+        if self.readdressed is not None:  # a reload that changes the link gives it its scene address again
+            old, self.readdressed = self.readdressed, None
+            modem = self._sim_modem()
+            if modem is not None:
+                modem.set_address(spec.params.address)
+            self.router.readdress(self, old, spec.params.address)
         if endpoints_changed:
             self.doors = [(door, door.update(handle, self)) for door, handle in self.doors]
 
@@ -79,7 +87,42 @@ class RoutedLink:
 
     @property
     def address(self) -> int:
-        return self.spec.params.address
+        return self.spec.params.address if self.readdressed is None else self.readdressed
+
+    def set_address(self, address: int) -> None:
+        """An emulated modem's ``AT!AL``: the simulation uses ``address`` for this link from now on (its
+        frames carry it, frames to it arrive), until a reload changes the link."""
+        backend = self.backend
+        if not hasattr(backend, "set_address") or address == self.address:
+            return
+        old = self.address
+        backend.set_address(address)
+        self.readdressed = address
+        self.router.readdress(self, old, address)
+        log.info("link %s: address %d -> %d (AT!AL)", self.id, old, address)
+
+    def withdraw(self, frames: list[AppFrame], cause: str) -> int:
+        """Take these frames back from the backend's queue if they are still there (an emulated modem's
+        ``ATZ``); each is traced as a drop with ``cause``."""
+        backend = self.backend
+        if not hasattr(backend, "withdraw"):
+            return 0
+        taken = backend.withdraw(frames, cause)
+        if taken:
+            self.state_changed()
+        return taken
+
+    def _watch_phy(self) -> None:
+        """Only while an endpoint reports the PHY (an emulated modem) does the backend report it."""
+        if hasattr(self.backend, "watch_phy"):
+            watching = any(hasattr(endpoint, "phy") for endpoint in self.endpoints)
+            self.backend.watch_phy(self._phy if watching else None)
+
+    def _phy(self, event: PhyEvent) -> None:
+        for endpoint in list(self.endpoints):
+            report = getattr(endpoint, "phy", None)
+            if report is not None:
+                report(event)
 
     @property
     def emulate(self) -> dict[str, Any]:
@@ -99,11 +142,15 @@ class RoutedLink:
         if endpoint.kind == "socket" and self.clients >= self.router.max_link_clients:
             return False
         self.endpoints.append(endpoint)
+        if hasattr(endpoint, "phy"):
+            self._watch_phy()
         return True
 
     def detach(self, endpoint: Endpoint) -> None:
         if endpoint in self.endpoints:
             self.endpoints.remove(endpoint)
+            if hasattr(endpoint, "phy"):
+                self._watch_phy()
 
     @property
     def clients(self) -> int:
@@ -305,6 +352,14 @@ class Router:
     def addressed_to_nobody(self, channel: str, address: int) -> bool:
         return address != BROADCAST and (channel, address) not in self._names
 
+    def readdress(self, link: RoutedLink, old: int, new: int) -> None:
+        """A link answers to another address (``AT!AL``): the trace names and "addressed to nobody"
+        follow it."""
+        channel = link.spec.params.rx_channel
+        if self._names.get((channel, old)) == link.id:
+            del self._names[(channel, old)]
+        self._names[(channel, new)] = link.id
+
     def _driver_backend(self, spec: LinkSpec) -> Backend:
         """A real modem's driver, as the backend table (:mod:`hilgate.drivers.table`) says to open it."""
         return open_backend(spec, self.scheduler, self.recorder.event)
@@ -314,6 +369,9 @@ class Router:
         changes = diff(self.scene, scene)
         self._names = {(l.params.rx_channel, l.params.address): l.id for l in scene.links.values()}
         self._names.update({(l.params.rx_channel, BROADCAST): "*" for l in scene.links.values()})
+        for link in self.links.values():  # links an AT!AL readdressed keep their address if unchanged
+            if link.readdressed is not None and link.id in scene.links:
+                self._names[(link.spec.params.rx_channel, link.readdressed)] = link.id
         first = self.world is None
         if first:
             self.world = World(scene, self.scheduler, self.recorder, host=self.host)
@@ -344,6 +402,7 @@ class Router:
             elif isinstance(link.backend, SimBackend):
                 link.backend.rebind(self.world.modems[spec.id])
                 link.backend.everyone_in_range = spec.everyone_in_range
+                link._watch_phy()
                 log.info("link %s reconfigured", spec.id)
             link.state_changed()
         if first:

@@ -118,6 +118,11 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
         if backend != SIM:
             raise f.child("emulate").error(f.sub("emulate"), "only a backend: sim link can emulate a modem")
         emulate = f.get("emulate", emulated_device)
+        firmware = f.get("firmware", _firmware, ())
+        if firmware:
+            emulate += (("firmware", firmware),)
+    elif "firmware" in f:
+        f.get("firmware", _firmware)  # checked (a preset gives it to every link), used only when emulating
     addressing = f.get("addressing", choice(*ADDRESSING), "auto")
     usbl = f.get("usbl", _usbl, None)
     if usbl is not None and dict(emulate).get("protocol") != "evologics":
@@ -126,6 +131,24 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
     host = f.get("host", host_name, None)
     return LinkSpec(link_id, vehicle, backend, model, params, mac, packet, node.file, node.line, options, emulate,
                     addressing, host=host, usbl=usbl)
+
+
+FIRMWARE_KEYS = ("version", "phy", "mac", "manufacturer", "mode")
+
+
+def _firmware(node: Node, path: str) -> tuple[tuple[str, str], ...]:
+    """``firmware: {version, phy, mac, manufacturer, mode}``: what an emulated modem says it is (ATI0,
+    ATI1, ATI7, AT?MODE), as texts (a version written 1.10 unquoted would read as 1.1)."""
+    f = Fields(node, path, FIRMWARE_KEYS)
+    values = []
+    for key in FIRMWARE_KEYS:
+        child = f.child(key)
+        if child is None:
+            continue
+        if not isinstance(child.value, str):
+            raise child.error(f.sub(key), f"must be a text in quotes (e.g. \"1.9\"), not {describe(child)}")
+        values.append((key, text(child, f.sub(key))))
+    return tuple(values)
 
 
 def assign_addresses(links: dict[str, LinkSpec], nodes: dict[str, Node]) -> dict[str, LinkSpec]:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any, Callable
 
-from ..core.backend import AppFrame, Backend
+from ..core.backend import AppFrame, Backend, PhyEvent
 from ..models.frame import BROADCAST, Frame
 from ..models.modem import SimModem
 
@@ -19,6 +19,7 @@ class SimBackend(Backend):
         self.modem = modem
         self._link_names = link_names
         self.everyone_in_range = everyone_in_range  # see LinkSpec.everyone_in_range
+        self.on_phy: Callable[[PhyEvent], Any] | None = None
         modem.on_deliver = self._deliver
         modem.on_idle = self._idle
         modem.acks.on_outcome = self._acknowledged
@@ -28,6 +29,26 @@ class SimBackend(Backend):
         modem.on_deliver = self._deliver
         modem.on_idle = self._idle
         modem.acks.on_outcome = self._acknowledged
+        modem.on_phy = self._phy if self.on_phy is not None else None
+
+    def watch_phy(self, listener: Callable[[PhyEvent], Any] | None) -> None:
+        """Report the modem's transmissions and arrivals to ``listener`` (None: stop; nothing is then
+        scheduled for it, so links without an emulated modem pay nothing)."""
+        self.on_phy = listener
+        self.modem.on_phy = self._phy if listener is not None else None
+
+    def _phy(self, kind: str, frame: Frame, start: float | None, end: float, cause: str | None) -> None:
+        if self.on_phy is not None:
+            app = frame.app_frame if isinstance(frame.app_frame, AppFrame) else None
+            self.on_phy(PhyEvent(kind, app, frame.size, frame.src_addr, frame.dst_addr, start, end, cause))
+
+    def set_address(self, address: int) -> None:
+        self.modem.set_address(address)
+
+    def withdraw(self, frames: list[AppFrame], cause: str) -> int:
+        """Take these application frames out of the modem's FIFO if they are still queued."""
+        wanted = {id(frame) for frame in frames}
+        return self.modem.withdraw(lambda frame: id(frame.app_frame) in wanted, cause)
 
     @property
     def state(self) -> str:
@@ -74,3 +95,4 @@ class SimBackend(Backend):
         self.modem.on_deliver = None
         self.modem.on_idle = None
         self.modem.acks.on_outcome = None
+        self.modem.on_phy = None
