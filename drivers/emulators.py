@@ -520,10 +520,9 @@ class EvologicsEmulator:
     def _signal(self, src: int, t: float) -> tuple[int, int]:
         """RSSI (dB) and integrity of a frame from ``src`` heard at ``t`` (hilgate.models.link_budget)."""
         heard = self.port.reception_from(src, t)
-        if heard is not None:
-            return heard.rssi_db, heard.integrity
-        d = self.port.distance_from(src, t) or 0.0
-        return int(-20 - 20 * math.log10(max(d, 1.0))), 150
+        if heard is None:  # a sender the model does not know (or out of range): nothing measured
+            return self.last_rssi, 0
+        return heard.rssi_db, heard.integrity
 
     # -- medium → host ----------------------------------------------------------------------------------
 

@@ -11,23 +11,20 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import re
 import signal
 import socket
 import subprocess
 import sys
-import threading
 import time
 import uuid
 
 import pytest
 import serial
 
-import hilgate.drivers.mavlink_source  # noqa: F401,E402  (MAVLink 2 before pymavlink is imported)
 from daemon_kit import Daemon, unique  # noqa: E402
 from hilgate.client import Link  # noqa: E402
-from pymavlink import mavutil  # noqa: E402
+from test_live_poses import FakeBlueRov  # noqa: E402  (pymavlink's ArduSub, as in the one-host test)
 
 
 def free_port(kind: int = socket.SOCK_STREAM) -> int:
@@ -257,8 +254,7 @@ def test_a_host_that_dies_is_down_on_the_others_and_rejoins_without_restarting_t
 
 
 def test_an_application_reaches_a_link_over_zenoh_from_anywhere(network):
-    A, B = network["hosts"]["A"], network["hosts"]["B"]
-    a, b, c = network["links"]
+    a = network["links"][0]
     at = AtClient(network["pty"])
     try:
         endpoint = f"tcp/127.0.0.1:{network['ports'][2]}"  # through C's daemon, for a link A serves
@@ -289,31 +285,6 @@ def test_the_same_host_name_or_link_twice_is_refused(network, tmp_path):
     assert thief.daemon.process.wait(30) == 1
     assert f"link {a} is already served by another daemon" in thief.daemon.output()
     assert network["hosts"]["A"].daemon.process.poll() is None
-
-
-class FakeBlueRov:
-    """ArduSub as seen from the topside: pymavlink sending to a daemon's udpin port at 20 Hz."""
-
-    def __init__(self, port: int):
-        self.link = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1, source_component=1)
-        self.position = [150.0, 0.0, 5.0]
-        self.stop = threading.Event()
-        self.thread = threading.Thread(target=self._run, daemon=True)
-        self.thread.start()
-
-    def _run(self):
-        boot = time.monotonic()
-        while not self.stop.is_set():
-            ms = int((time.monotonic() - boot) * 1000)
-            mav = self.link.mav
-            mav.heartbeat_send(mavutil.mavlink.MAV_TYPE_SUBMARINE, mavutil.mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 0)
-            x, y, z = self.position
-            mav.local_position_ned_send(ms, x, y, z, 0.0, 0.0, 0.0)
-            self.stop.wait(0.05)
-
-    def close(self):
-        self.stop.set()
-        self.thread.join()
 
 
 def test_a_pose_measured_on_one_host_moves_the_delays_on_another_exactly(tmp_path):
