@@ -252,6 +252,43 @@ def cmd_send(args: argparse.Namespace) -> int:
     return 1 if refused else 0
 
 
+def cmd_app(args: argparse.Namespace) -> int:
+    """``hilgate app MODULE:CLASS --link ID …``: the application as a process against a running daemon."""
+    import os
+
+    import yaml
+
+    from .core.application import Application
+    from .daemon.service import parse_tcp
+    from .gli.app_runner import run_application
+    from .scene.plugins import PluginError, load_plugin
+
+    entry, colon, class_name = args.application.rpartition(":")
+    if not colon or not entry or not class_name.isidentifier():
+        raise SceneError(args.application, 0, "", "give the application as MODULE:CLASS or FILE.py:CLASS")
+    try:
+        plugin = load_plugin(entry, os.getcwd())
+    except PluginError as exc:
+        raise SceneError(entry, 0, "", f"cannot load the application's module: {exc}") from None
+    cls = getattr(plugin.module, class_name, None)
+    if not (isinstance(cls, type) and issubclass(cls, Application)):
+        raise SceneError(entry, 0, "", f"{class_name!r} is not an application (a subclass of hilgate.app.Application)")
+    params = {}
+    for item in args.params:
+        key, equals, value = item.partition("=")
+        if not equals or not key.isidentifier():
+            raise SceneError("--param", 0, "", f"{item!r} is not KEY=VALUE")
+        try:
+            params[key] = yaml.safe_load(value) if value else ""
+        except yaml.YAMLError:
+            params[key] = value
+    zenoh = None
+    if args.zenoh:
+        zenoh = {"connect": args.zenoh, **({"prefix": args.zenoh_prefix} if args.zenoh_prefix else {})}
+    return run_application(cls, args.links, params, name=args.name, seed=args.seed, runtime_dir=args.runtime_dir,
+                           tcp=parse_tcp(args.tcp) if args.tcp else None, zenoh=zenoh, until=args.until)
+
+
 def _address(value: str) -> int:
     try:
         address = int(value, 0)
@@ -378,6 +415,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "pose": lambda args: cmd_pose(args),
     "send": cmd_send,
     "listen": cmd_listen,
+    "app": cmd_app,
 }
 
 
@@ -510,6 +548,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--window", type=float, nargs=2, metavar=("START", "END"), help="only these seconds of the trace")
     p.add_argument("--run", metavar="ID|N", help="a trace the daemon appended to across restarts holds several runs: "
                                                  "this one (its id, or 1 for the first, -1 the last; default the last)")
+
+    p = sub.add_parser("app", help="run an application (hilgate.app.Application) against a running daemon")
+    p.add_argument("application", metavar="MODULE:CLASS", help="a module name or a .py file, and the class")
+    p.add_argument("--link", dest="links", action="append", required=True, metavar="ID",
+                   help="a link the application uses (repeatable; ctx.links in this order)")
+    p.add_argument("--param", dest="params", action="append", default=[], metavar="KEY=VALUE",
+                   help="ctx.params[KEY] (VALUE read as YAML: 10, 0.5, true, [1, 2], text)")
+    p.add_argument("--name", help="the application's name (default: the class name; seeds ctx.random)")
+    p.add_argument("--seed", type=int, help="seed of ctx.random (default: not reproducible)")
+    p.add_argument("--until", type=float, metavar="S", help="stop after S seconds (default: SIGTERM/SIGINT)")
+    p.add_argument("--tcp", metavar="[HOST:]PORT", type=_tcp_address, help="the daemon's TCP GLI listener")
+    p.add_argument("--zenoh", action="append", metavar="ENDPOINT",
+                   help="reach the links over Zenoh through this daemon endpoint (repeatable)")
+    p.add_argument("--zenoh-prefix", help="the network's Zenoh key prefix (default: hilgate)")
+    p.add_argument("--runtime-dir")
 
     p = sub.add_parser("send", help="send text to a link (arguments, or one frame per stdin line)")
     p.add_argument("link")

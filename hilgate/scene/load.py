@@ -17,6 +17,7 @@ from typing import Sequence
 from ..models.flows import FlowSpec
 from ..models.medium import Channel
 from .checks import Fields, base_dir, integer, items, join_path, mapping, number, path_value, quote, text
+from .apps import app_specs
 from .flows import flow_spec
 from .hosts import resolve_hosts, zenoh_spec
 from .links import Context, assign_addresses, link_spec
@@ -31,7 +32,7 @@ __all__ = ["TOP_KEYS", "load_scene", "load_scene_text", "scene_summary"]
 log = logging.getLogger(__name__)
 
 TOP_KEYS = ("name", "seed", "duration_s", "plugins", "channels", "vehicles", "links", "flows", "trace", "cameras",
-            "zenoh")
+            "zenoh", "apps")
 CHANNEL_KEYS = ("speed_mps", "min_delay_s")
 
 
@@ -100,6 +101,8 @@ def _validate(root: Node | None, file: str, plugins: Sequence[str] = (), preset_
     links = {lid: link_spec(lid, lnode, join_path("links", lid), context, ctx) for lid, lnode in link_nodes.items()}
     links = assign_addresses(links, link_nodes)
     hosts, links, vehicles, cameras = resolve_hosts(links, vehicles, cameras, link_nodes, root)
+    apps_node = f.child("apps")
+    apps = () if apps_node is None or apps_node.value is None else app_specs(apps_node, ctx.plugins, links)
     zenoh_node = f.child("zenoh")
     zenoh = None if zenoh_node is None else zenoh_spec(zenoh_node)
 
@@ -117,7 +120,7 @@ def _validate(root: Node | None, file: str, plugins: Sequence[str] = (), preset_
         trace_file = tf.get("file", path_value, None)
         trace_poses = tf.get("poses_s", number(0), 1.0) or None
     return Scene(name, seed, duration, channels, vehicles, links, flows, trace_file, file, cameras, trace_poses,
-                 hosts, zenoh)
+                 hosts, zenoh, apps)
 
 
 def load_scene(path: str, overrides: Sequence[str] = (), *, plugins: Sequence[str] = (),

@@ -11,6 +11,7 @@ from typing import Any, TextIO
 from .recorder import Recorder
 from ..scene import Scene
 from ..core.scheduler import VirtualScheduler
+from .apps import VirtualApps
 from .world import World
 
 log = logging.getLogger(__name__)
@@ -52,11 +53,14 @@ class Simulation:
         self.recorder = Recorder(trace)
         self.clock = VirtualScheduler()
         self.world = World(scene, self.clock, self.recorder, self.seed)
+        self.apps = VirtualApps(self.world) if scene.apps else None
 
     def run(self, progress: bool = False) -> dict[str, Any]:
         """Run to the end and return the summary of DESIGN.md."""
         clock, until = self.clock, self.until
         self.world.start()
+        if self.apps is not None:
+            self.apps.start()
         if self.recorder.trace is not None and self.scene.trace_poses_s:
             self.world.sample_poses(self.scene.trace_poses_s, self.recorder.event)
         started = time.perf_counter()
@@ -69,6 +73,8 @@ class Simulation:
             bar.done()
         else:
             clock.run(until)
+        if self.apps is not None:
+            self.apps.stop()
         self.wall_time = time.perf_counter() - started
         self.recorder.close()
         log.info("simulated %.1f s in %.3f s wall (%d events, %d arrivals)",
