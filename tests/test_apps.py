@@ -111,3 +111,16 @@ def test_hilgate_app_refuses_what_is_not_an_application_in_one_line(tmp_path):
                             capture_output=True, text=True, timeout=30)
     assert result.returncode == 2 and "not an application" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("mac,mean,largest", [("cs-aloha", "0.141", "0.420"), ("s-fama", "0.463", "2.455")])
+def test_the_formation_in_virtual_time_gives_the_readmes_figures(tmp_path, mac, mean, largest):
+    """UWSim-NET's third experiment with the applications of examples/formation/apps.py, in virtual time:
+    the follower errors the README prints, to the digit (deterministic: no host load in them)."""
+    formation = os.path.join(os.path.dirname(HERE), "examples", "formation")
+    result = subprocess.run([sys.executable, os.path.join(formation, "run.py"), "--virtual", "--mac", mac,
+                             "--seconds", "60", "--out", str(tmp_path)], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stdout + result.stderr
+    lines = [line for line in result.stdout.splitlines() if line.strip().startswith("follower")]
+    assert len(lines) == 3
+    assert all(f"mean {mean} m, max {largest} m / mean 0.000 m, final 0.000 m" in line for line in lines), lines

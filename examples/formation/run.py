@@ -27,6 +27,7 @@ import uuid
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SCENE = os.path.join(HERE, "..", "..", "scenes", "paper-exp3-formation.yaml")
+VIRTUAL_SCENE = os.path.join(HERE, "formation-virtual.yaml")  # the same applications (apps.py), in virtual time
 SLOTS = {"follower1": (-1.5, 0.0, 0.0), "follower2": (0.0, -1.5, 0.0), "follower3": (-1.5, -1.5, 0.0)}
 LINKS = ["buoy_ac", "leader_ac", "follower1_ac", "follower2_ac", "follower3_ac"]
 
@@ -74,11 +75,27 @@ def main() -> int:
     parser.add_argument("--mac", default="cs-aloha", choices=["cs-aloha", "s-fama", "none"])
     parser.add_argument("--legs", type=int, default=3, help="legs of the operator's route (3 m each)")
     parser.add_argument("--out", default="formation-out")
+    parser.add_argument("--virtual", action="store_true",
+                        help="run the applications in virtual time (hilgate sim, deterministic) instead of as "
+                             "processes against the daemon with the fake BlueROV")
     parser.add_argument("--prefix", default=None,
                         help="prefix of this run's link ids (default: one of its own, so that several runs, and "
                              "a daemon already serving the scene, can share the machine)")
     args = parser.parse_args()
     os.makedirs(args.out, exist_ok=True)
+    if args.virtual:
+        trace = os.path.join(args.out, f"trace-virtual-{args.mac}.jsonl")
+        scene = os.path.join(args.out, "formation-virtual.yaml")  # the route's length is the operator's parameter
+        with open(VIRTUAL_SCENE, encoding="utf-8") as handle:
+            text = handle.read().replace("legs: 3", f"legs: {args.legs}")
+        with open(scene, "w", encoding="utf-8") as handle:
+            handle.write(text.replace("plugins: [apps.py]", f"plugins: [{os.path.join(HERE, 'apps.py')}]"))
+        overrides = [f"links.*.mac.protocol={args.mac}"]
+        if args.mac != "cs-aloha":
+            overrides.append("links.*.mac.backoff_s=null")
+        subprocess.run([sys.executable, "-m", "hilgate", "sim", scene, "--until", str(args.seconds),
+                        "--trace", trace, "-q", *(x for o in overrides for x in ("--set", o))], check=True)
+        return report(formation_errors(trace), args, f"virtual-{args.mac}")
     runtime = tempfile.mkdtemp(prefix="hilgate-formation-")
     prefix = args.prefix if args.prefix is not None else f"f{uuid.uuid4().hex[:6]}_"
     links = {name: prefix + name for name in LINKS}
@@ -136,13 +153,17 @@ def main() -> int:
         subprocess.run([*hilgate, "queues", scene, "--unlink"], capture_output=True)  # this run's own
         notify.close()
         shutil.rmtree(runtime, ignore_errors=True)
-    rows = formation_errors(trace)
-    with open(os.path.join(args.out, f"formation-{args.mac}.csv"), "w", newline="") as handle:
+    return report(formation_errors(trace), args, args.mac)
+
+
+def report(rows: list[tuple[float, str, float]], args: argparse.Namespace, label: str) -> int:
+    """The follower errors: a CSV, a summary on stdout and, with matplotlib, a figure."""
+    with open(os.path.join(args.out, f"formation-{label}.csv"), "w", newline="") as handle:
         writer = csv.writer(handle)
         writer.writerow(["t", "follower", "error_m"])
         writer.writerows(rows)
     settled = [r for r in rows if r[0] >= 0.75 * args.seconds]
-    print(f"formation error with {args.mac} over {args.seconds:g} s (whole run / last quarter):")
+    print(f"formation error with {label} over {args.seconds:g} s (whole run / last quarter):")
     for follower in SLOTS:
         everything = [e for _, f, e in rows if f == follower]
         errors = [e for _, f, e in settled if f == follower]
@@ -161,11 +182,11 @@ def main() -> int:
             ax.plot([t for t, _ in points], [e for _, e in points], label=follower)
         ax.set_xlabel("time (s)")
         ax.set_ylabel("distance from the slot (m)")
-        ax.set_title(f"Formation error, {args.mac}")
+        ax.set_title(f"Formation error, {label}")
         ax.legend()
         ax.grid(alpha=0.3)
         fig.tight_layout()
-        fig.savefig(os.path.join(args.out, f"formation-error-{args.mac}.png"), dpi=110)
+        fig.savefig(os.path.join(args.out, f"formation-error-{label}.png"), dpi=110)
     except ImportError:
         pass
     return 0
