@@ -378,8 +378,9 @@ def cmd_report(args: argparse.Namespace) -> int:
             which = "the last" if args.run is None else f"number {run.index}"
             print(f"{args.trace} holds {len(runs)} runs of the daemon; showing {which}: run {run.id} started "
                   f"{run.start} (scene {run.scene}); choose another with --run ID or --run N", file=sys.stderr)
+        formats = tuple(dict.fromkeys(["png", *(args.formats or [])]))
         written = report(args.trace, args.summaries, args.out, args.vehicles, args.csv, args.title,
-                         tuple(args.window) if args.window else None, run if len(runs) > 1 else None)
+                         tuple(args.window) if args.window else None, run if len(runs) > 1 else None, formats)
     except ReportError as exc:
         print(f"hilgate: {exc}", file=sys.stderr)
         return 1
@@ -546,6 +547,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--csv", action="store_true", help="also write the tables behind the figures")
     p.add_argument("--title", help="the page's title")
     p.add_argument("--window", type=float, nargs=2, metavar=("START", "END"), help="only these seconds of the trace")
+    p.add_argument("--format", dest="formats", action="append", choices=["svg", "pdf"],
+                   help="also write each figure as SVG or PDF (vector, for a paper; repeatable)")
     p.add_argument("--run", metavar="ID|N", help="a trace the daemon appended to across restarts holds several runs: "
                                                  "this one (its id, or 1 for the first, -1 the last; default the last)")
 

@@ -60,3 +60,55 @@ def test_a_broken_trace_is_named(tmp_path):
     result = subprocess.run([sys.executable, "-m", "hilgate", "report", str(bad), "--out", str(tmp_path / "r")],
                             capture_output=True, text=True)
     assert result.returncode == 1 and f"{bad}:2: not a JSON line" in result.stderr
+
+
+def test_figures_are_fit_for_a_paper(runs, tmp_path):
+    """Issue 14 item 5, checked from what was drawn (not pixels): coinciding series get their own styles
+    and are named in the caption; a value span beyond 100× goes on a log scale; dense timelines are
+    counted per window; SVG and PDF besides PNG; captions say what produced each figure."""
+    from hilgate.report.figures import figures, load_trace
+
+    folder, trace_path = runs
+    trace = load_trace(str(trace_path))
+    # a second pair of vehicles at exactly the same distances as the first: drawn over one another
+    first = sorted(trace.poses)[:2]
+    trace.poses["twin_a"] = list(trace.poses[first[0]])
+    trace.poses["twin_b"] = list(trace.poses[first[1]])
+    summaries = {name: json.loads((folder / f"{name}.json").read_text()) for name in ("csma", "none")}
+    summaries["none"]["flows"][0]["delay_mean_s"] = 150.0  # one MAC's delay, decades above the rest
+    seen: dict = {}
+    written = figures(trace, summaries, [first[0], first[1], "twin_a", "twin_b"], str(tmp_path),
+                      formats=("png", "svg", "pdf"), subtitle="scene paper-exp1-rf, seed 1", inspect=seen)
+    styles = seen["distance"]["styles"]
+    for group in seen["distance"]["coinciding"]:
+        assert len({styles[name] for name in group}) == len(group)  # each one visible
+    captions = dict(written)
+    assert any(" coincide" in caption for caption in captions.values())
+    assert all("scene paper-exp1-rf, seed 1" in caption for caption in captions.values())
+    assert seen["compare"]["yscale"]["delay_mean_s"] == "log"
+    assert seen["compare"]["yscale"]["efficiency"] == "linear"
+    assert seen["delay"]["unit"] in ("ms", "s")
+    for stem in ("distance", "delay", "compare", "timeline"):
+        assert (tmp_path / f"{stem}.svg").read_bytes().lstrip().startswith((b"<?xml", b"<svg"))
+        assert (tmp_path / f"{stem}.pdf").read_bytes()[:5] == b"%PDF-"
+
+
+def test_a_dense_timeline_is_counted_per_window(tmp_path):
+    from hilgate.report.figures import DENSE, Packet, Trace, figures
+
+    trace = Trace()
+    for i in range(DENSE + 50):  # 4 Hz for 90 s: marks would make a solid band
+        packet = Packet(i, "a", "b", 20, t_tx=[i * 0.25])
+        packet.outcomes.append((i * 0.25 + 0.1, "b", "rx" if i % 7 else "err", None if i % 7 else "col"))
+        trace.packets[i] = packet
+    trace.end = 100.0
+    seen: dict = {}
+    figures(trace, {}, [], str(tmp_path), inspect=seen)
+    assert seen["timeline"]["aggregated"] == ["a → b"]
+
+
+def test_an_empty_or_inverted_window_is_an_error(runs, tmp_path, capsys):
+    folder, trace = runs
+    for window in (["30", "30"], ["30", "10"]):
+        assert main(["report", str(trace), "--out", str(tmp_path), "--window", *window]) == 1
+        assert "is empty: give START < END" in capsys.readouterr().err

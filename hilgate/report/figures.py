@@ -3,7 +3,11 @@
 From a trace: the distance between vehicles over time (from the trace's pose samples); per flow, a
 timeline of packets sent, received and lost, coloured by cause; each link's transmit FIFO over time;
 the end-to-end delay over time.  From several summaries (one per MAC protocol, say): grouped bars of
-throughput, efficiency, delay and jitter per flow.  An ``index.html`` shows them all; ``--csv`` writes
+throughput, efficiency, delay and jitter per flow.  Made to go in a paper: series that coincide get
+their own line styles and the caption says so; a value axis spanning more than 100× is logarithmic;
+timelines too dense for marks are counted per window; plain tick values, delays in ms below a second;
+one colour per loss cause everywhere; every caption says what produced the figure; ``--format
+svg|pdf`` adds vector files.  An ``index.html`` shows them all; ``--csv`` writes
 the tables behind them for people who plot elsewhere.  matplotlib is an optional extra
 (``pip install 'hilgate[report]'``); without it the command says so and stops.
 """
@@ -233,59 +237,148 @@ def _pyplot():
     return plt
 
 
+LOG_SPAN = 100.0
+"""A value axis spanning more than this factor is drawn on a log scale (one series would hide the rest)."""
+
+DENSE = 300
+"""More marks than this on one flow's timeline would render as a solid band: they are counted per window."""
+
+STYLES = ["-", "--", ":", "-."]
+MARKERS = ["", "o", "s", "^", "v", "D"]
+
+
+def coinciding(series: dict[str, list]) -> list[list[str]]:
+    """Groups (two or more) of series whose points are the same: drawn one over the other, they would
+    show as one line."""
+    groups: dict[str, list[str]] = {}
+    for name, points in series.items():
+        groups.setdefault(json.dumps(points, sort_keys=True, default=str), []).append(name)
+    return [names for names in groups.values() if len(names) > 1]
+
+
+def log_scale_needed(values: list[float]) -> bool:
+    positive = [v for v in values if v is not None and v > 0]
+    return bool(positive) and max(positive) / min(positive) > LOG_SPAN
+
+
+def _plain(ax) -> None:
+    """Plain tick values (no ``1e−13+8.8888933e−2`` offsets) on linear axes."""
+    for axis, scale in ((ax.xaxis, ax.get_xscale()), (ax.yaxis, ax.get_yscale())):
+        formatter = axis.get_major_formatter()
+        if scale == "linear" and hasattr(formatter, "set_useOffset"):  # (not the tick labels a caller named)
+            formatter.set_useOffset(False)
+            formatter.set_scientific(False)
+
+
+def _seconds_or_ms(values: list[float]) -> tuple[float, str]:
+    """Delays below a second read better in milliseconds."""
+    return (1000.0, "ms") if values and max(values) < 1.0 else (1.0, "s")
+
+
 def figures(trace: Trace, summaries: dict[str, dict], vehicles: list[str], out: str,
-            title: str = "") -> list[tuple[str, str]]:
-    """Write the PNGs; returns (file name, caption) pairs."""
+            title: str = "", formats: tuple[str, ...] = ("png",), subtitle: str = "",
+            inspect: dict[str, dict] | None = None) -> list[tuple[str, str]]:
+    """Write the figures (PNG, and SVG/PDF when asked); returns (file name, caption) pairs.  Each
+    caption says what produced the figure (``subtitle``: scene, seed, window) and which series
+    coincide.  ``inspect`` collects what was drawn, figure by figure (scales, series and their styles),
+    for tests that check a figure from its data."""
     plt = _pyplot()
     written: list[tuple[str, str]] = []
+    inspect = inspect if inspect is not None else {}
 
     def save(fig, name: str, caption: str) -> None:
         fig.tight_layout()
-        fig.savefig(os.path.join(out, name), dpi=110)
+        stem = os.path.splitext(name)[0]
+        for fmt in formats:
+            fig.savefig(os.path.join(out, f"{stem}.{fmt}"), dpi=110)
         plt.close(fig)
-        written.append((name, caption))
+        written.append((f"{stem}.{formats[0]}", caption + (f" ({subtitle})" if subtitle else "")))
 
     pairs = distances(trace, vehicles)
     if pairs:
         fig, ax = plt.subplots(figsize=(9, 3.5))
-        for (a, b), points in pairs.items():
-            ax.plot([t for t, _ in points], [d for _, d in points], label=f"{a} – {b}")
+        series = {f"{a} – {b}": points for (a, b), points in pairs.items()}
+        together = coinciding(series)
+        styles = {}
+        for i, (label, points) in enumerate(series.items()):
+            style = (STYLES[i % len(STYLES)], MARKERS[(i // len(STYLES)) % len(MARKERS)])
+            styles[label] = style
+            ax.plot([t for t, _ in points], [d for _, d in points], linestyle=style[0], marker=style[1] or None,
+                    markevery=max(1, len(points) // 12), label=label)
         ax.set_xlabel("time (s)")
         ax.set_ylabel("distance (m)")
+        _plain(ax)
         ax.legend(loc="best", fontsize="small")
         ax.grid(alpha=0.3)
-        save(fig, "distance.png", "Distance between vehicles")
+        inspect["distance"] = {"styles": styles, "coinciding": together}
+        note = "".join(f"; {' and '.join(group)} coincide" for group in together)
+        save(fig, "distance.png", "Distance between vehicles" + note)
 
     flows = trace.flows()
     if flows:
         fig, axes = plt.subplots(len(flows), 1, figsize=(10.5, 1.6 + 1.3 * len(flows)), squeeze=False, sharex=True)
+        aggregated = []
         for ax, flow in zip(axes[:, 0], flows):
             packets = [p for p in trace.packets.values() if (p.src, p.dst) == flow]
             sent = [t for p in packets for t in p.t_tx]
-            ax.scatter(sent, [2] * len(sent), marker="|", s=40, color="#555555", label="sent")
             received = [t for p in packets for t, _, ev, _ in p.outcomes if ev == "rx"]
-            ax.scatter(received, [1] * len(received), marker="|", s=40, color="#2ca02c", label="received")
-            for cause, colour in CAUSE_COLOURS.items():
-                lost = [t for p in packets for t, _, ev, c in p.outcomes if ev in ("err", "drop") and c == cause]
-                if lost:
-                    ax.scatter(lost, [0] * len(lost), marker="x", s=18, color=colour, label=f"lost: {cause}")
-            ax.set_yticks([0, 1, 2], ["lost", "rx", "tx"])
-            ax.set_ylim(-0.6, 2.6)
+            lost_by_cause = {cause: [t for p in packets for t, _, ev, c in p.outcomes
+                                     if ev in ("err", "drop") and c == cause] for cause in CAUSE_COLOURS}
+            if len(sent) > DENSE:  # a solid band as marks: rates per window instead
+                aggregated.append(f"{flow[0]} → {flow[1]}")
+                span = max(trace.end, max(sent)) or 1.0
+                width = max(1.0, span / 120)
+                edges = [i * width for i in range(int(span / width) + 2)]
+
+                def rate(times: list[float]) -> list[float]:
+                    counts = [0] * (len(edges) - 1)
+                    for t in times:
+                        counts[min(len(counts) - 1, int(t / width))] += 1
+                    return [c / width for c in counts]
+
+                ax.step(edges[:-1], rate(sent), where="post", color="#555555", label="sent /s")
+                ax.step(edges[:-1], rate(received), where="post", color="#2ca02c", label="received /s")
+                for cause, times in lost_by_cause.items():
+                    if times:
+                        ax.step(edges[:-1], rate(times), where="post", color=CAUSE_COLOURS[cause],
+                                label=f"lost: {cause} /s")
+                ax.set_ylabel(f"per s ({width:g} s bins)", fontsize="x-small")
+            else:
+                ax.scatter(sent, [2] * len(sent), marker="|", s=40, color="#555555", label="sent")
+                ax.scatter(received, [1] * len(received), marker="|", s=40, color="#2ca02c", label="received")
+                for cause, lost in lost_by_cause.items():
+                    if lost:
+                        ax.scatter(lost, [0] * len(lost), marker="x", s=18, color=CAUSE_COLOURS[cause],
+                                   label=f"lost: {cause}")
+                ax.set_yticks([0, 1, 2], ["lost", "rx", "tx"])
+                ax.set_ylim(-0.6, 2.6)
+            _plain(ax)
             ax.set_title(f"{flow[0]} → {flow[1]}", fontsize="small", loc="left")
             ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="x-small")
             ax.grid(axis="x", alpha=0.3)
         axes[-1, 0].set_xlabel("time (s)")
-        save(fig, "timeline.png", "Packets of each flow: sent, received, and lost by cause")
+        inspect["timeline"] = {"aggregated": aggregated}
+        note = f"; counted per window for {', '.join(aggregated)}" if aggregated else ""
+        save(fig, "timeline.png", "Packets of each flow: sent, received, and lost by cause" + note)
 
         fig, ax = plt.subplots(figsize=(9, 3.5))
-        for flow in flows:
-            points = delays(trace, flow)
+        every = {flow: delays(trace, flow) for flow in flows}
+        values = [d for points in every.values() for _, d in points]
+        factor, unit = _seconds_or_ms(values)
+        for i, (flow, points) in enumerate(every.items()):
             if points:
-                ax.plot([t for t, _ in points], [d for _, d in points], ".", markersize=3, label=f"{flow[0]} → {flow[1]}")
+                ax.plot([t for t, _ in points], [d * factor for _, d in points], MARKERS[1 + i % (len(MARKERS) - 1)],
+                        markersize=3, label=f"{flow[0]} → {flow[1]}")
+        logarithmic = log_scale_needed(values)
+        if logarithmic:
+            ax.set_yscale("log")
         ax.set_xlabel("time of delivery (s)")
-        ax.set_ylabel("end-to-end delay (s)")
-        ax.legend(loc="best", fontsize="small")
+        ax.set_ylabel(f"end-to-end delay ({unit}{', log scale' if logarithmic else ''})")
+        _plain(ax)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(loc="best", fontsize="small")
         ax.grid(alpha=0.3)
+        inspect["delay"] = {"yscale": ax.get_yscale(), "unit": unit}
         save(fig, "delay.png", "End-to-end delay of every delivered packet")
 
     if trace.fifo:
@@ -297,6 +390,7 @@ def figures(trace: Trace, summaries: dict[str, dict], vehicles: list[str], out: 
         ax.set_ylabel("transmit FIFO (bytes)")
         ax.legend(loc="best", fontsize="small")
         ax.grid(alpha=0.3)
+        _plain(ax)
         save(fig, "fifo.png", "Transmit FIFO occupancy of each link")
 
     if summaries:
@@ -307,16 +401,25 @@ def figures(trace: Trace, summaries: dict[str, dict], vehicles: list[str], out: 
         fig, axes = plt.subplots(len(metrics), 1, figsize=(max(9, 1.2 * len(flow_keys) * len(names) / 2), 11),
                                  squeeze=False)
         width = 0.8 / len(names)
+        scales = {}
         for ax, (key, label) in zip(axes[:, 0], metrics):
+            panel = []
             for i, name in enumerate(names):
                 values = {f"{f['from']} → {f['to']}": f.get(key) for f in summaries[name]["flows"]}
-                ax.bar([j + i * width for j in range(len(flow_keys))],
-                       [values.get(k) or 0.0 for k in flow_keys], width, label=name)
+                heights = [values.get(k) or 0.0 for k in flow_keys]
+                panel += heights
+                ax.bar([j + i * width for j in range(len(flow_keys))], heights, width, label=name)
+            if log_scale_needed(panel):
+                ax.set_yscale("log")
+                label += ", log scale"
+            scales[key] = ax.get_yscale()
+            _plain(ax)
             ax.set_ylabel(label)
             ax.set_xticks([j + width * (len(names) - 1) / 2 for j in range(len(flow_keys))], flow_keys,
                           rotation=20, ha="right", fontsize="x-small")
             ax.grid(axis="y", alpha=0.3)
         axes[0, 0].legend(loc="best", fontsize="small")
+        inspect["compare"] = {"yscale": scales}
         save(fig, "compare.png", "Per flow, side by side: " + ", ".join(names))
     return written
 
@@ -340,16 +443,27 @@ def write_index(out: str, written: list[tuple[str, str]], tables: list[str], tit
 
 def report(trace_path: str, summary_paths: list[str], out: str, vehicles: list[str] | None = None,
            csv_tables: bool = False, title: str | None = None,
-           window: tuple[float, float] | None = None, run: Run | None = None) -> list[str]:
+           window: tuple[float, float] | None = None, run: Run | None = None,
+           formats: tuple[str, ...] = ("png",)) -> list[str]:
     """Everything ``hilgate report`` writes; returns the paths."""
+    if window is not None and not window[0] < window[1]:
+        raise ReportError(f"--window {window[0]:g} {window[1]:g} is empty: give START < END in seconds")
     trace = load_trace(trace_path, window, run)
     summaries = {os.path.splitext(os.path.basename(p))[0]: load_summary(p) for p in summary_paths}
     chosen = vehicles or sorted(trace.poses)[:4]
     os.makedirs(out, exist_ok=True)
     tables = write_csv(trace, summaries, chosen, out) if csv_tables else []
     title = title or f"hilgate report: {os.path.basename(trace_path)}"
+    produced = [f"trace {os.path.basename(trace_path)}"]
+    if run is not None:
+        produced.append(f"scene {run.scene}, run {run.id}")
+    for name, summary in summaries.items():
+        if isinstance(summary, dict) and summary.get("scene") is not None:
+            produced.append(f"{name}: scene {summary.get('scene')}, seed {summary.get('seed')}")
+    if window is not None:
+        produced.append(f"window {window[0]:g}–{window[1]:g} s")
     try:
-        written = figures(trace, summaries, chosen, out, title)
+        written = figures(trace, summaries, chosen, out, title, formats, "; ".join(produced))
     except ReportError:
         if csv_tables:
             write_index(out, [], tables, title)
