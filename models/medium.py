@@ -104,6 +104,7 @@ class Medium:
         self.frame_ids = itertools.count(1)
         self.arrivals = 0
         self._neighbours: dict[Radio, list[_Neighbour]] = {}
+        self._unreachable: dict[Radio, dict[int, list[Radio]]] = {}
         self._dirty = True
         self.tap: Any = None
         """Called ``tap(sender, frame, t, duration)`` for every transmission from a radio that listens
@@ -140,16 +141,29 @@ class Medium:
         return None
 
     def _rebuild(self) -> None:
+        """Neighbour lists per sender, in attachment order (the order arrivals are handed out, which
+        fixes the order of same-instant events).  A static pair out of range is left out of the list
+        altogether, so a transmission never visits it: the only thing it can still cause is the
+        ``range`` error of a frame addressed to it, kept by address in ``_unreachable``."""
         radios = self.radios
         neighbours = {}
+        unreachable = {}
         for sender in radios:
             channel = self.channels[sender.tx_channel]
-            neighbours[sender] = [
-                _Neighbour(sender, receiver, channel)
-                for receiver in radios
-                if receiver is not sender and receiver.rx_channel == sender.tx_channel and receiver.listens
-            ]
+            listed = []
+            beyond: dict[int, list[Radio]] = {}
+            for receiver in radios:
+                if receiver is sender or receiver.rx_channel != sender.tx_channel or not receiver.listens:
+                    continue
+                nb = _Neighbour(sender, receiver, channel)
+                if nb.static and not nb.in_range:
+                    beyond.setdefault(receiver.address, []).append(receiver)
+                else:
+                    listed.append(nb)
+            neighbours[sender] = listed
+            unreachable[sender] = beyond
         self._neighbours = neighbours
+        self._unreachable = unreachable
         self._dirty = False
 
     def propagation_delay(self, sender: Any, receiver: Any, t: float) -> float | None:
@@ -172,6 +186,10 @@ class Medium:
             self.tap(sender, frame, t, duration)
         neighbours = self._neighbours[sender]
         dst = frame.dst_addr
+        beyond = self._unreachable[sender].get(dst)
+        if beyond is not None:  # addressed to a static radio out of range (never visited below)
+            for radio in beyond:
+                radio.unreachable(frame)
         sender_position = None
         missed = 0  # neighbours the frame does not reach (counted this way round: they are the few)
         for nb in neighbours:
@@ -179,11 +197,6 @@ class Medium:
             if nb.reach:
                 d = nb.d
                 start = t + nb.tau
-            elif nb.static:
-                if radio.address == dst:
-                    radio.unreachable(frame)
-                missed += 1
-                continue
             else:
                 if sender_position is None:
                     sender_position = sender.pose.position(t)
