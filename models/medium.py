@@ -104,7 +104,7 @@ class Medium:
         self.frame_ids = itertools.count(1)
         self.arrivals = 0
         self._neighbours: dict[Radio, list[_Neighbour]] = {}
-        self._unreachable: dict[Radio, dict[int, list[Radio]]] = {}
+        self._unreachable: dict[Radio, dict[int, tuple[Radio, ...]]] = {}
         self._dirty = True
         self.tap: Any = None
         """Called ``tap(sender, frame, t, duration)`` for every transmission from a radio that listens
@@ -142,29 +142,58 @@ class Medium:
 
     def _rebuild(self) -> None:
         """Neighbour lists per sender, in attachment order (the order arrivals are handed out, which
-        fixes the order of same-instant events).  A static pair out of range is left out of the list
-        altogether, so a transmission never visits it: the only thing it can still cause is the
-        ``range`` error of a frame addressed to it, kept by address in ``_unreachable``."""
+        fixes the order of same-instant events).
+
+        A static pair out of range is left out of the list altogether, so a transmission never visits
+        it; a frame addressed to such a radio still gets its ``range`` error (:meth:`_beyond`).  A
+        static sender with a finite range only looks at the static radios in the grid cells around it
+        (cells as wide as its range: ``_static_grid``), so building the lists is O(n · neighbours),
+        not O(n²); pairs with a moving vehicle are always listed and judged at each transmission."""
         radios = self.radios
+        order = {radio: i for i, radio in enumerate(radios)}
+        moving = [radio for radio in radios if not radio.pose.static]
+        grids: dict[float, dict[tuple[int, int, int], list[Radio]]] = {}
         neighbours = {}
-        unreachable = {}
         for sender in radios:
             channel = self.channels[sender.tx_channel]
+            rmax = sender.range_m[1]
+            if sender.pose.static and math.isfinite(rmax):
+                origin = sender.pose.position(0.0)
+                if origin is None:
+                    candidates = moving
+                else:
+                    grid = grids.get(rmax)
+                    if grid is None:
+                        grid = grids[rmax] = _static_grid(radios, rmax)
+                    candidates = _near(grid, origin, rmax)
+                    candidates.extend(moving)
+                    candidates.sort(key=order.__getitem__)
+            else:
+                candidates = radios
             listed = []
-            beyond: dict[int, list[Radio]] = {}
-            for receiver in radios:
+            for receiver in candidates:
                 if receiver is sender or receiver.rx_channel != sender.tx_channel or not receiver.listens:
                     continue
                 nb = _Neighbour(sender, receiver, channel)
-                if nb.static and not nb.in_range:
-                    beyond.setdefault(receiver.address, []).append(receiver)
-                else:
+                if not nb.static or nb.in_range:
                     listed.append(nb)
             neighbours[sender] = listed
-            unreachable[sender] = beyond
         self._neighbours = neighbours
-        self._unreachable = unreachable
+        self._unreachable = {}
         self._dirty = False
+
+    def _beyond(self, sender: "Radio", dst: int) -> tuple["Radio", ...]:
+        """The radios with address ``dst`` on ``sender``'s channel that a static pair keeps out of its
+        range (or without a position): they are in no neighbour list, and a frame addressed to them
+        gets its ``range`` error here.  Cached per sender and address until the topology changes."""
+        listed = {nb.radio for nb in self._neighbours[sender]}
+        found = tuple(
+            radio for radio in self.radios
+            if radio.address == dst and radio is not sender and radio.rx_channel == sender.tx_channel
+            and radio.listens and radio not in listed and sender.pose.static and radio.pose.static
+        )
+        self._unreachable.setdefault(sender, {})[dst] = found
+        return found
 
     def propagation_delay(self, sender: Any, receiver: Any, t: float) -> float | None:
         """τ from ``sender`` to ``receiver`` (modems or radios) at ``t``, or None if out of range or
@@ -186,9 +215,12 @@ class Medium:
             self.tap(sender, frame, t, duration)
         neighbours = self._neighbours[sender]
         dst = frame.dst_addr
-        beyond = self._unreachable[sender].get(dst)
-        if beyond is not None:  # addressed to a static radio out of range (never visited below)
-            for radio in beyond:
+        if dst != BROADCAST:
+            known = self._unreachable.get(sender)
+            beyond = known.get(dst) if known is not None else None
+            if beyond is None:
+                beyond = self._beyond(sender, dst)
+            for radio in beyond:  # addressed to a static radio out of range (never visited below)
                 radio.unreachable(frame)
         sender_position = None
         missed = 0  # neighbours the frame does not reach (counted this way round: they are the few)
@@ -222,3 +254,39 @@ class Medium:
                 start = t + nb.min_delay + d / nb.speed
             radio.arrive(frame, t, start, start + duration, d, nb)
         self.arrivals += len(neighbours) - missed
+
+
+def _cell_size(rmax: float) -> float:
+    """A grid cell a little wider than ``rmax``: two points within ``rmax`` of each other are then in
+    the same or adjacent cells, whatever the rounding of the division."""
+    return max(rmax, 1.0) * (1.0 + 1e-9)
+
+
+def _cell(position: tuple[float, ...], size: float) -> tuple[int, int, int]:
+    x, y, z = position[0], position[1], position[2] if len(position) > 2 else 0.0
+    return (math.floor(x / size), math.floor(y / size), math.floor(z / size))
+
+
+def _static_grid(radios: list["Radio"], rmax: float) -> dict[tuple[int, int, int], list["Radio"]]:
+    """The static radios that have a position, by grid cell of side ``_cell_size(rmax)``."""
+    size = _cell_size(rmax)
+    grid: dict[tuple[int, int, int], list[Radio]] = {}
+    for radio in radios:
+        if radio.pose.static:
+            position = radio.pose.position(0.0)
+            if position is not None:
+                grid.setdefault(_cell(position, size), []).append(radio)
+    return grid
+
+
+def _near(grid: dict[tuple[int, int, int], list["Radio"]], origin: tuple[float, ...], rmax: float) -> list["Radio"]:
+    """The static radios in the 27 cells around ``origin``: a superset of those within ``rmax``."""
+    cx, cy, cz = _cell(origin, _cell_size(rmax))
+    found: list[Radio] = []
+    for dx in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            for dz in (-1, 0, 1):
+                cell = grid.get((cx + dx, cy + dy, cz + dz))
+                if cell is not None:
+                    found.extend(cell)
+    return found

@@ -1,0 +1,133 @@
+#!/usr/bin/env python3
+"""How the simulator scales with the number of modems: a ring scene generator run through ``hilgate sim``.
+
+Two geometries (``--geometry``):
+
+- ``neighbour`` (default): N modems 100 m apart on a ring, ``range_m: [0, 250]`` (each hears two
+  modems either side), every modem offers 35-byte frames to its clockwise neighbour as a Poisson
+  process of 0.05 frame/s at 1 kbit/s, ``mac: none``.  The work per transmission is the same at any N,
+  so the wall time per judged arrival should stay flat when the medium never visits modems beyond
+  range.
+- ``sink``: ``ring_aloha.py``'s ring (a sink at the centre, N-1 senders on a 500 m ring, unlimited
+  range): every transmission reaches every modem, so the work per judged arrival grows with N by
+  construction (N-1 arrivals per frame, one judged).
+
+Addresses are 1..N skipping 255 (the broadcast address): above 254 modems the scene needs wide
+addresses (simulated links only).  Each run is a separate ``python -m hilgate sim`` process on a
+generated scene file; ``--tree LABEL=DIR`` runs the hilgate found in DIR instead (e.g. an exported
+older commit), and several trees are run alternately, N by N, repeat by repeat.  Printed per run: N,
+simulated seconds, transmissions, judged arrivals (rx + prop/col/mult at the addressed receivers),
+the wall time of the process and of the simulation loop, and judged arrivals per wall second.
+
+    python benchmarks/ring_scale.py --nodes 50 200 1000 --sim-time 3600
+    python benchmarks/ring_scale.py --tree before=/tmp/old --tree after=. --nodes 50 --repeats 3
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+SPACING_M = 100.0
+RANGE_M = 250.0
+
+
+def addresses(nodes: int) -> list[int]:
+    """1..N, skipping 255 (the broadcast address)."""
+    result, a = [], 1
+    while len(result) < nodes:
+        if a != 255:
+            result.append(a)
+        a += 1
+    return result
+
+
+def ring_scene(nodes: int, sim_time: float, seed: int, geometry: str = "neighbour") -> str:
+    """The scene text of one ring."""
+    address = addresses(nodes)
+    lines = [f"name: ring-{geometry}-{nodes}", f"seed: {seed}", f"duration_s: {sim_time}",
+             "channels: {ac: {speed_mps: 1500}}", "vehicles:"]
+    if geometry == "sink":
+        lines.append("  v0: {pose: {static: [0, 0, 0]}}")
+        for i in range(1, nodes):
+            angle = 2 * math.pi * (i - 1) / (nodes - 1)
+            lines.append(f"  v{i}: {{pose: {{static: [{500 * math.cos(angle)!r}, {500 * math.sin(angle)!r}, 0]}}}}")
+        lines.append("links:")
+        for i in range(nodes):
+            lines.append(f"  m{i}: {{vehicle: v{i}, address: {address[i]}, bitrate_bps: 1000}}")
+        lines.append("flows:")
+        for i in range(1, nodes):
+            lines.append(f"  - {{from: m{i}, to: m0, size_bytes: 35, rate_hz: 0.05, poisson: true}}")
+        return "\n".join(lines) + "\n"
+    radius = SPACING_M * nodes / (2 * math.pi)
+    for i in range(nodes):
+        angle = 2 * math.pi * i / nodes
+        lines.append(f"  v{i}: {{pose: {{static: [{radius * math.cos(angle)!r}, {radius * math.sin(angle)!r}, 0]}}}}")
+    lines.append("links:")
+    for i in range(nodes):
+        lines.append(f"  m{i}: {{vehicle: v{i}, address: {address[i]}, bitrate_bps: 1000, range_m: [0, {RANGE_M}]}}")
+    lines.append("flows:")
+    for i in range(nodes):
+        lines.append(f"  - {{from: m{i}, to: m{(i + 1) % nodes}, size_bytes: 35, rate_hz: 0.05, poisson: true}}")
+    return "\n".join(lines) + "\n"
+
+
+def run_once(tree: str | None, scene_path: str, summary_path: str) -> dict:
+    env = dict(os.environ)
+    if tree is not None:
+        env["PYTHONPATH"] = os.path.abspath(tree) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    started = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "hilgate", "sim", scene_path, "--summary", summary_path, "-q"],
+                   env=env, check=True)
+    wall = time.perf_counter() - started
+    with open(summary_path, encoding="utf-8") as handle:
+        summary = json.load(handle)
+    flows = summary["flows"]
+    judged = sum(f["rx_packets"] + f["lost"]["prop"] + f["lost"]["col"] + f["lost"]["mult"] for f in flows)
+    return {"tx": sum(f["tx_packets"] for f in flows), "judged": judged,
+            "rx": sum(f["rx_packets"] for f in flows), "wall_s": wall, "sim_wall_s": summary["wall_time_s"]}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--nodes", type=int, nargs="*", default=[50, 200, 1000])
+    parser.add_argument("--sim-time", type=float, default=3600.0)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--geometry", choices=("neighbour", "sink"), default="neighbour")
+    parser.add_argument("--repeats", type=int, default=1)
+    parser.add_argument("--tree", action="append", default=[], metavar="LABEL=DIR",
+                        help="run the hilgate in DIR (repeatable: the trees are run alternately)")
+    args = parser.parse_args()
+    trees = [tuple(t.split("=", 1)) for t in args.tree] or [("this", None)]
+    print(f"geometry {args.geometry}, {args.sim_time:g} simulated s, seed {args.seed}, repeats {args.repeats}")
+    print(f"{'tree':>8} {'N':>5} {'tx':>8} {'judged':>8} {'rx':>8} {'wall s':>8} {'sim s':>8} "
+          f"{'judged/s':>9} {'us/judged':>9}")
+    with tempfile.TemporaryDirectory(prefix="ring_scale-") as tmp:
+        for n in args.nodes:
+            scene_path = os.path.join(tmp, f"ring-{n}.yaml")
+            with open(scene_path, "w", encoding="utf-8") as handle:
+                handle.write(ring_scene(n, args.sim_time, args.seed, args.geometry))
+            results: dict[str, list[dict]] = {label: [] for label, _ in trees}
+            for _ in range(args.repeats):
+                for label, tree in trees:  # alternating: each repeat runs every tree once
+                    r = run_once(tree, scene_path, os.path.join(tmp, "summary.json"))
+                    results[label].append(r)
+                    print(f"{label:>8} {n:>5} {r['tx']:>8} {r['judged']:>8} {r['rx']:>8} {r['wall_s']:>8.2f} "
+                          f"{r['sim_wall_s']:>8.2f} {r['judged'] / r['sim_wall_s']:>9.0f} "
+                          f"{1e6 * r['sim_wall_s'] / r['judged']:>9.1f}", flush=True)
+            if len(trees) > 1 and args.repeats > 1:
+                for label, runs in results.items():
+                    walls = sorted(r["sim_wall_s"] for r in runs)
+                    print(f"{label:>8} {n:>5} sim wall min/median/max {walls[0]:.2f}/{statistics.median(walls):.2f}"
+                          f"/{walls[-1]:.2f} s")
+
+
+if __name__ == "__main__":
+    main()
