@@ -81,11 +81,12 @@ def ring_scene(nodes: int, sim_time: float, seed: int, geometry: str = "neighbou
 
 def run_once(tree: str | None, scene_path: str, summary_path: str) -> dict:
     env = dict(os.environ)
-    if tree is not None:
-        env["PYTHONPATH"] = os.path.abspath(tree) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    root = os.path.abspath(tree if tree is not None else os.path.join(os.path.dirname(__file__), ".."))
+    env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     started = time.perf_counter()
+    # run from the scene's directory: ``python -m`` puts the working directory first on sys.path
     subprocess.run([sys.executable, "-m", "hilgate", "sim", scene_path, "--summary", summary_path, "-q"],
-                   env=env, check=True)
+                   env=env, check=True, cwd=os.path.dirname(scene_path))
     wall = time.perf_counter() - started
     with open(summary_path, encoding="utf-8") as handle:
         summary = json.load(handle)
@@ -117,13 +118,19 @@ def main() -> None:
             results: dict[str, list[dict]] = {label: [] for label, _ in trees}
             for _ in range(args.repeats):
                 for label, tree in trees:  # alternating: each repeat runs every tree once
-                    r = run_once(tree, scene_path, os.path.join(tmp, "summary.json"))
+                    try:
+                        r = run_once(tree, scene_path, os.path.join(tmp, "summary.json"))
+                    except subprocess.CalledProcessError as exc:
+                        print(f"{label:>8} {n:>5} not run: hilgate sim exited {exc.returncode} (above)", flush=True)
+                        continue
                     results[label].append(r)
                     print(f"{label:>8} {n:>5} {r['tx']:>8} {r['judged']:>8} {r['rx']:>8} {r['wall_s']:>8.2f} "
                           f"{r['sim_wall_s']:>8.2f} {r['judged'] / r['sim_wall_s']:>9.0f} "
                           f"{1e6 * r['sim_wall_s'] / r['judged']:>9.1f}", flush=True)
             if len(trees) > 1 and args.repeats > 1:
                 for label, runs in results.items():
+                    if not runs:
+                        continue
                     walls = sorted(r["sim_wall_s"] for r in runs)
                     print(f"{label:>8} {n:>5} sim wall min/median/max {walls[0]:.2f}/{statistics.median(walls):.2f}"
                           f"/{walls[-1]:.2f} s")
