@@ -8,6 +8,8 @@ Two geometries (``--geometry``):
   process of 0.05 frame/s at 1 kbit/s, ``mac: none``.  The work per transmission is the same at any N,
   so the wall time per judged arrival should stay flat when the medium never visits modems beyond
   range.
+- ``drifting``: the same ring, each vehicle looping around a 20 m square by its place at 0.5 m/s:
+  every pair involves a moving vehicle, so the medium's moving grid does the pruning.
 - ``sink``: ``ring_aloha.py``'s ring (a sink at the centre, N-1 senders on a 500 m ring, unlimited
   range): every transmission reaches every modem, so the work per judged arrival grows with N by
   construction (N-1 arrivals per frame, one judged).
@@ -69,7 +71,14 @@ def ring_scene(nodes: int, sim_time: float, seed: int, geometry: str = "neighbou
     radius = SPACING_M * nodes / (2 * math.pi)
     for i in range(nodes):
         angle = 2 * math.pi * i / nodes
-        lines.append(f"  v{i}: {{pose: {{static: [{radius * math.cos(angle)!r}, {radius * math.sin(angle)!r}, 0]}}}}")
+        x, y = radius * math.cos(angle), radius * math.sin(angle)
+        if geometry == "drifting":
+            corners = [[round(x + dx, 3), round(y + dy, 3), 0] for dx, dy in ((10, 0), (10, 10), (0, 10), (0, 0))]
+            legs = ", ".join(f"{{to: {c}, speed_mps: 0.5}}" for c in corners)
+            lines.append(f"  v{i}: {{pose: {{path: {{start: [{round(x, 3)}, {round(y, 3)}, 0], legs: [{legs}], "
+                         f"loop: true}}}}}}")
+        else:
+            lines.append(f"  v{i}: {{pose: {{static: [{x!r}, {y!r}, 0]}}}}")
     lines.append("links:")
     for i in range(nodes):
         lines.append(f"  m{i}: {{vehicle: v{i}, address: {address[i]}, bitrate_bps: 1000, range_m: [0, {RANGE_M}]}}")
@@ -101,7 +110,7 @@ def main() -> None:
     parser.add_argument("--nodes", type=int, nargs="*", default=[50, 200, 1000])
     parser.add_argument("--sim-time", type=float, default=3600.0)
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--geometry", choices=("neighbour", "sink"), default="neighbour")
+    parser.add_argument("--geometry", choices=("neighbour", "drifting", "sink"), default="neighbour")
     parser.add_argument("--repeats", type=int, default=1)
     parser.add_argument("--tree", action="append", default=[], metavar="LABEL=DIR",
                         help="run the hilgate in DIR (repeatable: the trees are run alternately)")

@@ -121,7 +121,9 @@ def test_the_neighbour_lists_match_a_brute_force_scan():
                     beyond.append(receiver)
                     continue
             expected.append(receiver)
-        assert [nb.radio for nb in medium._neighbours[sender]] == expected
+        roaming = medium._roam.get(sender)  # a moving sender finds everyone through the moving grid
+        listed = medium._all(roaming) if roaming is not None else medium._neighbours[sender]
+        assert [nb.radio for nb in listed] == expected
         pruned += len(beyond)
         for receiver in beyond:
             assert medium._beyond(sender, receiver.address) == (receiver,)
@@ -149,3 +151,77 @@ def test_wide_addresses_are_refused_where_8_bits_are_carried(tmp_path):
         f"hilgate: {path}:6: links.x.address: 4000 is wider than 8 bits (0..254): hilgate run attaches dccomms "
         f"queues and the socket GLI (8-bit addresses) to every link; wide addresses are for hilgate sim"]
     assert not (tmp_path / "rt").exists()
+
+
+def moving_scene(seed: int) -> str:
+    """48 vehicles crossing a 4 km square at 1-3 m/s, 8 static ones, one that jumps (no top speed);
+    600 m range: every sender has more moving neighbours than the medium's ROAMING_MIN."""
+    rng = random.Random(seed)
+    lines = [f"seed: {seed}", "duration_s: 300", "channels: {ac: {speed_mps: 1500}}", "vehicles:"]
+    n = 57
+    for i in range(n):
+        p = [round(rng.uniform(-2000, 2000), 1), round(rng.uniform(-2000, 2000), 1), round(rng.uniform(0, 200), 1)]
+        if i < 48:
+            q = [round(rng.uniform(-2000, 2000), 1), round(rng.uniform(-2000, 2000), 1), p[2]]
+            legs = f"[{{to: {q}, speed_mps: {rng.uniform(1, 3):.2f}}}, {{to: {p}, speed_mps: 2}}]"
+            lines.append(f"  v{i}: {{pose: {{path: {{start: {p}, legs: {legs}, loop: true}}}}}}")
+        elif i < 56:
+            lines.append(f"  v{i}: {{pose: {{static: {p}}}}}")
+        else:
+            lines.append(f"  v{i}: {{pose: {{path: {{start: {p}, legs: [{{hold_s: 100}}, {{to: [0, 0, 0], duration_s: 0}}]}}}}}}")
+    lines.append("links:")
+    for i in range(n):
+        lines.append(f"  l{i}: {{vehicle: v{i}, address: {i + 400}, bitrate_bps: 2000, range_m: [0, 600]}}")
+    lines.append("flows:")
+    for i in range(n):
+        dst = rng.choice([f"l{j}" for j in range(n) if j != i] + ['"*"'])
+        lines.append(f"  - {{from: l{i}, to: {dst}, size_bytes: {rng.randint(10, 60)}, rate_hz: 0.2, poisson: true}}")
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_the_moving_grid_gives_the_trace_of_a_full_scan(seed, monkeypatch):
+    """Senders with many moving neighbours visit only those the moving grid puts near them; the
+    trace (every arrival, collision, loss and range error) is byte-identical to visiting all."""
+    import hilgate.models.medium as medium_module
+
+    def run() -> tuple[str, int, int]:
+        trace = io.StringIO()
+        simulation = Simulation(load_scene_text(moving_scene(seed)), trace=trace)
+        simulation.run()
+        medium = simulation.world.medium
+        return trace.getvalue(), medium.arrivals, len(medium._roam)
+
+    indexed, arrivals, roaming = run()
+    assert roaming == 57
+    monkeypatch.setattr(medium_module, "ROAMING_MIN", 10**9)
+    scanned, arrivals_scanned, roaming_scanned = run()
+    assert roaming_scanned == 0
+    assert indexed == scanned and arrivals == arrivals_scanned
+    events = [json.loads(line) for line in indexed.splitlines()]
+    assert sum(e["ev"] == "rx" for e in events) > 100
+    assert sum(e["ev"] == "err" and e.get("cause") == "range" for e in events) > 20
+
+
+def test_the_moving_grid_holds_every_radio_in_range():
+    """At many instants, what the grid visits includes every radio a sender reaches (a full scan)."""
+    simulation = Simulation(load_scene_text(moving_scene(3)))
+    medium = simulation.world.medium
+    medium._rebuild()
+    rng = random.Random(4)
+    from hilgate.models.frame import BROADCAST, Frame
+
+    visited_total = listed_total = 0
+    for _ in range(60):
+        t = rng.uniform(0, 1000)
+        for sender in medium.radios:
+            here = sender.pose.position(t)
+            frame = Frame(1, "x", "y", BROADCAST, 10, t)
+            visit = medium._visit(medium._roam[sender], here, t, frame)
+            listed = medium._all(medium._roam[sender])
+            assert visit == [nb for nb in listed if nb in visit]  # list order kept
+            in_range = [nb for nb in listed if math.dist(here, nb.radio.pose.position(t)) <= 600]
+            assert set(in_range) <= set(visit)
+            visited_total += len(visit)
+            listed_total += len(listed)
+    assert visited_total < listed_total / 2  # and it does leave most out
