@@ -162,6 +162,8 @@ class Medium:
         radios = self.radios
         order = self._order = {radio: i for i, radio in enumerate(radios)}
         moving = [radio for radio in radios if not radio.pose.static]
+        unbounded = [radio for radio in radios if not math.isfinite(getattr(radio.pose, "max_speed_mps", math.inf))]
+        moving_unbounded = [radio for radio in unbounded if not radio.pose.static]
         pools: dict[str, set[Radio]] = {}  # per channel: listening radios with a top speed
         pooled_static: dict[str, int] = {}  # and how many of them are static
         for radio in radios:
@@ -183,19 +185,22 @@ class Medium:
                 if roamers <= ROAMING_MIN:
                     pool = set()
             roaming = _Roaming(sender, channel, pool) if pool else None
+            # who to list: the moving grid finds the moving radios with a top speed when it serves
+            # this sender (and every radio with a top speed when the sender itself moves)
             if sender.pose.static and math.isfinite(rmax):
+                others = moving_unbounded if roaming is not None else moving
                 origin = sender.pose.position(0.0)
                 if origin is None:
-                    candidates = moving
+                    candidates = others
                 else:
                     grid = grids.get(rmax)
                     if grid is None:
                         grid = grids[rmax] = _static_grid(radios, rmax)
                     candidates = _near(grid, origin, _cell_size(rmax))
-                    candidates.extend(moving)
+                    candidates.extend(others)
                     candidates.sort(key=order.__getitem__)
             else:
-                candidates = radios
+                candidates = unbounded if roaming is not None else radios
             listed = []
             for receiver in candidates:
                 if receiver is sender or receiver.rx_channel != sender.tx_channel or not receiver.listens:
