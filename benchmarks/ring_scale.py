@@ -17,7 +17,10 @@ Two geometries (``--geometry``):
 Addresses are 1..N skipping 255 (the broadcast address): above 254 modems the scene needs wide
 addresses (simulated links only).  Each run is a separate ``python -m hilgate sim`` process on a
 generated scene file; ``--tree LABEL=DIR`` runs the hilgate found in DIR instead (e.g. an exported
-older commit), and several trees are run alternately, N by N, repeat by repeat.  Printed per run: N,
+older commit), and several trees are run alternately, N by N, repeat by repeat.  A source tree maps
+``models/``, ``drivers/`` and ``scenes/`` into the package only when installed (pyproject's
+package-dir), so an exported tree needs ``hilgate/models -> ../models`` (and drivers, scenes) links;
+without them ``hilgate.models`` would come from the installed checkout, and the script refuses it.  Printed per run: N,
 simulated seconds, transmissions, judged arrivals (rx + prop/col/mult at the addressed receivers),
 the wall time of the process and of the simulation loop, and judged arrivals per wall second.
 
@@ -88,10 +91,30 @@ def ring_scene(nodes: int, sim_time: float, seed: int, geometry: str = "neighbou
     return "\n".join(lines) + "\n"
 
 
-def run_once(tree: str | None, scene_path: str, summary_path: str) -> dict:
+def tree_of(tree: str | None) -> str:
+    """Where ``hilgate.models.medium`` comes from when running ``tree``: it must be inside it."""
+    root = _root(tree)
+    out = subprocess.run([sys.executable, "-c", "import hilgate.models.medium as m; print(m.__file__)"],
+                         env=_env(root), cwd=tempfile.gettempdir(), check=True, capture_output=True, text=True)
+    medium = os.path.realpath(out.stdout.strip())
+    if not medium.startswith(os.path.realpath(root) + os.sep):
+        sys.exit(f"ring_scale: {root}: hilgate.models comes from {medium}, not from this tree "
+                 f"(link hilgate/models, hilgate/drivers and hilgate/scenes to ../models, ../drivers, ../scenes)")
+    return medium
+
+
+def _root(tree: str | None) -> str:
+    return os.path.abspath(tree if tree is not None else os.path.join(os.path.dirname(__file__), ".."))
+
+
+def _env(root: str) -> dict[str, str]:
     env = dict(os.environ)
-    root = os.path.abspath(tree if tree is not None else os.path.join(os.path.dirname(__file__), ".."))
     env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    return env
+
+
+def run_once(tree: str | None, scene_path: str, summary_path: str) -> dict:
+    env = _env(_root(tree))
     started = time.perf_counter()
     # run from the scene's directory: ``python -m`` puts the working directory first on sys.path
     subprocess.run([sys.executable, "-m", "hilgate", "sim", scene_path, "--summary", summary_path, "-q"],
@@ -117,6 +140,8 @@ def main() -> None:
     args = parser.parse_args()
     trees = [tuple(t.split("=", 1)) for t in args.tree] or [("this", None)]
     print(f"geometry {args.geometry}, {args.sim_time:g} simulated s, seed {args.seed}, repeats {args.repeats}")
+    for label, tree in trees:
+        print(f"{label}: {tree_of(tree)}")
     print(f"{'tree':>8} {'N':>5} {'tx':>8} {'judged':>8} {'rx':>8} {'wall s':>8} {'sim s':>8} "
           f"{'judged/s':>9} {'us/judged':>9}")
     with tempfile.TemporaryDirectory(prefix="ring_scale-") as tmp:
