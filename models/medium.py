@@ -8,6 +8,12 @@ decides collisions (``radio.py``).  Distances between vehicles that never move, 
 probability on such a path, are computed once per pair; that is what keeps the hot path O(1) per
 arrival.
 
+With a limited range, a transmission visits only modems that can be in range: static pairs beyond it
+are never listed (the lists are built from a grid of static positions, cells as wide as the range),
+and a sender with many moving neighbours finds them through a grid of where they were a moment ago,
+widened by how far their top speed can have taken them since.  Both keep the list order, so traces
+are the same as with a full scan; the work per transmission no longer grows with the number of modems.
+
 The arithmetic is DESIGN.md's "timing and loss model", step 3 (and the PER of step 5).
 """
 
@@ -104,6 +110,11 @@ class Medium:
         self.frame_ids = itertools.count(1)
         self.arrivals = 0
         self._neighbours: dict[Radio, list[_Neighbour]] = {}
+        self._unreachable: dict[Radio, dict[int, tuple[Radio, ...]]] = {}
+        self._roam: dict[Radio, _Roaming] = {}
+        self._order: dict[Radio, int] = {}
+        self._snap: tuple[float, dict[tuple[int, int, int], list[Radio]], list[Radio], float] | None = None
+        self._snap_reach = 0.0
         self._dirty = True
         self.tap: Any = None
         """Called ``tap(sender, frame, t, duration)`` for every transmission from a radio that listens
@@ -140,17 +151,150 @@ class Medium:
         return None
 
     def _rebuild(self) -> None:
+        """Neighbour lists per sender, in attachment order (the order arrivals are handed out, which
+        fixes the order of same-instant events).
+
+        A static pair out of range is left out of the list altogether, so a transmission never visits
+        it; a frame addressed to such a radio still gets its ``range`` error (:meth:`_beyond`).  A
+        static sender with a finite range only looks at the static radios in the grid cells around it
+        (cells as wide as its range: ``_static_grid``), so building the lists is O(n · neighbours),
+        not O(n²)."""
         radios = self.radios
+        order = self._order = {radio: i for i, radio in enumerate(radios)}
+        moving = [radio for radio in radios if not radio.pose.static]
+        unbounded = [radio for radio in radios if not math.isfinite(getattr(radio.pose, "max_speed_mps", math.inf))]
+        moving_unbounded = [radio for radio in unbounded if not radio.pose.static]
+        pools: dict[str, set[Radio]] = {}  # per channel: listening radios with a top speed
+        pooled_static: dict[str, int] = {}  # and how many of them are static
+        for radio in radios:
+            if radio.listens and math.isfinite(getattr(radio.pose, "max_speed_mps", math.inf)):
+                pools.setdefault(radio.rx_channel, set()).add(radio)
+                pooled_static[radio.rx_channel] = pooled_static.get(radio.rx_channel, 0) + bool(radio.pose.static)
+        grids: dict[float, dict[tuple[int, int, int], list[Radio]]] = {}
         neighbours = {}
+        roam: dict[Radio, _Roaming] = {}
         for sender in radios:
             channel = self.channels[sender.tx_channel]
-            neighbours[sender] = [
-                _Neighbour(sender, receiver, channel)
-                for receiver in radios
-                if receiver is not sender and receiver.rx_channel == sender.tx_channel and receiver.listens
-            ]
+            rmax = sender.range_m[1]
+            pool: set[Radio] = set()
+            if math.isfinite(rmax):
+                pool = pools.get(sender.tx_channel, set())
+                roamers = len(pool) - (sender in pool)
+                if sender.pose.static:  # its static pairs are listed once, not roaming
+                    roamers = len(pool) - pooled_static.get(sender.tx_channel, 0)
+                if roamers <= ROAMING_MIN:
+                    pool = set()
+            roaming = _Roaming(sender, channel, pool) if pool else None
+            # who to list: the moving grid finds the moving radios with a top speed when it serves
+            # this sender (and every radio with a top speed when the sender itself moves)
+            if sender.pose.static and math.isfinite(rmax):
+                others = moving_unbounded if roaming is not None else moving
+                origin = sender.pose.position(0.0)
+                if origin is None:
+                    candidates = others
+                else:
+                    grid = grids.get(rmax)
+                    if grid is None:
+                        grid = grids[rmax] = _static_grid(radios, rmax)
+                    candidates = _near(grid, origin, _cell_size(rmax))
+                    candidates.extend(others)
+                    candidates.sort(key=order.__getitem__)
+            else:
+                candidates = unbounded if roaming is not None else radios
+            listed = []
+            for receiver in candidates:
+                if receiver is sender or receiver.rx_channel != sender.tx_channel or not receiver.listens:
+                    continue
+                if roaming is not None and roaming.covers(receiver):
+                    continue  # found through the moving grid at each transmission
+                nb = _Neighbour(sender, receiver, channel)
+                if not nb.static or nb.in_range:
+                    listed.append(nb)
+            neighbours[sender] = listed
+            if roaming is not None:
+                roam[sender] = roaming
         self._neighbours = neighbours
+        self._unreachable = {}
+        self._roam = roam
+        self._snap = None
+        reach = [sender.range_m[1] for sender in roam]
+        self._snap_reach = max(max(reach), 1.0) if reach else 0.0
         self._dirty = False
+
+    def _beyond(self, sender: "Radio", dst: int) -> tuple["Radio", ...]:
+        """The radios with address ``dst`` on ``sender``'s channel that a static pair keeps out of its
+        range (or without a position): they are in no neighbour list, and a frame addressed to them
+        gets its ``range`` error here.  Cached per sender and address until the topology changes."""
+        listed = {nb.radio for nb in self._neighbours[sender]}
+        roaming = self._roam.get(sender)
+        found = tuple(
+            radio for radio in self.radios
+            if radio.address == dst and radio is not sender and radio.rx_channel == sender.tx_channel
+            and radio.listens and radio not in listed and sender.pose.static and radio.pose.static
+            and (roaming is None or not roaming.covers(radio))
+        )
+        self._unreachable.setdefault(sender, {})[dst] = found
+        return found
+
+    def _moving_grid(self, t: float) -> tuple[float, dict[tuple[int, int, int], list["Radio"]], list["Radio"], float]:
+        """Where every radio with a top speed was at ``t0`` (at most ``_snap_reach / 4`` metres ago at
+        the fastest speed): (t0, grid with cells of 1.25 × the widest indexed range, radios without a
+        position, that speed).  A radio within range ``r`` of a sender at ``t`` was within
+        ``r + speed·|t − t0|`` ≤ one cell side of it at ``t0``, so the 27 cells around the sender hold it."""
+        snap = self._snap
+        if snap is not None and abs(t - snap[0]) * snap[3] <= 0.25 * self._snap_reach:
+            return snap
+        size = _cell_size(1.25 * self._snap_reach)
+        grid: dict[tuple[int, int, int], list[Radio]] = {}
+        nowhere: list[Radio] = []
+        speed = 0.0
+        for radio in self.radios:
+            top = getattr(radio.pose, "max_speed_mps", math.inf)
+            if not math.isfinite(top):
+                continue
+            speed = max(speed, top)
+            position = radio.pose.position(t)
+            if position is None:
+                nowhere.append(radio)
+            else:
+                grid.setdefault(_cell(position, size), []).append(radio)
+        snap = self._snap = (t, grid, nowhere, speed)
+        return snap
+
+    def _visit(self, roaming: "_Roaming", here: tuple[float, ...], t: float, frame: "Frame") -> list[_Neighbour]:
+        """The neighbours a transmission from ``here`` at ``t`` must look at, in attachment order: the
+        listed ones (static pairs in range, radios without a top speed) and those the moving grid puts
+        near.  A frame addressed to one the grid leaves out gets its ``range`` error here."""
+        _, grid, nowhere, _ = self._moving_grid(t)
+        visit = list(self._neighbours[roaming.sender])
+        covers, entry = roaming.covers, roaming.entry
+        for radio in _near(grid, here, _cell_size(1.25 * self._snap_reach)):
+            if covers(radio):
+                visit.append(entry(radio))
+        for radio in nowhere:
+            if covers(radio):
+                visit.append(entry(radio))
+        order = self._order
+        visit.sort(key=lambda nb: order[nb.radio])
+        dst = frame.dst_addr
+        if dst != BROADCAST:
+            addressed = [radio for radio in roaming.pool if radio.address == dst and covers(radio)] \
+                if dst not in roaming.addresses else roaming.addresses[dst]
+            roaming.addresses[dst] = addressed
+            if addressed:
+                seen = {nb.radio for nb in visit}
+                for radio in addressed:
+                    if radio not in seen:
+                        radio.unreachable(frame)
+        return visit
+
+    def _all(self, roaming: "_Roaming") -> list[_Neighbour]:
+        """Every neighbour of a sender the moving grid serves, in attachment order (when it has no
+        position: then nobody hears it, and a frame addressed to one of them gets its range error)."""
+        listed = self._neighbours[roaming.sender] + [roaming.entry(r) for r in roaming.pool if roaming.covers(r)]
+        order = self._order
+        listed.sort(key=lambda nb: order[nb.radio])
+        return listed
 
     def propagation_delay(self, sender: Any, receiver: Any, t: float) -> float | None:
         """τ from ``sender`` to ``receiver`` (modems or radios) at ``t``, or None if out of range or
@@ -172,6 +316,18 @@ class Medium:
             self.tap(sender, frame, t, duration)
         neighbours = self._neighbours[sender]
         dst = frame.dst_addr
+        if self._roam:
+            roaming = self._roam.get(sender)
+            if roaming is not None:
+                here = sender.pose.position(t)
+                neighbours = self._visit(roaming, here, t, frame) if here is not None else self._all(roaming)
+        if dst != BROADCAST:
+            known = self._unreachable.get(sender)
+            beyond = known.get(dst) if known is not None else None
+            if beyond is None:
+                beyond = self._beyond(sender, dst)
+            for radio in beyond:  # addressed to a static radio out of range (never visited below)
+                radio.unreachable(frame)
         sender_position = None
         missed = 0  # neighbours the frame does not reach (counted this way round: they are the few)
         for nb in neighbours:
@@ -179,11 +335,6 @@ class Medium:
             if nb.reach:
                 d = nb.d
                 start = t + nb.tau
-            elif nb.static:
-                if radio.address == dst:
-                    radio.unreachable(frame)
-                missed += 1
-                continue
             else:
                 if sender_position is None:
                     sender_position = sender.pose.position(t)
@@ -209,3 +360,69 @@ class Medium:
                 start = t + nb.min_delay + d / nb.speed
             radio.arrive(frame, t, start, start + duration, d, nb)
         self.arrivals += len(neighbours) - missed
+
+
+def _cell_size(rmax: float) -> float:
+    """A grid cell a little wider than ``rmax``: two points within ``rmax`` of each other are then in
+    the same or adjacent cells, whatever the rounding of the division."""
+    return max(rmax, 1.0) * (1.0 + 1e-9)
+
+
+def _cell(position: tuple[float, ...], size: float) -> tuple[int, int, int]:
+    x, y, z = position[0], position[1], position[2] if len(position) > 2 else 0.0
+    return (math.floor(x / size), math.floor(y / size), math.floor(z / size))
+
+
+def _static_grid(radios: list["Radio"], rmax: float) -> dict[tuple[int, int, int], list["Radio"]]:
+    """The static radios that have a position, by grid cell of side ``_cell_size(rmax)``."""
+    size = _cell_size(rmax)
+    grid: dict[tuple[int, int, int], list[Radio]] = {}
+    for radio in radios:
+        if radio.pose.static:
+            position = radio.pose.position(0.0)
+            if position is not None:
+                grid.setdefault(_cell(position, size), []).append(radio)
+    return grid
+
+
+def _near(grid: dict[tuple[int, int, int], list["Radio"]], origin: tuple[float, ...], size: float) -> list["Radio"]:
+    """The radios in the 27 cells around ``origin``: a superset of those within one cell side."""
+    cx, cy, cz = _cell(origin, size)
+    found: list[Radio] = []
+    for dx in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            for dz in (-1, 0, 1):
+                cell = grid.get((cx + dx, cy + dy, cz + dz))
+                if cell is not None:
+                    found.extend(cell)
+    return found
+
+
+ROAMING_MIN = 32
+"""A sender with more moving-pair neighbours (with a top speed) than this finds them through the
+moving grid; below it, computing every distance is cheaper than the grid."""
+
+
+class _Roaming:
+    """The neighbours of ``sender`` that the moving grid serves: the radios of ``pool`` (listening on
+    its channel, with a top speed) other than itself, and for a static sender only the moving ones
+    (its static pairs are listed once).  Their entries are made on first use."""
+
+    __slots__ = ("sender", "channel", "pool", "static", "entries", "addresses")
+
+    def __init__(self, sender: "Radio", channel: Channel, pool: set["Radio"]):
+        self.sender = sender
+        self.channel = channel
+        self.pool = pool
+        self.static = bool(sender.pose.static)
+        self.entries: dict[Radio, _Neighbour] = {}
+        self.addresses: dict[int, list[Radio]] = {}
+
+    def covers(self, radio: "Radio") -> bool:
+        return radio in self.pool and radio is not self.sender and not (self.static and radio.pose.static)
+
+    def entry(self, radio: "Radio") -> _Neighbour:
+        nb = self.entries.get(radio)
+        if nb is None:
+            nb = self.entries[radio] = _Neighbour(self.sender, radio, self.channel)
+        return nb

@@ -30,6 +30,7 @@ class PoseSource(Protocol):
 
 class Static:
     static = True
+    max_speed_mps = 0.0
 
     def __init__(self, position: Sequence[float]):
         self._position: Vec3 = (float(position[0]), float(position[1]), float(position[2]))
@@ -75,6 +76,8 @@ class Piecewise:
         self.t_end = self.segments[-1].t1
         self.loop = loop and self.t_end > self.t_begin
         self.static = all(s.p0 == s.p1 for s in self.segments) and len({s.p0 for s in self.segments}) == 1
+        self.max_speed_mps = max(map(_speed, self.segments))
+        """No faster than this anywhere (inf for a jump): lets the medium's grid bound where it can be."""
 
     def position(self, t: float) -> Vec3:
         if self.loop and t > self.t_end:
@@ -89,6 +92,14 @@ class Piecewise:
 
     def __repr__(self) -> str:
         return f"Piecewise({len(self.segments)} segments, loop={self.loop})"
+
+
+def _speed(segment: Segment) -> float:
+    length = math.dist(segment.p0, segment.p1)
+    if length == 0.0:
+        return 0.0
+    span = segment.t1 - segment.t0
+    return length / span if span > 0 else math.inf
 
 
 def _vec(p: Sequence[float]) -> Vec3:

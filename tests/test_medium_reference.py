@@ -19,13 +19,18 @@ from hilgate.sim.simulate import simulate
 EPS = 1e-9
 
 
-def random_scene(seed: int) -> tuple[str, dict]:
+def random_scene(seed: int, sparse: bool = False) -> tuple[str, dict]:
+    """3-7 modems within 800 m; ``sparse``: 20-30 over 5 km, so the medium's grid by max range (900 m)
+    leaves most static pairs out of its neighbour lists."""
     rng = random.Random(seed)
-    n = rng.randint(3, 7)
-    positions = {f"v{i}": [rng.uniform(-800, 800), rng.uniform(-800, 800), rng.uniform(0, 50)] for i in range(n)}
+    n = rng.randint(20, 30) if sparse else rng.randint(3, 7)
+    spread = 2500 if sparse else 800
+    positions = {f"v{i}": [rng.uniform(-spread, spread), rng.uniform(-spread, spread), rng.uniform(0, 50)]
+                 for i in range(n)}
     duplex = {f"l{i}": rng.choice(["half", "full"]) for i in range(n)}
     max_range = {f"l{i}": rng.choice([math.inf, 900.0]) for i in range(n)}
-    lines = ["seed: %d" % seed, "duration_s: 120", "channels: {ac: {speed_mps: 1500}}", "vehicles:"]
+    duration = 30 if sparse else 120
+    lines = ["seed: %d" % seed, f"duration_s: {duration}", "channels: {ac: {speed_mps: 1500}}", "vehicles:"]
     for name, p in positions.items():
         lines.append(f"  {name}: {{pose: {{static: {p}}}}}")
     lines.append("links:")
@@ -38,13 +43,14 @@ def random_scene(seed: int) -> tuple[str, dict]:
         dst = rng.choice([f"l{j}" for j in range(n) if j != i] + ['"*"'])
         lines.append(f"  - {{from: l{i}, to: {dst}, size_bytes: {rng.randint(5, 120)}, "
                      f"rate_hz: {rng.uniform(0.2, 1.5):.3f}, poisson: true}}")
-    info = {"positions": {f"l{i}": positions[f"v{i}"] for i in range(n)}, "duplex": duplex, "range": max_range}
+    info = {"positions": {f"l{i}": positions[f"v{i}"] for i in range(n)}, "duplex": duplex, "range": max_range,
+            "duration": duration}
     return "\n".join(lines) + "\n", info
 
 
-@pytest.mark.parametrize("seed", range(12))
-def test_outcomes_match_a_brute_force_recomputation(seed):
-    text, info = random_scene(seed)
+@pytest.mark.parametrize("seed, sparse", [(seed, False) for seed in range(12)] + [(seed, True) for seed in range(4)])
+def test_outcomes_match_a_brute_force_recomputation(seed, sparse):
+    text, info = random_scene(seed, sparse)
     trace = io.StringIO()
     simulate(load_scene_text(text), trace=trace)
     events = [json.loads(line) for line in trace.getvalue().splitlines()]
@@ -79,7 +85,7 @@ def test_outcomes_match_a_brute_force_recomputation(seed):
 
     judged = [e for e in events if e["ev"] in ("rx", "err") and e.get("cause") != "range"]
     assert len(judged) > 50
-    end_of_run = 120.0
+    end_of_run = info["duration"]
     for e in judged:
         outcome, end = expected[(e["link"], e["pkt"])]
         assert ("ok" if e["ev"] == "rx" else e["cause"]) == outcome, e
@@ -89,4 +95,10 @@ def test_outcomes_match_a_brute_force_recomputation(seed):
     for (receiver, pkt), (_, end) in expected.items():
         if end <= end_of_run and dst_of[pkt] in (receiver, "*"):
             assert (receiver, pkt) in judged_keys
+    # a frame addressed beyond the sender's range gets its range error at the addressed link, once
+    expected_range = sorted((e["dst"], e["pkt"]) for e in txs if e["dst"] != "*"
+                            and math.dist(info["positions"][e["link"]], info["positions"][e["dst"]]) > info["range"][e["link"]])
+    assert sorted((e["link"], e["pkt"]) for e in events if e["ev"] == "err" and e.get("cause") == "range") == expected_range
+    if sparse:
+        assert expected_range  # the grid left pairs out, and their frames still get their errors
     assert address  # addresses are positional in random_scene

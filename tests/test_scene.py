@@ -102,7 +102,12 @@ links: {x: {vehicle: a, model: evologics-s2cr-7-17}}
     ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
      "links:\n  x: {vehicle: a, address: 1}\n  y: {vehicle: a, address: 1}\n", 5, "links.y.address", "already used"),
     ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
-     "links:\n  x: {vehicle: a, address: 255}\n", 4, "links.x.address", "at most 254"),
+     "links:\n  x: {vehicle: a, address: 255}\n", 4, "links.x.address", "broadcast address"),
+    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
+     "links:\n  x: {vehicle: a, address: 65535}\n", 4, "links.x.address", "at most 65534"),
+    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
+     "links:\n  x:\n    vehicle: a\n    packet: dlf16\n    address: 300\n", 7, "links.x.address",
+     "packet class dlf16 carries a one-byte address on air"),
     ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
      "links:\n  x: {vehicle: a, range_m: [6, 0.5]}\n", 4, "links.x.range_m", "below min"),
     ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"

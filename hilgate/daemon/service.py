@@ -27,6 +27,7 @@ from .router import Router
 from .network import Network
 from ..scene import Scene, SceneError, load_scene
 from ..scene.hosts import HOST_NAME, ZenohSpec
+from ..scene.links import require_narrow_addresses
 from ..scene.worker import SceneJob, request_for
 from ..core.notify import notify, watchdog_interval
 from ..sim.simulate import write_summary
@@ -89,6 +90,7 @@ class Daemon:
     def run(self) -> int:
         scene = load_scene(self.scene_path, self.overrides, plugins=self.plugins,
                            preset_dirs=self.preset_dirs)  # a bad scene never half-starts
+        require_narrow_addresses(scene.links.values())
         self.scene = scene
         host = self._host(scene)
         group = resolve_group(self.group_name)
@@ -250,6 +252,11 @@ class Daemon:
         self._reload_job = None
         if scene is None:
             self._reload_finished(False, error or "unknown error")
+            return
+        try:
+            require_narrow_addresses(scene.links.values())
+        except SceneError as exc:
+            self._reload_finished(False, str(exc))
             return
         try:
             self.router.apply(scene)

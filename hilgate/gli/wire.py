@@ -19,6 +19,11 @@ type        direction            body
 8 REPLY     hilgate → client     UTF-8 JSON answer to a COMMAND
 ==========  ===================  =====================================================================
 
+Addresses are 8 bits (version 1).  Simulated links with wider addresses (up to 65534, ``hilgate sim``
+only) are refused by ``hilgate run`` before any endpoint opens, so this framing never has to carry
+one; widening it would need a new ``version`` with ``u16`` fields announced in WELCOME, leaving
+version-1 clients as they are.
+
 Payloads are the application's bytes only; hilgate wraps them in the link's packet class, so their
 size on air is what a dccomms application of the same class would have sent.
 """

@@ -87,7 +87,7 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
         if value not in channels and key in f:
             raise f.child(key).error(f.sub(key), f"no channel {value!r} in the scene; channels: {', '.join(channels)}")
     params = ModemParams(
-        address=f.get("address", integer(0, BROADCAST - 1), -1),
+        address=f.get("address", _address, -1),
         tx_channel=tx_channel,
         rx_channel=rx_channel,
         bitrate_bps=f.get("bitrate_bps", number(above=0), 1000.0),
@@ -129,8 +129,57 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
         raise f.child("usbl").error(f.sub("usbl"), "only an emulated EvoLogics modem reports USBL fixes "
                                                    "(give the link emulate: {protocol: evologics, pty: …} or tcp)")
     host = f.get("host", host_name, None)
+    address_line = 0
+    if params.address > NARROW_MAX:
+        child = f.child("address")
+        address_line = child.line
+        problem = _wide_problem(backend, emulate, packet)
+        if problem:
+            raise child.error(f.sub("address"), f"{params.address} is wider than 8 bits (0..{NARROW_MAX}): {problem}")
     return LinkSpec(link_id, vehicle, backend, model, params, mac, packet, node.file, node.line, options, emulate,
-                    addressing, host=host, usbl=usbl)
+                    addressing, host=host, usbl=usbl, address_line=address_line)
+
+
+NARROW_MAX = BROADCAST - 1
+"""The widest address dccomms and the 8-bit carriers take (255 is the broadcast address)."""
+
+WIDE_MAX = 0xFFFE
+"""The widest address of a simulated-only link (16 bits; 0xFFFF is kept back).  255 stays the
+broadcast address on every channel, wide or not, so it is never a modem's address."""
+
+
+def _address(node: Node, path: str) -> int:
+    value = integer(0, WIDE_MAX)(node, path)
+    if value == BROADCAST:
+        raise node.error(path, f"{BROADCAST} is the broadcast address, not a modem's")
+    return value
+
+
+def _wide_problem(backend: str, emulate: tuple, packet: str) -> str:
+    """Why a link cannot have an address above 254, or "" if it can: only a simulated link that no
+    8-bit carrier touches (a real modem, an emulated one, a packet class with a u8 address on air)."""
+    from ..core.packets import packet_class
+
+    if backend != SIM:
+        return f"a real modem (backend: {backend}) has an 8-bit address"
+    if emulate:
+        return "an emulated modem speaks 8-bit addresses (AT protocol)"
+    if packet_class(packet).addresses_on_air:
+        return f"packet class {packet} carries a one-byte address on air"
+    return ""
+
+
+def require_narrow_addresses(links: Any) -> None:
+    """``hilgate run`` attaches dccomms applications (POSIX queues) and the socket GLI, whose ``u8 dst``
+    carries 8 bits, to every link: a wide address is refused there, naming its file, line and key."""
+    from .yaml_nodes import SceneError
+
+    for link in links:
+        if link.params.address > NARROW_MAX:
+            raise SceneError(link.file, link.address_line or link.line, f"links.{link.id}.address",
+                             f"{link.params.address} is wider than 8 bits (0..{NARROW_MAX}): hilgate run attaches "
+                             f"dccomms queues and the socket GLI (8-bit addresses) to every link; wide addresses "
+                             f"are for hilgate sim")
 
 
 FIRMWARE_KEYS = ("version", "phy", "mac", "manufacturer", "mode")
