@@ -31,7 +31,7 @@ from .yaml_nodes import Node
 __all__ = ["LINK_KEYS", "BACKENDS", "Context", "link_spec", "assign_addresses"]
 
 OWN_KEYS = ("vehicle", "backend", "model", "address", "channel", "tx_channel", "rx_channel", "host",
-            "usbl")
+            "usbl", "gli")
 
 
 def link_keys() -> tuple[str, ...]:
@@ -129,8 +129,29 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
         raise f.child("usbl").error(f.sub("usbl"), "only an emulated EvoLogics modem reports USBL fixes "
                                                    "(give the link emulate: {protocol: evologics, pty: …} or tcp)")
     host = f.get("host", host_name, None)
+    gli = f.get("gli", _gli_endpoints, GLI_ENDPOINTS)
     return LinkSpec(link_id, vehicle, backend, model, params, mac, packet, node.file, node.line, options, emulate,
-                    addressing, host=host, usbl=usbl)
+                    addressing, host=host, usbl=usbl, gli=gli)
+
+
+GLI_ENDPOINTS = ("mq", "socket")
+
+
+def _gli_endpoints(node: Node, path: str) -> tuple[str, ...]:
+    """``gli: [mq, socket]`` (the default), ``[socket]``, ``[mq]`` or ``[]``: which GLI endpoints the link
+    opens.  Every ``mq`` link costs two POSIX queues of a per-user and a system-wide budget; a link only
+    socket applications (or only an emulated modem) use needs none."""
+    items = [node] if isinstance(node.value, str) else node.value if node.is_list else None
+    if items is None:
+        raise node.error(path, f"must be a list of {' and '.join(GLI_ENDPOINTS)} (e.g. [socket]), not {describe(node)}")
+    chosen = []
+    for i, item in enumerate(items):
+        item_path = path if item is node else join_path(path, i)
+        value = choice(*GLI_ENDPOINTS)(item, item_path)
+        if value in chosen:
+            raise item.error(item_path, f"{value} is given twice")
+        chosen.append(value)
+    return tuple(name for name in GLI_ENDPOINTS if name in chosen)
 
 
 FIRMWARE_KEYS = ("version", "phy", "mac", "manufacturer", "mode")

@@ -112,6 +112,7 @@ class LinkSpec:
     addressing: str = "auto"  # auto: address-less packet classes without a MAC reach everyone in range
     host: str | None = None  # the host whose daemon serves it (None: a scene for one daemon)
     usbl: UsblParams | None = None  # the emulated modem is a USBL: it reports fixes of whom it hears
+    gli: tuple[str, ...] = ("mq", "socket")  # the GLI endpoints the daemon opens for it (links.py)
 
     @property
     def everyone_in_range(self) -> bool:
