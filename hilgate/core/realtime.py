@@ -16,8 +16,9 @@ threads and signals).  Three details give sub-millisecond lateness without burni
   sent usually sends again (or answers) soon, and waking a sleeping process costs tens of
   microseconds on a virtual machine.  The window adapts as KVM's halt polling does: it halves each
   time it expires with no input and grows (up to ``linger_s``) when input came soon after the loop
-  went to sleep; and all lingering together may take at most ``linger_budget`` of the wall clock (a
-  fixed 0.15 ms after every input cost hundreds of links most of a core).  Only traffic makes it spin;
+  went to sleep; and all lingering together may take at most ``linger_budget`` (half) of the wall
+  clock: a fixed 0.15 ms after every input cost hundreds of links much of a core, while a tighter cap
+  (10 %) added some 70 µs to every round trip of a single busy link.  Only traffic makes it spin;
 - Python's automatic garbage collection is off while the loop runs (a collection takes up to a
   millisecond at an arbitrary moment); the loop collects the young generations itself when the
   next event is at least ``gc_gap_s`` away.  The models make no reference cycles per event, so
@@ -97,7 +98,7 @@ class RealtimeScheduler(VirtualScheduler):
     """False: the fixed spin and linger of earlier versions (``benchmarks/many_links.py --spin fixed``)."""
 
     def __init__(self, speed: float = 1.0, spin_s: float = 0.0003, gc_gap_s: float = 0.002,
-                 linger_s: float = 0.00015, spin_min_s: float = 0.00005, linger_budget: float = 0.1):
+                 linger_s: float = 0.00015, spin_min_s: float = 0.00005, linger_budget: float = 0.5):
         super().__init__()
         if speed <= 0:
             raise ValueError("speed must be positive")

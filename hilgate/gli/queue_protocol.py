@@ -17,6 +17,7 @@ from ..core.packets import Decoded, PacketClass, PacketError
 
 FRAME, REQ_STATE, CMD_STATE, NOTBUILT = 0, 1, 2, 3
 BUSY, READY = 0, 1
+FRAME_PREFIX = bytes([FRAME])
 
 
 @dataclass(frozen=True)
@@ -55,7 +56,7 @@ class QueueProtocol:
         kind = message[0]
         if kind == FRAME:
             try:
-                return FrameIn(self.packet.decode_body(message[1:]))
+                return FrameIn(self.packet.decode_body(memoryview(message)[1:]))  # no 2 kB copy
             except PacketError as exc:
                 return Refused(exc.reason, len(message))
         if kind == REQ_STATE:
@@ -78,4 +79,4 @@ class QueueProtocol:
         self.said = message[1]
 
     def frame_message(self, real: bytes, seq: int, src: int, dst: int) -> bytes:
-        return bytes([FRAME]) + self.packet.encode_body(real, seq, src, dst)
+        return self.packet.encode_body(real, seq, src, dst, FRAME_PREFIX)
