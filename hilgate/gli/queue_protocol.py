@@ -56,7 +56,7 @@ class QueueProtocol:
         kind = message[0]
         if kind == FRAME:
             try:
-                return FrameIn(self.packet.decode_body(memoryview(message)[1:]))  # no 2 kB copy
+                return FrameIn(self.packet.decode_body(message[1:]))
             except PacketError as exc:
                 return Refused(exc.reason, len(message))
         if kind == REQ_STATE:
