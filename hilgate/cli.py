@@ -38,6 +38,7 @@ def cmd_check(args: argparse.Namespace) -> int:
 
     scene = load_scene(args.scene, args.overrides, plugins=args.plugins, preset_dirs=args.preset_dirs)
     print(scene_summary(scene))
+    print(_queue_budget(scene))
     limit = None if args.budget_rows == 0 else args.budget_rows
     rows = link_budget(scene, args.frame_bytes, limit)
     if rows:
@@ -48,6 +49,18 @@ def cmd_check(args: argparse.Namespace) -> int:
             print("... more pairs not shown (--budget-rows 0 shows them all)")
     print("ok")
     return 0
+
+
+def _queue_budget(scene) -> str:
+    """The POSIX queues and descriptors the scene's GLI endpoints need against this user's limits (a
+    warning per limit they exceed; the daemon itself would stop at the first queue it cannot create)."""
+    from .gli.limits import budget_problems, describe, read_limits, scene_need
+
+    limits = read_limits()
+    need = scene_need(((l.id, l.gli, l.packet) for l in scene.links.values()), limits)
+    lines = [describe(need, limits)]
+    lines += [f"warning: the scene exceeds the {problem}" for problem in budget_problems(need, limits)]
+    return "\n".join(lines)
 
 
 def cmd_sim(args: argparse.Namespace) -> int:

@@ -41,6 +41,10 @@ class LinkPort(Protocol):
     def address(self) -> int: ...
 
     @property
+    def gli(self) -> tuple[str, ...]:
+        """The GLI endpoints the scene gives the link (``mq``, ``socket``): a door opens only its own."""
+
+    @property
     def ready(self) -> bool:
         """READY: the backend is up and idle, and no endpoint holds the link busy."""
 

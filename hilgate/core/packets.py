@@ -22,6 +22,8 @@ from dataclasses import dataclass
 import fastcrc
 
 VIRTUAL_AREA = 12
+_VIRTUAL = struct.Struct("<III")  # seq, src, dst: compiled once, every frame on a queue has it
+_ZEROS = memoryview(bytes(8192))  # padding slices of it are not copied before the frame is joined
 PREAMBLE = 0x55
 from ..models.frame import BROADCAST  # the one broadcast address, as the medium knows it
 MAX_QUEUE_MESSAGE = 8192
@@ -97,13 +99,15 @@ class PacketClass(ABC):
         if len(body) != self.body_size:
             raise PacketError("size", f"{self.name} frames are {self.body_size} bytes on the queue, got {len(body)}")
         real, payload, src, dst = self.parse_real(body[: self.max_real])
-        seq, v_src, v_dst = struct.unpack_from("<III", body, self.max_real)
+        seq, v_src, v_dst = _VIRTUAL.unpack_from(body, self.max_real)
         return Decoded(real, payload, seq, _address(v_src) if src is None else src,
                        _address(v_dst) if dst is None else dst)
 
-    def encode_body(self, real: bytes, seq: int, src: int, dst: int) -> bytes:
-        return (real.ljust(self.max_real, b"\0")
-                + struct.pack("<III", seq & 0xFFFFFFFF, src & 0xFFFFFFFF, dst & 0xFFFFFFFF))
+    def encode_body(self, real: bytes, seq: int, src: int, dst: int, prefix: bytes = b"") -> bytes:
+        """``prefix`` (a queue message's type byte), the real packet padded to the class's fixed size,
+        the virtual area: joined in one allocation (a vl2b frame is 2 kB, mostly padding)."""
+        return b"".join((prefix, real, _ZEROS[: max(0, self.max_real - len(real))],
+                         _VIRTUAL.pack(seq & 0xFFFFFFFF, src & 0xFFFFFFFF, dst & 0xFFFFFFFF)))
 
     def fit_payload(self, payload: bytes) -> bytes:
         if len(payload) > self.max_payload:
@@ -263,11 +267,11 @@ class Raw(PacketClass):
         if len(body) < VIRTUAL_AREA:
             raise PacketError("size", f"raw frames end with the {VIRTUAL_AREA}-byte virtual area, got {len(body)} bytes")
         real = bytes(body[:-VIRTUAL_AREA])
-        seq, src, dst = struct.unpack_from("<III", body, len(body) - VIRTUAL_AREA)
+        seq, src, dst = _VIRTUAL.unpack_from(body, len(body) - VIRTUAL_AREA)
         return Decoded(real, real, seq, _address(src), _address(dst))
 
-    def encode_body(self, real: bytes, seq: int, src: int, dst: int) -> bytes:
-        return real + struct.pack("<III", seq & 0xFFFFFFFF, src & 0xFFFFFFFF, dst & 0xFFFFFFFF)
+    def encode_body(self, real: bytes, seq: int, src: int, dst: int, prefix: bytes = b"") -> bytes:
+        return b"".join((prefix, real, _VIRTUAL.pack(seq & 0xFFFFFFFF, src & 0xFFFFFFFF, dst & 0xFFFFFFFF)))
 
 
 class HilgateFrame(VariableLength):

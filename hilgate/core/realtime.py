@@ -7,11 +7,18 @@ threads and signals).  Three details give sub-millisecond lateness without burni
 - ``epoll_wait`` and asyncio round timeouts to whole milliseconds, so the loop sleeps in
   ``select()`` on the epoll descriptor itself, which takes microseconds;
 - the thread's timer slack is lowered from the default 50 µs with ``prctl(PR_SET_TIMERSLACK)``;
-- the sleep ends ``spin_s`` before the next event and the loop polls the rest of the way.  It only
-  spins in those last few hundred microseconds, so an idle daemon sleeps;
-- after handling input it keeps polling for ``linger_s`` before it sleeps: an application that
-  just sent usually sends again (or answers) within that time, and waking a sleeping process costs
-  tens of microseconds on a virtual machine.  Only traffic makes it spin;
+- the sleep ends a spin before the next event and the loop polls the rest of the way.  It only
+  spins in those last microseconds, so an idle daemon sleeps.  The spin adapts to how late
+  ``select()`` actually wakes on this host (a peak-hold estimate that decays, between ``spin_min_s``
+  and ``spin_s``): a fixed 0.3 ms made a daemon with hundreds of links and thousands of timers a
+  second poll nearly all the time;
+- after handling input it may keep polling for a while before it sleeps: an application that just
+  sent usually sends again (or answers) soon, and waking a sleeping process costs tens of
+  microseconds on a virtual machine.  The window adapts as KVM's halt polling does: it halves each
+  time it expires with no input and grows (up to ``linger_s``) when input came soon after the loop
+  went to sleep; and all lingering together may take at most ``linger_budget`` (half) of the wall
+  clock: a fixed 0.15 ms after every input cost hundreds of links much of a core, while a tighter cap
+  (10 %) added some 70 µs to every round trip of a single busy link.  Only traffic makes it spin;
 - Python's automatic garbage collection is off while the loop runs (a collection takes up to a
   millisecond at an arbitrary moment); the loop collects the young generations itself when the
   next event is at least ``gc_gap_s`` away.  The models make no reference cycles per event, so
@@ -49,6 +56,12 @@ from .scheduler import VirtualScheduler
 log = logging.getLogger(__name__)
 
 PR_SET_TIMERSLACK = 29
+LINGER_CREDIT_CAP = 0.005
+"""Lingering saved up while idle (wall seconds): enough for a burst, not for a second of spinning."""
+OVERSLEEP_DECAY = 0.02
+"""Fraction by which the oversleep estimate moves down towards each smaller observation."""
+LINGER_FLOOR = 0.00001
+"""A linger window below this is not worth a poll: it becomes 0 (and grows back from here)."""
 
 
 def lower_timer_slack(nanoseconds: int = 1000) -> bool:
@@ -81,15 +94,27 @@ def make_realtime(priority: int) -> str:
 
 
 class RealtimeScheduler(VirtualScheduler):
+    adaptive = True
+    """False: the fixed spin and linger of earlier versions (``benchmarks/many_links.py --spin fixed``)."""
+
     def __init__(self, speed: float = 1.0, spin_s: float = 0.0003, gc_gap_s: float = 0.002,
-                 linger_s: float = 0.00015):
+                 linger_s: float = 0.00015, spin_min_s: float = 0.00005, linger_budget: float = 0.5):
         super().__init__()
         if speed <= 0:
             raise ValueError("speed must be positive")
         self.speed = speed
         self.spin_s = spin_s
+        """The spin before the next timer now (wall seconds); adapted between spin_min_s and spin_max_s."""
+        self.spin_max_s = spin_s
+        self.spin_min_s = min(spin_min_s, spin_s)
+        self._oversleep = spin_s / 2  # how late select() wakes here: a peak-hold estimate (wall seconds)
         self.gc_gap_s = gc_gap_s
         self.linger_s = linger_s
+        self._linger = linger_s  # the linger window now (wall seconds), adapted in [0, linger_s]
+        self.linger_budget = linger_budget
+        self._linger_credit = LINGER_CREDIT_CAP  # wall seconds of lingering still allowed
+        self._credit_time = time.perf_counter()
+        self._lingering = False  # polling after an input, in its linger window
         self._last_input = -1.0
         self._origin: float | None = None
         self._epoll = select.epoll()
@@ -238,13 +263,18 @@ class RealtimeScheduler(VirtualScheduler):
             woke = self.model_time()
             self._watch_end = woke
             if not ready:
+                if self.adaptive:
+                    self._learn_oversleep((woke - deadline) / self.speed)
                 return
             blind += max(0.0, woke - deadline)  # overslept: stopped or preempted while waiting
         events_ready = self._epoll.poll(0)
         if timeout <= 0:
             self._watch_end = self.model_time()
         if events_ready or self._posted:
-            self._last_input = time.perf_counter()
+            now = time.perf_counter()
+            if self.adaptive:
+                self._input_came(now, timeout > 0)
+            self._last_input = now
             self._begin_inputs(blind)
         for fd, events in events_ready:
             if events & select.EPOLLOUT:
@@ -267,6 +297,49 @@ class RealtimeScheduler(VirtualScheduler):
                 log.exception("posted call %r failed", fn)
         self.input_lateness = 0.0
 
+    # -- adaptive spinning ----------------------------------------------------------------------
+
+    def _learn_oversleep(self, late: float) -> None:
+        """A sleep ended ``late`` wall seconds after its deadline: the spin before timers follows the
+        upper envelope of these (at once upwards, slowly downwards); a preemption of milliseconds
+        counts as ``spin_max_s``, since no spin would have hidden it."""
+        late = min(max(late, 0.0), self.spin_max_s)
+        estimate = self._oversleep
+        estimate = late if late > estimate else estimate - (estimate - late) * OVERSLEEP_DECAY
+        self._oversleep = estimate
+        self.spin_s = min(self.spin_max_s, max(self.spin_min_s, 1.5 * estimate + 0.00002))
+
+    def _input_came(self, now: float, after_sleep: bool) -> None:
+        """Input is ready: pay the linger that led to it, and grow the window if the loop had gone to
+        sleep just before (a longer linger would have caught it)."""
+        self._refill(now)
+        gap = now - self._last_input
+        if self._lingering:
+            self._linger_credit -= gap  # polled since the last input, and it paid off
+            self._lingering = False
+        elif after_sleep and gap <= self.linger_s and self._linger < gap:
+            self._linger = min(self.linger_s, max(2 * self._linger, LINGER_FLOOR, gap))
+
+    def _linger_now(self, now: float) -> bool:
+        """Whether to keep polling after the last input instead of sleeping."""
+        since = now - self._last_input
+        if not self.adaptive:
+            return since <= self.linger_s
+        if since <= self._linger and (self._lingering or self._linger_credit > 0):
+            self._lingering = True
+            return True
+        if self._lingering:  # the window expired with no input: it was not worth it
+            self._lingering = False
+            self._refill(now)
+            self._linger_credit -= since
+            self._linger = 0.0 if self._linger < 2 * LINGER_FLOOR else self._linger / 2
+        return False
+
+    def _refill(self, now: float) -> None:
+        self._linger_credit = min(LINGER_CREDIT_CAP,
+                                  self._linger_credit + (now - self._credit_time) * self.linger_budget)
+        self._credit_time = now
+
     def _call(self, callback: Callable[[], Any]) -> None:
         try:
             callback()
@@ -279,11 +352,10 @@ class RealtimeScheduler(VirtualScheduler):
         self.start_clock()
         self._running = True
         self._watch_end = self.model_time()
-        spin = self.spin_s
         gc_was_enabled = gc.isenabled()
         gc.disable()
         try:
-            fired = self._loop(until, spin)
+            fired = self._loop(until)
         finally:
             if gc_was_enabled:
                 gc.enable()
@@ -302,7 +374,7 @@ class RealtimeScheduler(VirtualScheduler):
         elif young > threshold0:
             gc.collect(0)
 
-    def _loop(self, until: float, spin: float) -> int:
+    def _loop(self, until: float) -> int:
         self._fired = 0
         while self._running:
             now = self.model_time()
@@ -319,7 +391,8 @@ class RealtimeScheduler(VirtualScheduler):
                 break
             next_t = self.peek()
             wait = (min(next_t, until) - now) / self.speed
-            if wait > spin and time.perf_counter() - self._last_input > self.linger_s:
+            spin = self.spin_s
+            if wait > spin and not self._linger_now(time.perf_counter()):
                 self._collect_if_idle(wait)
                 wait = (min(next_t, until) - self.model_time()) / self.speed
                 self._handle_inputs(min(max(0.0, wait - spin), 0.5))

@@ -125,6 +125,10 @@ class RoutedLink:
                 report(event)
 
     @property
+    def gli(self) -> tuple[str, ...]:
+        return self.spec.gli
+
+    @property
     def emulate(self) -> dict[str, Any]:
         return dict(self.spec.emulate)
 

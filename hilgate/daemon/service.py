@@ -110,7 +110,8 @@ class Daemon:
         self.router = Router(scheduler, self.recorder, max_link_clients=self.max_link_clients, host=host)
         self.clients = ClientLimits(self.max_clients, self.max_link_clients)
         self.router.doors = [
-            QueueDoor(scheduler, plan_message_size(sum(1 for l in scene.links.values() if host in (None, l.host))),
+            QueueDoor(scheduler, plan_message_size(sum(1 for l in scene.links.values()
+                                                        if host in (None, l.host) and "mq" in l.gli)),
                       self.gli_backlog, group),
             SocketDoor(os.path.join(self.runtime_dir, "gli"), scheduler, self.clients, self.router.port, group),
             EmulatorDoor(scheduler),

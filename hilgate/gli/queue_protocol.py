@@ -17,6 +17,7 @@ from ..core.packets import Decoded, PacketClass, PacketError
 
 FRAME, REQ_STATE, CMD_STATE, NOTBUILT = 0, 1, 2, 3
 BUSY, READY = 0, 1
+FRAME_PREFIX = bytes([FRAME])
 
 
 @dataclass(frozen=True)
@@ -78,4 +79,4 @@ class QueueProtocol:
         self.said = message[1]
 
     def frame_message(self, real: bytes, seq: int, src: int, dst: int) -> bytes:
-        return bytes([FRAME]) + self.packet.encode_body(real, seq, src, dst)
+        return self.packet.encode_body(real, seq, src, dst, FRAME_PREFIX)

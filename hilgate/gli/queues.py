@@ -22,7 +22,6 @@ kernel says the queue has room; only beyond that are frames dropped and counted 
 
 from __future__ import annotations
 
-import errno
 import logging
 import os
 import pwd
@@ -35,17 +34,12 @@ import posix_ipc
 from ..core.backend import AppFrame
 from ..core.endpoint import ABSENT, KEPT, TAKEN, LinkPort
 from ..core.packets import PacketClass, PacketError
+from .limits import (MAX_MESSAGE_SIZE, MAX_MESSAGES, QUEUE_OVERHEAD, is_user_budget, open_failure,  # noqa: F401
+                     queue_cost, queue_names)
 from .queue_protocol import FRAME, FrameIn, Ignored, QueueProtocol, Refused, StateRequest
 
 log = logging.getLogger(__name__)
 
-MAX_MESSAGES = 10
-MAX_MESSAGE_SIZE = 8192
-
-
-def queue_names(link_id: str) -> tuple[str, str]:
-    """(application → hilgate, hilgate → application)."""
-    return f"/{link_id}_tx_dlnk_phy", f"/{link_id}_rx_dlnk_phy"
 
 
 class QueueError(OSError):
@@ -67,14 +61,7 @@ def raise_queue_budget() -> None:
             continue
 
 
-QUEUE_OVERHEAD = 96
-"""Kernel bookkeeping per message slot (struct msg_msg and a priority-tree node), roughly."""
-
 _warned = False
-
-
-def queue_cost(message_size: int) -> int:
-    return MAX_MESSAGES * (message_size + QUEUE_OVERHEAD)
 
 
 def plan_message_size(links: int) -> bool:
@@ -125,7 +112,7 @@ def open_queue(name: str, needed_size: int = MAX_MESSAGE_SIZE, full_size: bool =
             raise QueueError(f"POSIX queue {name} exists but hilgate may not open it (created by another user "
                              f"with a mode that excludes hilgate's); remove it: {remedy}") from None
         except OSError as exc:
-            raise QueueError(_open_failure(name, exc)) from None
+            raise QueueError(open_failure(name, exc)) from None
         break
     try:
         _check_queue(name, queue, needed_size, group, remedy)
@@ -151,33 +138,12 @@ def _create_queue(name: str, needed_size: int, full_size: bool) -> posix_ipc.Mes
                 return None
             except (posix_ipc.Error, OSError) as exc:
                 error = exc
-                if size != needed_size and _is_budget(exc):
+                if size != needed_size and is_user_budget(exc):
                     _note_compact(resource.getrlimit(resource.RLIMIT_MSGQUEUE)[0],
                                   "the POSIX queue budget is exhausted")
     finally:
         os.umask(old)
-    raise QueueError(_open_failure(name, error))
-
-
-def _is_budget(exc: BaseException) -> bool:
-    """mq_open says EMFILE both for RLIMIT_MSGQUEUE and for the descriptor limit: tell them apart."""
-    if "maximum number of files" not in str(exc) and getattr(exc, "errno", None) != errno.EMFILE:
-        return False
-    try:
-        open_fds = len(os.listdir("/proc/self/fd"))
-    except OSError:
-        return True
-    return open_fds < resource.getrlimit(resource.RLIMIT_NOFILE)[0] - 1
-
-
-def _open_failure(name: str, exc: BaseException | None) -> str:
-    if exc is not None and _is_budget(exc):
-        return (f"cannot create POSIX queue {name}: the queue budget of this user is used up. Each link needs "
-                f"two queues and Linux limits their total size per user (ulimit -q, now "
-                f"{resource.getrlimit(resource.RLIMIT_MSGQUEUE)[0]} bytes): raise it with "
-                "LimitMSGQUEUE=infinity in the systemd unit or `ulimit -q unlimited`, or remove stale queues "
-                "(hilgate queues SCENE --unlink).")
-    return f"cannot open POSIX queue {name}: {exc}"
+    raise QueueError(open_failure(name, error))
 
 
 def _check_queue(name: str, queue: posix_ipc.MessageQueue, needed_size: int, group: int | None,
@@ -433,14 +399,24 @@ class QueueDoor:
         self.backlog = backlog
         self.group = group
 
-    def open(self, port: LinkPort) -> MqEndpoint:
+    def open(self, port: LinkPort) -> MqEndpoint | None:
+        """The link's queues, unless its ``gli:`` leaves them out (then it costs no queue at all)."""
+        if "mq" not in port.gli:
+            return None
         endpoint = MqEndpoint(port, self.scheduler, self.full_size, self.backlog, self.group)
         port.attach(endpoint)
         return endpoint
 
-    def update(self, handle: MqEndpoint, port: LinkPort) -> MqEndpoint:
+    def update(self, handle: MqEndpoint | None, port: LinkPort) -> MqEndpoint | None:
+        if handle is None:
+            return self.open(port)
+        if "mq" not in port.gli:  # a reload took the queues away: closed, not unlinked (an application may hold them)
+            port.detach(handle)
+            handle.close()
+            return None
         handle.set_packet(port.packet)
         return handle
 
-    def close(self, handle: MqEndpoint) -> None:
-        handle.close()
+    def close(self, handle: MqEndpoint | None) -> None:
+        if handle is not None:
+            handle.close()

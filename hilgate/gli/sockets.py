@@ -59,6 +59,9 @@ class GliClient:
         if port is None:
             self.fail(f"no link {link_id[:100]!r}")
             return
+        if "socket" not in port.gli:
+            self.fail(f"link {link_id!r} has no socket GLI (its gli: is [{', '.join(port.gli)}])")
+            return
         if not port.attach(self):
             self.fail(f"too many clients on link {link_id!r} ({self.limits.per_link})")
             return
@@ -157,16 +160,25 @@ class SocketDoor:
         self.group = group
         os.makedirs(directory, mode=0o750, exist_ok=True)
 
-    def open(self, port: LinkPort) -> Listener:
+    def open(self, port: LinkPort) -> Listener | None:
+        """The link's socket, unless its ``gli:`` leaves it out."""
+        if "socket" not in port.gli:
+            return None
         path = os.path.join(self.directory, f"{port.id}.sock")
         return Listener(listen_unix(path, group=self.group), self.scheduler,
                         lambda sock: accept(sock, self.scheduler, self.limits, self.lookup, port), path)
 
-    def update(self, handle: Listener, port: LinkPort) -> Listener:
+    def update(self, handle: Listener | None, port: LinkPort) -> Listener | None:
+        if handle is None:
+            return self.open(port)
+        if "socket" not in port.gli:  # a reload took the socket away (clients already on it stay)
+            handle.close()
+            return None
         return handle
 
-    def close(self, handle: Listener) -> None:
-        handle.close()
+    def close(self, handle: Listener | None) -> None:
+        if handle is not None:
+            handle.close()
 
 
 def tcp_listener(host: str, port: int, scheduler: Any, limits: ClientLimits,

@@ -46,9 +46,11 @@ class LinkChange:
 
     @property
     def endpoints_changed(self) -> bool:
-        """What the doors in front of the link look at: its packet class or its emulated modem."""
+        """What the doors in front of the link look at: its packet class, its emulated modem or its GLI
+        endpoints."""
         b, a = self.before, self.after
-        return b is not None and a is not None and (b.packet != a.packet or b.emulate != a.emulate)
+        return b is not None and a is not None and (b.packet != a.packet or b.emulate != a.emulate
+                                                    or b.gli != a.gli)
 
 
 @dataclass(frozen=True)

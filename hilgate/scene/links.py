@@ -31,7 +31,7 @@ from .yaml_nodes import Node
 __all__ = ["LINK_KEYS", "BACKENDS", "Context", "link_spec", "assign_addresses"]
 
 OWN_KEYS = ("vehicle", "backend", "model", "address", "channel", "tx_channel", "rx_channel", "host",
-            "usbl")
+            "usbl", "gli")
 
 
 def link_keys() -> tuple[str, ...]:
@@ -136,8 +136,9 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
         problem = _wide_problem(backend, emulate, packet)
         if problem:
             raise child.error(f.sub("address"), f"{params.address} is wider than 8 bits (0..{NARROW_MAX}): {problem}")
+    gli = f.get("gli", _gli_endpoints, GLI_ENDPOINTS)
     return LinkSpec(link_id, vehicle, backend, model, params, mac, packet, node.file, node.line, options, emulate,
-                    addressing, host=host, usbl=usbl, address_line=address_line)
+                    addressing, host=host, usbl=usbl, address_line=address_line, gli=gli)
 
 
 NARROW_MAX = BROADCAST - 1
@@ -180,6 +181,26 @@ def require_narrow_addresses(links: Any) -> None:
                              f"{link.params.address} is wider than 8 bits (0..{NARROW_MAX}): hilgate run attaches "
                              f"dccomms queues and the socket GLI (8-bit addresses) to every link; wide addresses "
                              f"are for hilgate sim")
+
+
+GLI_ENDPOINTS = ("mq", "socket")
+
+
+def _gli_endpoints(node: Node, path: str) -> tuple[str, ...]:
+    """``gli: [mq, socket]`` (the default), ``[socket]``, ``[mq]`` or ``[]``: which GLI endpoints the link
+    opens.  Every ``mq`` link costs two POSIX queues of a per-user and a system-wide budget; a link only
+    socket applications (or only an emulated modem) use needs none."""
+    items = [node] if isinstance(node.value, str) else node.value if node.is_list else None
+    if items is None:
+        raise node.error(path, f"must be a list of {' and '.join(GLI_ENDPOINTS)} (e.g. [socket]), not {describe(node)}")
+    chosen = []
+    for i, item in enumerate(items):
+        item_path = path if item is node else join_path(path, i)
+        value = choice(*GLI_ENDPOINTS)(item, item_path)
+        if value in chosen:
+            raise item.error(item_path, f"{value} is given twice")
+        chosen.append(value)
+    return tuple(name for name in GLI_ENDPOINTS if name in chosen)
 
 
 FIRMWARE_KEYS = ("version", "phy", "mac", "manufacturer", "mode")

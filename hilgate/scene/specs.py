@@ -113,6 +113,7 @@ class LinkSpec:
     host: str | None = None  # the host whose daemon serves it (None: a scene for one daemon)
     usbl: UsblParams | None = None  # the emulated modem is a USBL: it reports fixes of whom it hears
     address_line: int = field(default=0, compare=False)  # where a wide address (> 254) is written
+    gli: tuple[str, ...] = ("mq", "socket")  # the GLI endpoints the daemon opens for it (links.py)
 
     @property
     def everyone_in_range(self) -> bool:
