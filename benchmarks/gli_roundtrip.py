@@ -130,23 +130,26 @@ def _echo(link: str, count: int, mode: str, result, timeout: float = 10.0) -> No
 
 
 class Daemon:
-    def __init__(self, a: str, b: str):
-        self.dir = tempfile.mkdtemp(prefix="hilgate-gli-bench-")
+    """``hilgate run`` in a subprocess on ``scene_text`` (its links are ``links``), up once it says
+    READY=1; :meth:`close` stops it and removes its queues.  Shared with realtime_lateness.py."""
+
+    def __init__(self, scene_text: str, links: tuple[str, ...], args: tuple[str, ...] = ()):
+        self.dir = tempfile.mkdtemp(prefix="hilgate-bench-")
         scene = os.path.join(self.dir, "scene.yaml")
         with open(scene, "w") as handle:
-            handle.write(SCENE.format(a=a, b=b))
+            handle.write(scene_text)
         notify_path = os.path.join(self.dir, "notify")
         self.notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
         self.notify.bind(notify_path)
         self.log = open(os.path.join(self.dir, "daemon.log"), "w")  # its log stays out of the benchmark's output
         self.process = subprocess.Popen(
             [sys.executable, "-m", "hilgate", "run", scene, "--runtime-dir", os.path.join(self.dir, "rt"),
-             "--no-status-line"], env=dict(os.environ, NOTIFY_SOCKET=notify_path),
+             "--no-status-line", *args], env=dict(os.environ, NOTIFY_SOCKET=notify_path),
             stderr=self.log)
         self.notify.settimeout(30)
         while b"READY=1" not in self.notify.recv(4096):
             pass
-        self.links = (a, b)
+        self.links = links
 
     def status(self) -> dict:
         with socket.socket(socket.AF_UNIX) as sock:
@@ -156,17 +159,23 @@ class Daemon:
             sock.sendall(b'{"class": "STATUS"}\n')
             return json.loads(reader.readline())
 
-    def close(self) -> None:
+    def close(self) -> "os.struct_rusage | None":
+        """Stop the daemon; its resource usage (CPU), or None if it was already reaped."""
         self.process.terminate()
-        self.process.wait()
+        try:
+            _, status, usage = os.wait4(self.process.pid, 0)
+            self.process.returncode = os.waitstatus_to_exitcode(status)
+        except ChildProcessError:
+            usage = None
         self.notify.close()
         self.log.close()
         unlink_queues(self.links)
+        return usage
 
 
 def through_hilgate(count: int) -> list[float]:
     a, b = f"bga{os.getpid()}", f"bgb{os.getpid()}"
-    daemon = Daemon(a, b)
+    daemon = Daemon(SCENE.format(a=a, b=b), (a, b))
     try:
         result = mp.Queue()
         echo = mp.Process(target=_echo, args=(b, count, "echo", result))
@@ -195,7 +204,7 @@ def throughput(count: int, size: int, rate: float | None) -> tuple[float, int, i
     """Frames per second seen by the receiver, frames lost, frames the daemon counted as dropped.
     ``rate`` paces the sender (None: as fast as its queue takes them)."""
     a, b = f"bta{os.getpid()}", f"btb{os.getpid()}"
-    daemon = Daemon(a, b)
+    daemon = Daemon(SCENE.format(a=a, b=b), (a, b))
     try:
         result = mp.Queue()
         counter = mp.Process(target=_echo, args=(b, count, "count", result))
