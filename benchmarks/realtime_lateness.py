@@ -20,10 +20,16 @@ timer plus one hop at this moment.
 The two alternate (bare, hilgate, hilgate, bare, …), ``--repeats`` times each.  Printed per run: p50, p99
 and max lateness in ms, deliveries, the daemon's CPU per wall second; then min/median/max of hilgate's
 p99 over the bare loop's p99 (DESIGN.md: p99 <= 0.25 ms and max <= 1 ms on a quiet host, within 1.2 x the
-bare loop's p99 on a loaded one).  ns-3's real-time scheduler is not run here (its send lateness is not a
-delivery at an application).
+bare loop's p99 on a loaded one).
 
-    python benchmarks/realtime_lateness.py [--seconds 20] [--nodes 50] [--rate 0.5] [--repeats 3]
+With ``--ns3-python PATH`` (a Python with the PyPI ``ns3`` wheel) ns-3's real-time scheduler runs too,
+alternating with the other two: the peer script ``ns3_uan_aloha.py --realtime`` (N nodes, the same rate
+and bit rate, its senders to a sink), which reports how late its send events ran against the wall
+clock, mean and max.  That is a timer's lateness inside ns-3, not a delivery's at an application, so it
+is printed beside the others (min/median/max over the repeats) and not divided into them.  Without the
+option ns-3 is "not run".
+
+    python benchmarks/realtime_lateness.py [--seconds 20] [--nodes 50] [--rate 0.5] [--repeats 3] [--ns3-python PATH]
 """
 
 from __future__ import annotations
@@ -42,7 +48,7 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from gli_roundtrip import Daemon  # noqa: E402
-from peers import spread  # noqa: E402
+from peers import PEERS, check_python, run_json, spread  # noqa: E402
 
 BITRATE, TX_DELAY, ON_AIR, SPEED, RADIUS = 9600, 0.001, 20, 1500.0, 200.0
 MIN_GAP = 0.05  # s between one link's frames: longer than its 17.7 ms on air, so none waits in the FIFO
@@ -204,6 +210,13 @@ def bare(rate: float, seconds: float, seed: int, realtime_priority: int) -> list
     return late
 
 
+def ns3_realtime(python: str, script: str, nodes: int, rate: float, seconds: float, seed: int) -> dict:
+    raw, _ = run_json([python, script, "--realtime", "--nodes", str(nodes), "--sim-time", repr(seconds), "--rate",
+                       repr(rate), "--size", str(ON_AIR - 3), "--bitrate", str(BITRATE), "--radius", repr(RADIUS),
+                       "--seed", str(seed)])
+    return raw
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seconds", type=float, default=20.0, help="of sending, per hilgate run")
@@ -214,16 +227,33 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3, help="runs of each, alternating")
     parser.add_argument("--realtime-priority", type=int, default=0,
                         help="SCHED_FIFO priority for the daemon and the bare loop, as `hilgate run --realtime-priority`")
+    parser.add_argument("--ns3-python", help="a Python with the ns3 wheel: run ns-3's real-time scheduler alongside")
+    parser.add_argument("--ns3-script", default=os.path.join(PEERS, "ns3_uan_aloha.py"))
     args = parser.parse_args()
+    why_not = check_python(args.ns3_python, "ns") or (None if os.path.exists(args.ns3_script)
+                                                      else f"no peer script {args.ns3_script}")
     daemon_args = ("--realtime-priority", str(args.realtime_priority)) if args.realtime_priority else ()
     setup = f"SCHED_FIFO {args.realtime_priority}" if args.realtime_priority else "normal scheduling"
     deliveries_per_s = args.nodes * args.rate * (args.nodes - 1)
     print(f"{args.nodes} nodes, {args.rate:g} frames/s each, {args.apps} application processes on the socket GLI, "
           f"{setup}; bare loop at {deliveries_per_s:,.0f} timers/s; {args.repeats} runs of each, alternating", flush=True)
+    print(f"ns-3: {'real-time scheduler run alongside (' + args.ns3_python + ')' if why_not is None else 'not run (' + why_not + ')'}",
+          flush=True)
     p99s: dict[str, list[float]] = {"bare": [], "hilgate": []}
+    ns3_mean, ns3_max = [], []
+    sides = ["bare", "hilgate"] + (["ns-3"] if why_not is None else [])
     for repeat in range(1, args.repeats + 1):
-        order = ["bare", "hilgate"] if repeat % 2 else ["hilgate", "bare"]
+        k = (repeat - 1) % len(sides)  # each side goes first in turn
+        order = sides[k:] + sides[:k]
         for side in order:
+            if side == "ns-3":
+                raw = ns3_realtime(args.ns3_python, args.ns3_script, args.nodes, args.rate, args.seconds, repeat)
+                ns3_mean.append(raw["send_lateness_mean_ms"])
+                ns3_max.append(raw["send_lateness_max_ms"])
+                print(f"run {repeat}    ns-3: send lateness of its real-time scheduler (a timer, not a delivery at an "
+                      f"application) mean {raw['send_lateness_mean_ms']:.3f} ms  max {raw['send_lateness_max_ms']:.3f} ms; "
+                      f"{raw['sends_late_over_1ms']:,} of {raw['app_tx']:,} sends later than 1 ms", flush=True)
+                continue
             if side == "bare":
                 late = bare(deliveries_per_s, args.bare_seconds, repeat, args.realtime_priority)
                 extra = f"{len(late):,} timers in {args.bare_seconds:g} s"
@@ -240,6 +270,11 @@ def main() -> None:
     ratios = [h / b for h, b in zip(p99s["hilgate"], p99s["bare"])]
     print(f"p99 lateness, min/median/max of {args.repeats}: bare {spread(p99s['bare'], 3)} ms, hilgate "
           f"{spread(p99s['hilgate'], 3)} ms; ratio hilgate / bare {spread(ratios)}")
+    if ns3_mean:
+        print(f"ns-3 real-time send lateness, min/median/max of {args.repeats}: mean {spread(ns3_mean, 3)} ms, "
+              f"max {spread(ns3_max, 3)} ms (not divided into the above: not the same measurement point)")
+    else:
+        print("ns-3 real-time scheduler: not run")
     print(f"(targets: p99 <= {TARGET_P99_MS} ms and max <= {TARGET_MAX_MS} ms on a quiet host; within "
           f"{TARGET_LOADED} x the bare loop's p99 on a loaded one; median p99 now "
           f"{statistics.median(p99s['hilgate']):.3f} ms)")

@@ -114,7 +114,7 @@ def ns3_run(python: str, script: str, nodes: int, sim_time: float, seed: int) ->
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--nodes", type=int, nargs="*", default=[10, 50])
-    parser.add_argument("--sim-time", type=float, default=3600.0)
+    parser.add_argument("--sim-time", type=float, default=36000.0, help="simulated s (at 3 600 s N = 10 runs in tens of ms: noise)")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--repeats", type=int, default=3, help="alternating hilgate / ns-3 runs per N (>= 1)")
     parser.add_argument("--drop-when-busy", action="store_true",

@@ -26,7 +26,7 @@ def benchmarks(ns3_python: str | None) -> list[list[str]]:
     ns3 = ["--ns3-python", ns3_python] if ns3_python else []
     return [
         ["benchmarks/ring_aloha.py", "--drop-when-busy", *ns3],
-        ["benchmarks/realtime_lateness.py"],
+        ["benchmarks/realtime_lateness.py", *ns3],
         ["benchmarks/gli_roundtrip.py"],
         ["benchmarks/aruco.py"],
     ]
