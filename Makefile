@@ -51,11 +51,14 @@ install uninstall:
 	LOGROTATEDIR='$(LOGROTATEDIR)' BINDIR='$(BINDIR)' PYTHON='$(PYTHON)' PIP_ARGS='$(PIP_ARGS)' PURGE='$(PURGE)' \
 	sh systemd/install.sh $@
 
+# Every benchmark once (a few minutes each on a loaded 2-core machine); their output goes to bench.out
+# and from there into the README's performance section. NS3_PYTHON=PATH (a Python with the ns3 wheel)
+# runs ns-3 UAN alongside the ALOHA ring; without it ns-3 is "not run".
+NS3_PYTHON ?=
+
 bench: $(VENV)/.installed
-	$(BIN)/python benchmarks/ring_aloha.py
-	$(BIN)/python benchmarks/realtime_lateness.py
-	$(BIN)/python benchmarks/gli_roundtrip.py
-	$(BIN)/python benchmarks/aruco.py
+	NS3_PYTHON='$(NS3_PYTHON)' $(BIN)/python benchmarks/run_all.py --out bench.out
+	$(BIN)/python benchmarks/readme_bench.py bench.out README.md
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache

@@ -37,7 +37,7 @@ import uuid
 import posix_ipc
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from gli_roundtrip import MESSAGE, frame, open_queue, percentiles  # noqa: E402
+from gli_roundtrip import MESSAGE, _echo, frame, open_queue, percentiles  # noqa: E402
 
 from hilgate.gli.queues import unlink_queues  # noqa: E402
 
@@ -168,30 +168,6 @@ class Network:
             process.terminate()
             process.wait()
         unlink_queues(self.links)
-
-
-def _echo(link: str, count: int, mode: str, result) -> None:
-    """On link b: echo every frame back to address 1, or only count them."""
-    tx, rx = open_queue(f"/{link}_tx_dlnk_phy"), open_queue(f"/{link}_rx_dlnk_phy")
-    tx.send(b"\x01")  # REQ_STATE, as a dccomms application says when it starts: the daemon knows it is there
-    received = 0
-    first = last = 0.0
-    while received < count:
-        try:
-            message, _ = rx.receive(10.0)
-        except posix_ipc.BusyError:
-            break
-        if message[0] != 0:
-            continue  # READY/BUSY
-        received += 1
-        last = time.perf_counter()
-        if received == 1:
-            first = last
-        if mode == "echo":
-            tx.send(message[:-4] + (1).to_bytes(4, "little"))
-    tx.close()
-    rx.close()
-    result.put((received, first, last))
 
 
 def through_hilgate(count: int) -> list[float]:

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+from .aloha import Aloha
 from .csaloha import CsAloha
 from .mac import Mac, NoMac
 from .sfama import SFama
 
-REGISTRY: dict[str, type[Mac]] = {"none": NoMac, "cs-aloha": CsAloha, "s-fama": SFama}
+REGISTRY: dict[str, type[Mac]] = {"none": NoMac, "aloha": Aloha, "cs-aloha": CsAloha, "s-fama": SFama}

@@ -288,3 +288,32 @@ def test_a_mac_that_no_listed_plugin_provides_is_a_scene_error():
         load_scene_text(SCENE.format(seed=1).replace("cs-aloha", "no_such_module:Mac"), "mac.yaml")
     with pytest.raises(SceneError, match="unknown MAC protocol 'tdma'"):
         load_scene_text(SCENE.format(seed=1).replace("cs-aloha", "tdma"), "mac.yaml")
+
+
+# -- ALOHA that drops when busy (ns-3's UanMacAloha) ------------------------------------------------
+# 1000 bit/s: a 20-byte frame is 0.16 s on air.
+
+
+def test_aloha_drops_a_frame_offered_while_the_phy_transmits_and_sends_the_next_one_after():
+    from hilgate.models.aloha import Aloha
+
+    net = Net(Channel("ac", 1500.0))
+    net.modem("a", (0, 0, 0), mac=Aloha(), bitrate_bps=1000)
+    net.modem("b", (150, 0, 0), mac=Aloha(), bitrate_bps=1000)
+    net.send("a", "b", 20, at=1.0)
+    dropped = net.send("a", "b", 20, at=1.1)  # a is on air until 1.16: refused, not queued
+    net.send("a", "b", 20, at=1.2)  # the PHY is free again: on air at once
+    net.run(5)
+    assert tx_times(net, "a") == [1.0, 1.2]
+    drops = net.of("drop", "a")
+    assert [(round(t, 9), pkt, cause) for t, _, _, pkt, cause in drops] == [(1.1, dropped.id, "busy")]
+    # b hears both frames 0.1 s later (150 m at 1500 m/s) at their end
+    assert [round(t, 9) for t, _ in net.delivered["b"]] == [1.26, 1.46]
+    assert not net.modems["a"].fifo and net.modems["a"].idle
+
+
+def test_aloha_is_a_scene_mac():
+    scene = load_scene_text(
+        "channels: {ac: {speed_mps: 1500}}\nvehicles: {v: {pose: {static: [0, 0, 0]}}}\n"
+        "links: {x: {vehicle: v, address: 1, mac: aloha}}\n", "aloha.yaml")
+    assert scene.links["x"].mac.protocol == "aloha"
