@@ -379,3 +379,83 @@ links:
     finally:
         A.daemon.close()
         B.daemon.close()
+
+
+def test_a_scene_with_zenoh_but_no_host_names_is_all_this_daemons(tmp_path):
+    """No ``host:`` anywhere: every link is this daemon's, none is another host's (none is host_down)."""
+    a, b = unique("sa"), unique("sb")
+    scene = f"""\
+channels: {{ac: {{speed_mps: 1500}}}}
+zenoh: {{prefix: hilgate-test-{uuid.uuid4().hex[:8]}}}
+vehicles: {{va: {{pose: {{static: [0, 0, 0]}}}}, vb: {{pose: {{static: [150, 0, 0]}}}}}}
+links:
+  {a}: {{vehicle: va, address: 1, bitrate_bps: 1000, addressing: strict}}
+  {b}: {{vehicle: vb, address: 2, bitrate_bps: 1000, addressing: strict}}
+"""
+    host = Host(tmp_path, "solo", scene, [a, b], free_port())
+    try:
+        host.daemon.wait_for("READY=1")
+        assert host.status()["network"]["remote_links"] == []
+        with Link.open(a, runtime_dir=host.daemon.runtime) as la, Link.open(b, runtime_dir=host.daemon.runtime) as lb:
+            la.send(b"mine", dst=2)
+            assert lb.recv(timeout=10).data == b"mine"
+        assert host.daemon.link_status(a)["drop_causes"] == {}
+    finally:
+        host.daemon.close()
+
+
+def test_forged_messages_from_the_network_are_counted_and_change_nothing(tmp_path):
+    """A peer that sends transmissions of a host the scene does not name, times a day away, and
+    liveliness tokens of strangers: counted or ignored, never a traceback, the daemon goes on."""
+    import json as json_
+
+    import zenoh
+
+    from hilgate.core.backend import AppFrame
+    from hilgate.core.packets import packet_class
+    from hilgate.daemon.netcodec import encode_transmission
+    from hilgate.models.frame import Frame
+
+    prefix = f"hilgate-test-{uuid.uuid4().hex[:8]}"
+    a, b = unique("fa"), unique("fb")
+    scene = f"""\
+channels: {{ac: {{speed_mps: 1500}}}}
+zenoh: {{prefix: {prefix}}}
+vehicles: {{va: {{pose: {{static: [0, 0, 0]}}}}, vb: {{pose: {{static: [150, 0, 0]}}}}}}
+links:
+  {a}: {{vehicle: va, host: A, address: 1, bitrate_bps: 1000}}
+  {b}: {{vehicle: vb, host: B, address: 2, bitrate_bps: 1000}}
+"""
+    port = free_port()
+    host = Host(tmp_path, "A", scene, [a], port)
+    config = zenoh.Config()
+    config.insert_json5("mode", '"peer"')
+    config.insert_json5("scouting/multicast/enabled", "false")
+    config.insert_json5("listen/endpoints", '["tcp/127.0.0.1:0"]')
+    config.insert_json5("connect/endpoints", json_.dumps([f"tcp/127.0.0.1:{port}"]))
+    try:
+        host.daemon.wait_for("READY=1")
+        session = zenoh.open(config)
+        try:
+            token = session.liveliness().declare_token(f"{prefix}/alive/hosts/stranger/0123")
+            vl2b = packet_class("vl2b")
+            frame = Frame(1, b, a, 1, 9, 0.0, app_frame=AppFrame(vl2b.encode(b"x", 2, 1), b"x", vl2b, 1, 2, 1, 0.0))
+            frame.src_addr = 2
+            publisher = session.declare_publisher(f"{prefix}/tx/ac")
+            wait_until(lambda: publisher.matching_status, what="the daemon's subscriber")
+            publisher.put(encode_transmission("Z", 0, 1, frame, 0.0, 0.1, None))          # a host nobody named
+            publisher.put(encode_transmission("B", time.time_ns(), 1, frame, 86400.0, 0.1, None))  # a day ahead
+            publisher.put(b"\x00\x00\x00\x05garbage")                                       # not a message
+            counters = wait_until(lambda: (lambda c: c if len(c) >= 3 else None)(host.status()["network"]["counters"]),
+                                  what="the counters")
+            assert counters["foreign_sender"] == 1 and counters["out_of_time"] == 1 and counters["bad_message"] == 1
+            assert {v["host"] for v in host.status()["network"]["hosts"]} == {"B"}  # no stranger
+            token.undeclare()
+        finally:
+            session.close()
+        assert host.daemon.process.poll() is None
+        host.daemon.stop()
+        assert "Traceback" not in host.daemon.output()
+        assert not [e for e in host.events() if e.get("ev") in ("rx", "late")]
+    finally:
+        host.daemon.close()

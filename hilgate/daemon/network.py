@@ -52,6 +52,7 @@ __all__ = ["Network", "zenoh_config"]
 REMEMBERED_FRAMES = 4096  # frames a control frame of another host may still refer to (S-FAMA's RTS → CTS)
 JOIN_WAIT_S = 2.0
 SWITCH_INTERVAL_S = 0.0002
+TIME_WINDOW_S = 60.0  # another host's transmission or pose further from now than this is dropped (counted)
 FIFO_DEPTH = 65536  # transmissions Zenoh keeps for the loop (beyond that it holds back its own reader)
 
 
@@ -77,7 +78,7 @@ class HostView:
     """What this daemon knows of another host."""
 
     __slots__ = ("name", "up", "zids", "links", "heard", "gaps", "late", "late_max", "delay_sum", "delay_max",
-                 "expected", "epoch_ns", "since")
+                 "expected", "epoch_ns")
 
     def __init__(self, name: str):
         self.name = name
@@ -92,7 +93,6 @@ class HostView:
         self.delay_max = 0.0
         self.expected: int | None = None
         self.epoch_ns: int | None = None
-        self.since = 0.0
 
     def status(self) -> dict[str, Any]:
         return {"host": self.name, "state": "up" if self.up else "down",
@@ -130,7 +130,6 @@ class Network:
         self._tokens: dict[str, Any] = {}
         self._entities: list[Any] = []
         self._status_cache = b"{}"
-        self.door: ZenohDoor | None = None
 
     # -- set-up ---------------------------------------------------------------------------------
 
@@ -149,40 +148,37 @@ class Network:
         wanted = len(self.connect) + len(self.spec.connect)
         while wanted and time.monotonic() < deadline and not list(session.info.peers_zid()):
             time.sleep(0.02)  # connecting to the listed peers: liveliness answers need them
-        self.door = ZenohDoor(session, self.prefix, self.host, self.scheduler.post)
-        return self.door
+        return ZenohDoor(session, self.prefix, self.host, self.scheduler.post)
 
     def _alive(self, *parts: str) -> str:
         return "/".join((self.prefix, "alive", *parts))
 
-    def _claims(self, key: str) -> list[str]:
-        """Other daemons' tokens under ``key`` (their zenoh ids)."""
-        others = []
-        for reply in self.session.liveliness().get(key, timeout=1.0):
-            if reply.ok is not None:
-                zid = str(reply.ok.key_expr).rsplit("/", 1)[-1]
-                if zid != self.zid:
-                    others.append(str(reply.ok.key_expr))
-        return others
+    def _mine(self, scene: Any) -> set[str]:
+        """The links this daemon serves (a scene that names no host is all this daemon's)."""
+        return {link.id for link in scene.links.values() if link.host in (None, self.host)}
 
     def claim(self, scene: Any) -> None:
         """Declare this host and its links, then check nobody else claims them (both daemons of a
         race see each other and both refuse: never two daemons serving one link)."""
         liveliness = self.session.liveliness()
         self._tokens["host"] = liveliness.declare_token(self._alive("hosts", self.host, self.zid))
-        for link in scene.links.values():
-            if link.host == self.host:
-                self._tokens[link.id] = liveliness.declare_token(self._alive("links", link.id, self.host, self.zid))
-        others = self._claims(self._alive("hosts", self.host, "*"))
-        if others:
-            raise AccessError(f"host name {self.host!r} is already used by another daemon on the network "
-                              f"({others[0]}); start this one with another --host")
-        for link in scene.links.values():
-            if link.host == self.host:
-                others = self._claims(self._alive("links", link.id, "*", "*"))
-                if others:
-                    raise AccessError(f"link {link.id} is already served by another daemon on the network "
-                                      f"({others[0]})")
+        mine = self._mine(scene)
+        for link_id in mine:
+            self._tokens[link_id] = liveliness.declare_token(self._alive("links", link_id, self.host, self.zid))
+        theirs = []  # every other daemon's token, in one query (each query waits for its replies)
+        for reply in liveliness.get(self._alive("**"), timeout=1.0):
+            if reply.ok is not None:
+                key = str(reply.ok.key_expr)
+                parts = key[len(self.prefix) + 1:].split("/")
+                if parts[-1] != self.zid:
+                    theirs.append((parts, key))
+        for parts, key in theirs:
+            if parts[:3] == ["alive", "hosts", self.host]:
+                raise AccessError(f"host name {self.host!r} is already used by another daemon on the network "
+                                  f"({key}); start this one with another --host")
+        for parts, key in theirs:
+            if len(parts) == 5 and parts[1] == "links" and parts[2] in mine:
+                raise AccessError(f"link {parts[2]} is already served by another daemon on the network ({key})")
 
     def start(self, scene: Any) -> None:
         """Listen to the others and start telling them about this host (on the loop, clock running)."""
@@ -212,12 +208,12 @@ class Network:
     def apply(self, scene: Any) -> None:
         """A scene (the first or a reload): which links are whose, tokens for links added or removed."""
         self.scene = scene
-        self.remote_links = {link.id: link.host for link in scene.links.values() if link.host != self.host}
+        mine = self._mine(scene)
+        self.remote_links = {link.id: link.host for link in scene.links.values() if link.id not in mine}
         for name in scene.hosts:
             if name != self.host:
                 self.hosts.setdefault(name, HostView(name))
         liveliness = self.session.liveliness()
-        mine = {link.id for link in scene.links.values() if link.host == self.host}
         for link_id in [key for key in self._tokens if key != "host" and key not in mine]:
             self._tokens.pop(link_id).undeclare()
         for link_id in mine - set(self._tokens):
@@ -233,14 +229,13 @@ class Network:
         parts = key[len(self.prefix) + 1:].split("/")
         if len(parts) == 4 and parts[:2] == ["alive", "hosts"]:
             _, _, host, zid = parts
-            if host == self.host:
+            view = self.hosts.get(host)  # (only the hosts the scene names: a token is cheap to forge)
+            if view is None:
                 return
-            view = self.hosts.setdefault(host, HostView(host))
             (view.zids.add if kind == "PUT" else view.zids.discard)(zid)
             up = bool(view.zids)
             if up != view.up:
                 view.up = up
-                view.since = self.scheduler.now()
                 if not up:
                     view.expected = None  # a host that comes back starts its counter again
                 log.log(logging.INFO if up else logging.WARNING, "host %s is %s", host, "up" if up else "down")
@@ -248,9 +243,9 @@ class Network:
                                      "state": "up" if up else "down"})
         elif len(parts) == 5 and parts[:2] == ["alive", "links"]:
             _, _, link, host, zid = parts
-            if host == self.host:
+            view = self.hosts.get(host)
+            if view is None or self.remote_links.get(link) != host:
                 return
-            view = self.hosts.setdefault(host, HostView(host))
             zids = view.links.setdefault(link, set())
             (zids.add if kind == "PUT" else zids.discard)(zid)
         self._refresh_status()
@@ -320,9 +315,11 @@ class Network:
             self.counters["bad_message"] += 1
             log.debug("unreadable transmission: %s", exc)
             return
-        if message.host == self.host:
+        view = self.hosts.get(message.host)
+        if view is None:  # this host, or one the scene does not name: nothing of it is judged here
+            if message.host != self.host:
+                self.counters["foreign_sender"] += 1
             return
-        view = self.hosts.setdefault(message.host, HostView(message.host))
         if view.epoch_ns != message.epoch_ns:
             view.epoch_ns, view.expected = message.epoch_ns, None  # the host restarted
         if view.expected is not None and message.number > view.expected:
@@ -342,6 +339,9 @@ class Network:
         self._remember(self.heard, (frame.src_link, frame.id), frame)
         now = self.scheduler.now()
         t = to_local(message.t, message.epoch_ns, self.epoch_ns)
+        if abs(now - t) > TIME_WINDOW_S:  # a clock that far off (or a forged time) would schedule nonsense
+            self.counters["out_of_time"] += 1
+            return
         view.heard += 1
         delay = now - t
         view.delay_sum += delay
@@ -429,6 +429,9 @@ class Network:
         if vehicle is None or vehicle.host != message["host"] or message["position"] is None:
             return
         t = to_local(message["t"], message["epoch_ns"], self.epoch_ns)
+        if abs(self.scheduler.now() - t) > TIME_WINDOW_S:
+            self.counters["out_of_time"] += 1
+            return
         if isinstance(pose, RemoteVehicle):
             pose.update_from(t, message["position"], message["velocity"])
             self.router.world.medium.topology_changed()
