@@ -94,10 +94,55 @@ class Application:
 
 
 class Repeating:
-    """What :meth:`Context.every` returns: cancel it to stop the repetition (shared by both worlds)."""
+    """What :meth:`Context.every` returns: cancel it to stop the repetition."""
 
     __slots__ = ("cancelled", "handle")
 
     def __init__(self) -> None:
         self.cancelled = False
         self.handle: Any = None
+
+
+class ContextBase:
+    """What the contexts of both worlds share: timers on ``clock`` (the virtual scheduler or the
+    real-time one, which have the same ``now``/``at``/``cancel``) and finding a link by id in
+    ``_links``.  Callbacks get the context as their first argument."""
+
+    clock: Any
+    name: str
+    links: tuple[str, ...]
+    _links: dict[str, Any]
+
+    def now(self) -> float:
+        return self.clock.now()
+
+    def after(self, seconds: float, fn: Callable[..., Any], *args: Any) -> Any:
+        return self.clock.at(self.clock.now() + max(0.0, float(seconds)), fn, self, *args)
+
+    def every(self, period: float, fn: Callable[..., Any], *args: Any) -> Repeating:
+        if not period > 0:
+            raise ValueError("every() needs a positive period")
+        repeating = Repeating()
+        start = self.clock.now()
+
+        def tick(k: int) -> None:
+            if repeating.cancelled:
+                return
+            repeating.handle = self.clock.at(start + (k + 1) * period, tick, k + 1)  # start + k·period: no drift
+            fn(self, *args)
+
+        repeating.handle = self.clock.at(start + period, tick, 1)
+        return repeating
+
+    def cancel(self, handle: Any) -> None:
+        if isinstance(handle, Repeating):
+            handle.cancelled = True
+            handle = handle.handle
+        self.clock.cancel(handle)
+
+    def link(self, link_id: str) -> Any:
+        try:
+            return self._links[link_id]
+        except KeyError:
+            raise KeyError(f"application {self.name!r} has no link {link_id!r} "
+                           f"(its links: {', '.join(self.links)})") from None

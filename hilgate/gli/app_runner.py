@@ -15,9 +15,9 @@ import logging
 import random
 import signal
 from collections import deque
-from typing import Any, Callable
+from typing import Any
 
-from ..core.application import Application, Message, Repeating
+from ..core.application import Application, ContextBase, Message
 from ..core.realtime import RealtimeScheduler
 from .client import GliError, Link
 
@@ -53,10 +53,10 @@ class _Vehicle:
         self._ask({"class": "STOP"})
 
 
-class RealtimeContext:
+class RealtimeContext(ContextBase):
     def __init__(self, scheduler: RealtimeScheduler, name: str, links: dict[str, Any], params: dict[str, Any],
                  seed: int | None):
-        self.scheduler = scheduler
+        self.clock = scheduler
         self.name = name
         self.links = tuple(links)
         self.params = params
@@ -64,42 +64,6 @@ class RealtimeContext:
         self.log = logging.getLogger(f"hilgate.app.{name}")
         self._links = links
         self._vehicles: dict[str, _Vehicle] = {}
-
-    def now(self) -> float:
-        return self.scheduler.now()
-
-    def after(self, seconds: float, fn: Callable[..., Any], *args: Any) -> Any:
-        return self.scheduler.after(max(0.0, float(seconds)), self._call, fn, args)
-
-    def every(self, period: float, fn: Callable[..., Any], *args: Any) -> Repeating:
-        if not period > 0:
-            raise ValueError("every() needs a positive period")
-        repeating = Repeating()
-        start = self.scheduler.now()
-
-        def tick(k: int) -> None:
-            if repeating.cancelled:
-                return
-            repeating.handle = self.scheduler.at(start + (k + 1) * period, tick, k + 1)
-            self._call(fn, args)
-
-        repeating.handle = self.scheduler.at(start + period, tick, 1)
-        return repeating
-
-    def cancel(self, handle: Any) -> None:
-        if isinstance(handle, Repeating):
-            handle.cancelled = True
-            handle = handle.handle
-        self.scheduler.cancel(handle)
-
-    def _call(self, fn: Callable[..., Any], args: tuple) -> None:
-        fn(self, *args)
-
-    def link(self, link_id: str) -> Any:
-        try:
-            return self._links[link_id]
-        except KeyError:
-            raise KeyError(f"application {self.name!r} has no link {link_id!r} (its links: {', '.join(self.links)})") from None
 
     def vehicle(self, name: str) -> _Vehicle:
         if name not in self._vehicles:

@@ -29,7 +29,7 @@ class AppSpec:
     name: str
     reference: str  # plugin:Class, as the scene wrote it
     links: tuple[str, ...]
-    params: tuple[tuple[str, Any], ...] = ()
+    params: dict[str, Any] = field(default_factory=dict, hash=False)  # plain YAML values (ctx.params)
     cls: type | None = field(default=None, compare=False, repr=False)
 
     def __reduce__(self):
@@ -51,14 +51,6 @@ def _plain(node: Node) -> Any:
     if node.is_list:
         return [_plain(child) for child in node.value]
     return node.value
-
-
-def _freeze(value: Any) -> Any:
-    if isinstance(value, dict):
-        return tuple((key, _freeze(item)) for key, item in value.items())
-    if isinstance(value, list):
-        return tuple(_freeze(item) for item in value)
-    return value
 
 
 def app_specs(node: Node, plugins: dict[str, Plugin], links: dict[str, Any]) -> tuple[AppSpec, ...]:
@@ -99,6 +91,5 @@ def app_specs(node: Node, plugins: dict[str, Plugin], links: dict[str, Any]) -> 
         name = f.get("name", text, default)
         if any(spec.name == name for spec in specs):
             raise item.error(path, f"two applications are named {name!r}: give one a name:")
-        specs.append(AppSpec(name, reference, tuple(used), tuple(sorted((k, _freeze(v)) for k, v in params.items())),
-                             cls))
+        specs.append(AppSpec(name, reference, tuple(used), params, cls))
     return tuple(specs)

@@ -5,10 +5,11 @@ deliver comes back as :class:`~hilgate.core.application.Message`."""
 
 from __future__ import annotations
 
+import copy
 import logging
 from typing import Any, Callable
 
-from ..core.application import Application, Message, Repeating
+from ..core.application import Application, ContextBase, Message
 from ..core.backend import AppFrame
 from ..core.packets import packet_class
 from ..models.controlled import Controlled
@@ -77,65 +78,23 @@ class _VirtualVehicle:
         self.world.medium.topology_changed()
 
 
-class VirtualContext:
+class VirtualContext(ContextBase):
     def __init__(self, world: World, spec: Any, app: Application):
         self.world = world
         self.clock = world.clock
         self.app = app
         self.name = spec.name
         self.links = spec.links
-        self.params = _thaw(spec.params)
+        self.params = copy.deepcopy(spec.params)  # (an application may change its own; the scene keeps its)
         self.random = random_stream(world.seed, "app", spec.name)
         self.log = logging.getLogger(f"hilgate.app.{spec.name}")
         self._links = {link_id: _VirtualLink(world, link_id) for link_id in spec.links}
         self._vehicles: dict[str, _VirtualVehicle] = {}
 
-    def now(self) -> float:
-        return self.clock.now()
-
-    def after(self, seconds: float, fn: Callable[..., Any], *args: Any) -> Any:
-        return self.clock.at(self.clock.now() + max(0.0, float(seconds)), fn, self, *args)
-
-    def every(self, period: float, fn: Callable[..., Any], *args: Any) -> Repeating:
-        if not period > 0:
-            raise ValueError("every() needs a positive period")
-        repeating = Repeating()
-        start = self.clock.now()
-
-        def tick(k: int) -> None:
-            if repeating.cancelled:
-                return
-            repeating.handle = self.clock.at(start + (k + 1) * period, tick, k + 1)  # start + k·period: no drift
-            fn(self, *args)
-
-        repeating.handle = self.clock.at(start + period, tick, 1)
-        return repeating
-
-    def cancel(self, handle: Any) -> None:
-        if isinstance(handle, Repeating):
-            handle.cancelled = True
-            handle = handle.handle
-        self.clock.cancel(handle)
-
-    def link(self, link_id: str) -> _VirtualLink:
-        try:
-            return self._links[link_id]
-        except KeyError:
-            raise KeyError(f"application {self.name!r} has no link {link_id!r} (its links: {', '.join(self.links)})") from None
-
     def vehicle(self, name: str) -> _VirtualVehicle:
         if name not in self._vehicles:
             self._vehicles[name] = _VirtualVehicle(self.world, name)
         return self._vehicles[name]
-
-
-def _thaw(value: Any) -> Any:
-    """The frozen ``params`` of an AppSpec back as dicts and lists."""
-    if isinstance(value, tuple) and all(isinstance(i, tuple) and len(i) == 2 and isinstance(i[0], str) for i in value):
-        return {key: _thaw(item) for key, item in value}
-    if isinstance(value, tuple):
-        return [_thaw(item) for item in value]
-    return value
 
 
 class VirtualApps:
