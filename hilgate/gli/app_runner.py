@@ -93,9 +93,15 @@ def run_application(cls: type[Application], link_ids: list[str], params: dict[st
             inbox = link.inbox
             while True:
                 if isinstance(inbox, deque):  # a socket link: filled by _pump on this thread
+                    while link.errors:  # a frame the daemon refused: said, not raised into the loop
+                        context.log.warning("link %s: %s", link_id, link.errors.popleft())
                     message = inbox.popleft() if inbox else None
                 else:  # a Zenoh link: filled by Zenoh's threads
-                    message = link.recv(timeout=0)
+                    try:
+                        message = link.recv(timeout=0)
+                    except GliError as exc:
+                        context.log.warning("link %s: %s", link_id, exc)
+                        continue
                 if message is None:
                     return
                 app.on_receive(context, Message(link_id, message.src, message.dst, message.t, message.data))
