@@ -29,6 +29,7 @@ import struct
 import threading
 from typing import Any
 
+from ..core import safejson
 from ..core.backend import AppFrame
 from ..core.endpoint import ABSENT, TAKEN, LinkPort
 from ..core.packets import PacketError
@@ -112,9 +113,9 @@ class ZenohEndpoint:
 
     def _on_command(self, query: Any) -> None:
         try:
-            request = json.loads(query.payload.to_bytes()) if query.payload is not None else None
-        except ValueError:
-            query.reply(query.key_expr, json.dumps({"class": "ERROR", "error": "a request is JSON"}).encode())
+            request = safejson.loads(query.payload.to_bytes()) if query.payload is not None else None
+        except ValueError as exc:  # (bounded: a deep or huge request is refused before parsing)
+            query.reply(query.key_expr, json.dumps({"class": "ERROR", "error": f"a request is JSON: {exc}"}).encode())
             return
         done = threading.Event()
         answer: list[Any] = []
