@@ -87,6 +87,25 @@ def test_ready_and_busy_are_said_once_per_change():
     assert protocol.state_message(True) == ready  # an explicit REQ_STATE is always answered
 
 
+def test_a_frame_from_the_application_makes_it_busy_in_its_own_eyes():
+    """dccomms' WritePacket sets the application's PHY state BUSY before it sends: after any frame
+    (even one refused) the next READY must be said again, and a BUSY would be a repeat."""
+    packet = packet_class("vl2b")
+    protocol = QueueProtocol(packet)
+    protocol.told(protocol.state_message(True))
+    assert protocol.state_change(True) is None
+    body = packet.encode_body(packet.encode(b"hi", 1, 2), 7, 1, 2)
+    protocol.receive(bytes([FRAME]) + body)
+    assert protocol.state_change(False) is None
+    assert protocol.state_change(True) == bytes([CMD_STATE, 1])
+    protocol.told(bytes([CMD_STATE, 1]))
+    assert protocol.receive(bytes([FRAME]) + body[:-1]) == Refused("size", len(body))
+    assert protocol.state_change(True) == bytes([CMD_STATE, 1])
+    protocol.told(bytes([CMD_STATE, 1]))
+    protocol.receive(bytes([REQ_STATE]))
+    assert protocol.state_change(True) is None  # a REQ_STATE is answered, but leaves the state alone
+
+
 def test_welcome_describes_the_link():
     from hilgate.gli.sockets import welcome
 

@@ -55,6 +55,7 @@ class QueueProtocol:
             return Refused("size", 0)
         kind = message[0]
         if kind == FRAME:
+            self.said = BUSY  # dccomms' WritePacket sets the application's own PHY state BUSY
             try:
                 return FrameIn(self.packet.decode_body(message[1:]))
             except PacketError as exc:

@@ -301,10 +301,12 @@ class MqEndpoint:
                 except PacketError as exc:
                     log.warning("link %s: %s", self.port.id, exc)
                     self.port.lost(exc.reason, len(decoded.real), src="app")
+                self.port.state_changed()  # the application thinks BUSY now: it is told READY when free
             case StateRequest():
                 self._tell(self.protocol.state_message(self.port.ready))
             case Refused(reason=reason, size=size):
                 self.port.lost(reason, size, src="app")
+                self.port.state_changed()
             case Ignored():
                 pass
 
