@@ -103,7 +103,7 @@ def test_frames_are_built_in_one_place():
     calls = [call for path in sources for call in frame_constructions(path)]
     # ... and, for a frame another host's modem made, where its message is read back (daemon/netcodec.py)
     assert [(f, fn) for f, _, fn in calls] == [(os.path.join("models", "modem.py"), "new_frame"),
-                                              (os.path.join("hilgate", "daemon", "netcodec.py"), "_frame")], calls
+                                              (os.path.join("hilgate", "daemon", "netcodec.py"), "frame")], calls
 
 
 RADIO_NAMES = {"radio", "sender", "receiver", "target"}
