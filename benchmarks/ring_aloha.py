@@ -57,8 +57,8 @@ def ring_scene(nodes: int, sim_time: float, seed: int, mac: str = "none", radius
         lines.append(f"  s{i}: {{pose: {{static: [{radius * math.cos(angle)!r}, {radius * math.sin(angle)!r}, 0]}}}}")
     lines.append("links:")
     lines.append(f"  sink: {{vehicle: sink, address: 0, bitrate_bps: {BITRATE}, mac: {mac}}}")
-    for i in range(1, nodes):
-        lines.append(f"  s{i}: {{vehicle: s{i}, address: {i}, bitrate_bps: {BITRATE}, mac: {mac}}}")
+    for i in range(1, nodes):  # beyond 254, wide addresses (simulated links), skipping 255 (broadcast)
+        lines.append(f"  s{i}: {{vehicle: s{i}, address: {i if i < 255 else i + 1}, bitrate_bps: {BITRATE}, mac: {mac}}}")
     lines.append("flows:")
     for i in range(1, nodes):
         lines.append(f"  - {{from: s{i}, to: sink, size_bytes: {PAYLOAD + HEADER}, rate_hz: {RATE}, poisson: true}}")
