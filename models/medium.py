@@ -59,7 +59,7 @@ class _Neighbour:
         self.rmin, self.rmax = sender.range_m
         self.min_delay = channel.min_delay_s
         self.speed = channel.speed_mps
-        self.per_cache: dict[int, float] = {}
+        self.per_cache: dict[int, float] | None = None  # made at the first loss drawn: a million pairs, few draw
         error = receiver.error
         path_from = getattr(error, "path_from", None)  # a physical model takes the sender's source level
         self.model = path_from(sender.error) if path_from is not None else error
@@ -81,9 +81,12 @@ class _Neighbour:
     def per(self, d: float, size: int) -> float:
         """Probability that a frame of ``size`` bytes is lost on this path at distance ``d``."""
         if self.static:
-            per = self.per_cache.get(size)
+            cache = self.per_cache
+            if cache is None:
+                cache = self.per_cache = {}
+            per = cache.get(size)
             if per is None:
-                per = self.per_cache[size] = self.model.per(d, size)
+                per = cache[size] = self.model.per(d, size)
             return per
         return self.model.per(d, size)
 
