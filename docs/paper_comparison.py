@@ -237,10 +237,11 @@ def markdown(r: dict) -> str:
         f"{spread([x['max'] * 1000 for x in base], '.0f')} ms. The other hypotheses, each over the same seeds "
         "(largest delay in 37–40 s; mean delay after 59 s, which the paper says is back to the 3.3 m value):")
     add("")
-    add("| variant | largest delay 37–40 s (ms) | largest delay (ms) | mean after 59 s (ms) | command (per seed N) |")
-    add("|---|---|---|---|---|")
+    add("| variant | delay at 0.8 m, alone (ms) | largest delay 37–40 s (ms) | largest delay (ms) | mean after 59 s (ms) | command (per seed N) |")
+    add("|---|---|---|---|---|---|")
     for name, rows in r["exp1_ac"].items():
-        add(f"| {name} | {spread([x['max_37_40'] * 1000 for x in rows], '.0f')} | "
+        add(f"| {name} | {statistics.median(x['alone'] for x in rows) * 1000:.0f} | "
+            f"{spread([x['max_37_40'] * 1000 for x in rows], '.0f')} | "
             f"{spread([x['max'] * 1000 for x in rows], '.0f')} | {spread([x['after'] * 1000 for x in rows], '.0f')} | "
             f"{VARIANTS[name].command('N')} |")
     add("")
@@ -264,6 +265,12 @@ def markdown(r: dict) -> str:
                "cs-aloha or s-fama; no MAC: the cs-aloha one with `--set 'links.*.mac.protocol=none'`)")
     for finding, figures, ok in r["exp2_findings"]:
         add(f"| {finding} | {figures} | {command} | {'yes' if ok else 'no'} |")
+    runs = r["exp2"]
+    quickest = [l for l in runs["none"] if runs["none"][l]["rx_packets"] and runs["none"][l]["delay_mean_s"]
+                < min(runs["cs-aloha"][l]["delay_mean_s"], runs["s-fama"][l]["delay_mean_s"])]
+    add(f"| Without a MAC the delay is the lowest (the few frames that get through are delivered at once) | lowest on "
+        f"{len(quickest)} of {len(runs['none'])} flows (" + ", ".join(f"{l} {runs['none'][l]['delay_mean_s']:.2f} s" for l in RF + EXPLORERS)
+        + f") | {command} | {'yes' if len(quickest) == len(runs['none']) else 'no'} |")
     jitter = {mac: statistics.fmean(f["jitter_s"] for f in r["exp2"][mac].values() if f["jitter_s"] is not None)
               for mac in ("cs-aloha", "s-fama")}
     add(f"| Jitter comparable with both protocols | mean over the flows {jitter['cs-aloha']:.2f} s (CS-ALOHA), "
