@@ -19,7 +19,7 @@ BINDIR       ?= /usr/local/bin
 PIP_ARGS     ?=
 PURGE        ?=
 
-.PHONY: run test sim bench fuzz install uninstall clean
+.PHONY: run test sim bench fuzz paper install uninstall clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -45,6 +45,13 @@ test: $(VENV)/.installed-test
 # The fuzz tests (test_fuzz_*) for minutes instead of seconds: HILGATE_FUZZ multiplies their examples.
 fuzz: $(VENV)/.installed-test
 	HILGATE_FUZZ=$(FUZZ) $(BIN)/python -m pytest -q -k fuzz
+
+# The paper comparison (docs/paper-comparison.md, docs/paper-exp2.md) and the formation figure
+# (docs/figures/exp3-formation.png, from the virtual-time run): virtual time only, about a minute.
+paper: $(VENV)/.installed-test
+	$(BIN)/python docs/paper_exp2.py > /dev/null
+	$(BIN)/python docs/paper_comparison.py > /dev/null
+	$(BIN)/python docs/formation_figure.py
 
 install uninstall:
 	DESTDIR='$(DESTDIR)' PREFIX='$(PREFIX)' SYSCONFDIR='$(SYSCONFDIR)' UNITDIR='$(UNITDIR)' \

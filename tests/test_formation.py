@@ -27,3 +27,18 @@ def test_followers_keep_formation_and_settle_once_the_leader_stops(tmp_path, mac
     assert max(e for _, _, e in rows) < 1.5  # …but never lose it
     assert max(settled) < 0.2, settled
     assert os.path.exists(tmp_path / f"formation-error-{mac}.png")
+
+
+def test_the_application_classes_keep_formation_through_hilgate_app(tmp_path):
+    """The classes of apps.py (the virtual-time run's) through `hilgate app` against `hilgate run`, with
+    the fake BlueROV as the leader: its application passes the waypoints to the autopilot over MAVLink."""
+    result = subprocess.run([sys.executable, RUN, "--realtime-apps", "--runs", "1", "--seconds", "24", "--legs", "1",
+                             "--mac", "cs-aloha", "--out", str(tmp_path)], capture_output=True, text=True, timeout=240)
+    assert result.returncode == 0, result.stdout + result.stderr
+    with open(tmp_path / "formation-apps-cs-aloha-1.csv") as handle:
+        rows = [(float(t), follower, float(error)) for t, follower, error in list(csv.reader(handle))[1:]]
+    assert {f for _, f, _ in rows} == {"follower1", "follower2", "follower3"}
+    assert max(e for t, _, e in rows if 3 <= t <= 12) > 0.05  # the leader did fly: the followers lag
+    assert max(e for _, _, e in rows) < 1.5
+    assert max(e for t, _, e in rows if t >= 20) < 0.2, rows  # and settle once it stops
+    assert "leader start delay" in result.stdout

@@ -27,7 +27,7 @@ import uuid
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SCENE = os.path.join(HERE, "..", "..", "scenes", "paper-exp3-formation.yaml")
-VIRTUAL_SCENE = os.path.join(HERE, "formation-virtual.yaml")  # the same applications (apps.py), in virtual time
+VIRTUAL_SCENE = os.path.join(HERE, "..", "..", "scenes", "paper-exp3-formation-virtual.yaml")  # the same applications (apps.py), in virtual time
 SLOTS = {"follower1": (-1.5, 0.0, 0.0), "follower2": (0.0, -1.5, 0.0), "follower3": (-1.5, -1.5, 0.0)}
 LINKS = ["buoy_ac", "leader_ac", "follower1_ac", "follower2_ac", "follower3_ac"]
 
@@ -69,6 +69,21 @@ def free_udp_port() -> int:
         return probe.getsockname()[1]
 
 
+def run_virtual(args: argparse.Namespace, trace: str) -> None:
+    """The same applications in virtual time: ``hilgate sim`` of the virtual scene (deterministic)."""
+    scene = os.path.join(args.out, "formation-virtual.yaml")  # the route's length is the operator's parameter
+    with open(VIRTUAL_SCENE, encoding="utf-8") as handle:
+        text = handle.read().replace("legs: 3", f"legs: {args.legs}")
+    with open(scene, "w", encoding="utf-8") as handle:
+        handle.write(text.replace("plugins: [../examples/formation/apps.py]",
+                                  f"plugins: [{os.path.join(HERE, 'apps.py')}]"))
+    overrides = [f"links.*.mac.protocol={args.mac}"]
+    if args.mac != "cs-aloha":
+        overrides.append("links.*.mac.backoff_s=null")
+    subprocess.run([sys.executable, "-m", "hilgate", "sim", scene, "--until", str(args.seconds),
+                    "--trace", trace, "-q", *(x for o in overrides for x in ("--set", o))], check=True)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seconds", type=float, default=60.0)
@@ -78,6 +93,10 @@ def main() -> int:
     parser.add_argument("--virtual", action="store_true",
                         help="run the applications in virtual time (hilgate sim, deterministic) instead of as "
                              "processes against the daemon with the fake BlueROV")
+    parser.add_argument("--realtime-apps", action="store_true",
+                        help="run apps.py's classes through `hilgate app` against `hilgate run` (the fake BlueROV "
+                             "as the leader) --runs times, and print the spread beside the virtual-time run")
+    parser.add_argument("--runs", type=int, default=5, help="real-time runs with --realtime-apps")
     parser.add_argument("--prefix", default=None,
                         help="prefix of this run's link ids (default: one of its own, so that several runs, and "
                              "a daemon already serving the scene, can share the machine)")
@@ -85,17 +104,18 @@ def main() -> int:
     os.makedirs(args.out, exist_ok=True)
     if args.virtual:
         trace = os.path.join(args.out, f"trace-virtual-{args.mac}.jsonl")
-        scene = os.path.join(args.out, "formation-virtual.yaml")  # the route's length is the operator's parameter
-        with open(VIRTUAL_SCENE, encoding="utf-8") as handle:
-            text = handle.read().replace("legs: 3", f"legs: {args.legs}")
-        with open(scene, "w", encoding="utf-8") as handle:
-            handle.write(text.replace("plugins: [apps.py]", f"plugins: [{os.path.join(HERE, 'apps.py')}]"))
-        overrides = [f"links.*.mac.protocol={args.mac}"]
-        if args.mac != "cs-aloha":
-            overrides.append("links.*.mac.backoff_s=null")
-        subprocess.run([sys.executable, "-m", "hilgate", "sim", scene, "--until", str(args.seconds),
-                        "--trace", trace, "-q", *(x for o in overrides for x in ("--set", o))], check=True)
+        run_virtual(args, trace)
         return report(formation_errors(trace), args, f"virtual-{args.mac}")
+    if args.realtime_apps:
+        return realtime_apps_runs(args)
+    trace = realtime(args, "processes", args.mac)
+    return report(formation_errors(trace), args, args.mac)
+
+
+def realtime(args: argparse.Namespace, kind: str, label: str) -> str:
+    """One real-time run against ``hilgate run`` with the fake BlueROV as the leader; the applications
+    are the process-style scripts (``kind="processes"``: operator.py, leader.py, follower.py) or the
+    classes of apps.py through ``hilgate app`` (``kind="apps"``).  Returns the trace's path."""
     runtime = tempfile.mkdtemp(prefix="hilgate-formation-")
     prefix = args.prefix if args.prefix is not None else f"f{uuid.uuid4().hex[:6]}_"
     links = {name: prefix + name for name in LINKS}
@@ -107,8 +127,8 @@ def main() -> int:
     text = text.replace("udpin:127.0.0.1:14560", f"udpin:127.0.0.1:{vehicle_port}")
     with open(scene, "w", encoding="utf-8") as handle:
         handle.write(text)
-    trace = os.path.join(args.out, f"trace-{args.mac}.jsonl")
-    summary = os.path.join(args.out, f"summary-{args.mac}.json")
+    trace = os.path.join(args.out, f"trace-{label}.jsonl")
+    summary = os.path.join(args.out, f"summary-{label}.json")
     if os.path.exists(trace):
         os.unlink(trace)
     overrides = [f"links.*.mac.protocol={args.mac}"]
@@ -125,21 +145,38 @@ def main() -> int:
     apps: list[subprocess.Popen] = []
     try:
         if not wait_ready(notify, daemon):
-            print(f"hilgate did not start (exit status {daemon.returncode})", file=sys.stderr)
-            return 1
+            raise SystemExit(f"hilgate did not start (exit status {daemon.returncode})")
         python = sys.executable
         common = ["--runtime-dir", runtime]
         apps.append(subprocess.Popen([python, os.path.join(HERE, "fake_bluerov.py"), "--seconds",
                                       str(args.seconds + 5), "--to", f"udpout:127.0.0.1:{vehicle_port}",
                                       "--listen", f"udpin:127.0.0.1:{autopilot_port}"]))
+        autopilot = f"udpout:127.0.0.1:{autopilot_port}"
+        app = [*hilgate, "app", "--until", str(max(1.0, args.seconds - 3))]  # done before the daemon ends
+        classes = os.path.join(HERE, "apps.py")
         for i, (name, slot) in enumerate(SLOTS.items(), 1):
-            apps.append(subprocess.Popen([python, os.path.join(HERE, "follower.py"), "--link",
-                                          links[f"follower{i}_ac"], "--slot", *map(str, slot), *common]))
-        apps.append(subprocess.Popen([python, os.path.join(HERE, "leader.py"), "--link", links["leader_ac"],
-                                      "--autopilot", f"udpout:127.0.0.1:{autopilot_port}", *common]))
+            if kind == "apps":
+                command = [*app, f"{classes}:Follower", "--link", links[f"follower{i}_ac"], "--name", f"f{i}",
+                           "--param", f"vehicle={name}", "--param", f"slot={list(slot)}", *common]
+            else:
+                command = [python, os.path.join(HERE, "follower.py"), "--link", links[f"follower{i}_ac"], "--slot",
+                           *map(str, slot), *common]
+            apps.append(subprocess.Popen(command))
+        if kind == "apps":
+            command = [*app, f"{classes}:Leader", "--link", links["leader_ac"], "--param", "vehicle=leader",
+                       "--param", "period_s=1", "--param", f"autopilot={autopilot}", *common]
+        else:
+            command = [python, os.path.join(HERE, "leader.py"), "--link", links["leader_ac"], "--autopilot", autopilot,
+                       *common]
+        apps.append(subprocess.Popen(command))
         time.sleep(1.0)
-        apps.append(subprocess.Popen([python, os.path.join(HERE, "operator.py"), "--link", links["buoy_ac"],
-                                      "--legs", str(args.legs), *common]))
+        if kind == "apps":
+            command = [*app, f"{classes}:Operator", "--link", links["buoy_ac"], "--param", "leader=1",
+                       "--param", f"legs={args.legs}", "--param", "leg_s=12", "--param", "repeat_s=2", *common]
+        else:
+            command = [python, os.path.join(HERE, "operator.py"), "--link", links["buoy_ac"], "--legs", str(args.legs),
+                       *common]
+        apps.append(subprocess.Popen(command))
         daemon.wait(args.seconds + 60)
     finally:
         for process in [*apps, daemon]:
@@ -153,7 +190,66 @@ def main() -> int:
         subprocess.run([*hilgate, "queues", scene, "--unlink"], capture_output=True)  # this run's own
         notify.close()
         shutil.rmtree(runtime, ignore_errors=True)
-    return report(formation_errors(trace), args, args.mac)
+    return trace
+
+
+def leader_start(trace_path: str) -> tuple[float | None, float | None]:
+    """(model time of the operator's first waypoint, of the leader's first pose 5 cm from its start):
+    their difference is the leader's start delay (acoustic delivery, the applications' reaction, MAVLink
+    and the autopilot; to the trace's pose period, 0.5 s)."""
+    first_wp = moved = None
+    start = None
+    with open(trace_path, encoding="utf-8") as handle:
+        for line in handle:
+            event = json.loads(line)
+            if first_wp is None and event.get("ev") == "enq" and event.get("link", "").endswith("buoy_ac"):
+                first_wp = event["t"]
+            if event.get("ev") == "pose" and event.get("vehicle") == "leader" and event.get("position"):
+                if start is None:
+                    start = event["position"]
+                elif moved is None and math.dist(start, event["position"]) > 0.05:
+                    moved = event["t"]
+    return first_wp, moved
+
+
+def run_figures(rows: list[tuple[float, str, float]]) -> tuple[float, float]:
+    """(mean, max) follower error over the run, all followers together."""
+    errors = [e for _, _, e in rows]
+    return sum(errors) / len(errors), max(errors)
+
+
+def realtime_apps_runs(args: argparse.Namespace) -> int:
+    """``--realtime-apps --runs N``: apps.py's classes through ``hilgate app`` against ``hilgate run`` N
+    times, one run at a time; prints each run and the spread (min / median / max) beside the virtual run."""
+    import statistics
+
+    per_run = []
+    for run in range(1, args.runs + 1):
+        trace = realtime(args, "apps", f"apps-{args.mac}-{run}")
+        rows = formation_errors(trace)
+        mean, largest = run_figures(rows)
+        first_wp, moved = leader_start(trace)
+        delay = (moved - first_wp) if first_wp is not None and moved is not None else float("nan")
+        per_run.append((mean, largest, delay))
+        print(f"run {run}: mean {mean:.3f} m, max {largest:.3f} m, leader start delay {delay:.1f} s "
+              f"(first waypoint at {first_wp if first_wp is None else round(first_wp, 2)} s)", flush=True)
+        with open(os.path.join(args.out, f"formation-apps-{args.mac}-{run}.csv"), "w", newline="") as handle:
+            writer = csv.writer(handle)
+            writer.writerow(["t", "follower", "error_m"])
+            writer.writerows(rows)
+    virtual = os.path.join(args.out, f"trace-virtual-{args.mac}.jsonl")
+    run_virtual(args, virtual)
+    v_mean, v_max = run_figures(formation_errors(virtual))
+    v_wp, v_moved = leader_start(virtual)
+    print(f"{args.mac}, {args.runs} real-time runs of {args.seconds:g} s (hilgate app against hilgate run; "
+          f"min / median / max) beside the virtual-time run:")
+    for i, what in enumerate(["mean follower error (m)", "max follower error (m)", "leader start delay (s)"]):
+        values = [r[i] for r in per_run]
+        fmt = ".1f" if i == 2 else ".3f"
+        virtual_value = [v_mean, v_max, v_moved - v_wp][i]
+        print(f"  {what:<26} {min(values):{fmt}} / {statistics.median(values):{fmt}} / {max(values):{fmt}}"
+              f"   virtual {virtual_value:{fmt}}")
+    return 0
 
 
 def report(rows: list[tuple[float, str, float]], args: argparse.Namespace, label: str) -> int:
