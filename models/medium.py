@@ -114,6 +114,7 @@ class Medium:
         self.arrivals = 0
         self._neighbours: dict[Radio, list[_Neighbour]] = {}
         self._unreachable: dict[Radio, dict[int, tuple[Radio, ...]]] = {}
+        self._by_address: dict[int, list[Radio]] = {}  # radios by address, in attachment order
         self._roam: dict[Radio, _Roaming] = {}
         self._order: dict[Radio, int] = {}
         self._snap: tuple[float, dict[tuple[int, int, int], list[Radio]], list[Radio], float] | None = None
@@ -218,6 +219,10 @@ class Medium:
                 roam[sender] = roaming
         self._neighbours = neighbours
         self._unreachable = {}
+        by_address: dict[int, list[Radio]] = {}
+        for radio in radios:
+            by_address.setdefault(radio.address, []).append(radio)
+        self._by_address = by_address
         self._roam = roam
         self._snap = None
         reach = [sender.range_m[1] for sender in roam]
@@ -231,8 +236,8 @@ class Medium:
         listed = {nb.radio for nb in self._neighbours[sender]}
         roaming = self._roam.get(sender)
         found = tuple(
-            radio for radio in self.radios
-            if radio.address == dst and radio is not sender and radio.rx_channel == sender.tx_channel
+            radio for radio in self._by_address.get(dst, ())
+            if radio is not sender and radio.rx_channel == sender.tx_channel
             and radio.listens and radio not in listed and sender.pose.static and radio.pose.static
             and (roaming is None or not roaming.covers(radio))
         )
