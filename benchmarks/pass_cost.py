@@ -1,4 +1,7 @@
-"""In-process cost of one daemon pass: app frame on a's queue -> frame in b's queue (+ states)."""
+"""In-process cost of one daemon pass: app frame on a's queue -> frame in b's queue (+ states).
+
+Run from the repository root: `python benchmarks/pass_cost.py [N]` prints the p10/p50/p90 of N passes;
+`PROF=1` adds a cProfile table.  Used to judge a compiled hot path: docs/compiled-hot-path.md."""
 import sys, os, time, tempfile, cProfile, pstats
 sys.path.insert(0, os.path.join(os.getcwd(), "benchmarks"))
 import gli_roundtrip as g
@@ -45,7 +48,7 @@ def fake_run(self, until=float("inf")):
     for q in (tx, rxa, rxb, txb): q.close()
     return 0
 class PassScheduler(RealtimeScheduler):
-    """A subclass, not a patched class: compiled by mypyc (tools/compile_hot_path.py) it is closed."""
+    """A subclass, not a patched class: a class compiled by mypyc is closed (docs/compiled-hot-path.md)."""
     run = fake_run
 service.RealtimeScheduler = PassScheduler
 dm = service.Daemon(scene, runtime_dir=os.path.join(d, "rt"))
