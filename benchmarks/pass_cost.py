@@ -1,59 +1,113 @@
-"""In-process cost of one daemon pass: app frame on a's queue -> frame in b's queue (+ states).
+#!/usr/bin/env python3
+"""The CPU cost of one daemon pass, in process: a frame an application put on link a's POSIX queue,
+read by the loop and carried through the GLI, the router and the simulated modems to link b's queue.
 
-Run from the repository root: `python benchmarks/pass_cost.py [N]` prints the p10/p50/p90 of N passes;
-`PROF=1` adds a cProfile table.  Used to judge a compiled hot path: docs/compiled-hot-path.md."""
-import sys, os, time, tempfile, cProfile, pstats
-sys.path.insert(0, os.path.join(os.getcwd(), "benchmarks"))
-import gli_roundtrip as g
+The round-trip benchmarks measure passes plus wake-ups of sleeping processes plus the applications;
+this one isolates the daemon's own work (Python and its system calls), which is what a faster hot
+path (docs/compiled-hot-path.md) or a leaner per-frame path would change.  A real daemon is built on
+``gli_roundtrip.py``'s two-link ideal scene; its scheduler's ``run`` is replaced (in a subclass) by a
+loop that puts one frame on a's queue, times one pass, and empties the applications' queues.
+
+Run from the repository root:
+
+    python benchmarks/pass_cost.py [PASSES]          # p10 / p50 / p90 of PASSES passes (default 20 000)
+    PROF=1 python benchmarks/pass_cost.py 3000       # and a cProfile table of the passes
+"""
+
+from __future__ import annotations
+
+import cProfile
+import gc
+import os
+import pstats
+import sys
+import tempfile
+import time
+
 import posix_ipc
-from hilgate.daemon import service
-from hilgate.core.realtime import RealtimeScheduler
-N = int(sys.argv[1]) if len(sys.argv) > 1 else 20000
-PROFILE = os.environ.get("PROF")
-a, b = f"ppa{os.getpid()}", f"ppb{os.getpid()}"
-d = tempfile.mkdtemp()
-scene = os.path.join(d, "s.yaml"); open(scene, "w").write(g.SCENE.format(a=a, b=b))
-result = {}
-def fake_run(self, until=float("inf")):
-    self.start_clock()
-    import gc; gc.disable()
-    tx = posix_ipc.MessageQueue(f"/{a}_tx_dlnk_phy"); rxa = posix_ipc.MessageQueue(f"/{a}_rx_dlnk_phy")
-    rxb = posix_ipc.MessageQueue(f"/{b}_rx_dlnk_phy"); txb = posix_ipc.MessageQueue(f"/{b}_tx_dlnk_phy")
-    txb.send(b"\x01"); tx.send(b"\x01")
-    self._handle_inputs(0.0); self._fire_due(self.model_time())
-    def drain(q):
-        n = 0
-        while True:
-            try: q.receive(0); n += 1
-            except posix_ipc.BusyError: return n
-    drain(rxa); drain(rxb)
-    msg = g.frame(b"ping" * 5, 0, 2)
-    samples = []; states = frames = 0
-    prof = cProfile.Profile() if PROFILE else None
-    for i in range(N):
-        tx.send(msg)
-        t0 = time.perf_counter()
-        if prof: prof.enable()
-        self._handle_inputs(0.0)
-        while self.peek() <= self.model_time():
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from gli_roundtrip import SCENE, frame  # noqa: E402
+
+from hilgate.core.realtime import RealtimeScheduler  # noqa: E402
+from hilgate.daemon import service  # noqa: E402
+from hilgate.gli.queues import unlink_queues  # noqa: E402
+
+
+def _drain(queue: posix_ipc.MessageQueue) -> int:
+    """Empty an application's queue as its application would; how many messages were there."""
+    count = 0
+    while True:
+        try:
+            queue.receive(0)
+        except posix_ipc.BusyError:
+            return count
+        count += 1
+
+
+def measuring_scheduler(a: str, b: str, passes: int, profile: bool) -> type[RealtimeScheduler]:
+    """A scheduler whose ``run`` times ``passes`` passes instead of serving (a subclass: a class
+    compiled by mypyc cannot be patched)."""
+
+    class PassScheduler(RealtimeScheduler):
+        def run(self, until: float = float("inf")) -> int:
+            self.start_clock()
+            gc.disable()
+            queues = {name: posix_ipc.MessageQueue(f"/{name}") for name in
+                      (f"{a}_tx_dlnk_phy", f"{a}_rx_dlnk_phy", f"{b}_tx_dlnk_phy", f"{b}_rx_dlnk_phy")}
+            to_a, from_a = queues[f"{a}_tx_dlnk_phy"], queues[f"{a}_rx_dlnk_phy"]
+            to_b, from_b = queues[f"{b}_tx_dlnk_phy"], queues[f"{b}_rx_dlnk_phy"]
+            to_b.send(b"\x01")  # REQ_STATE from both applications: both links are attended
+            to_a.send(b"\x01")
+            self._handle_inputs(0.0)
             self._fire_due(self.model_time())
-        if self._deferred: self.run_deferred()
-        if prof: prof.disable()
-        samples.append(time.perf_counter() - t0)
-        states += drain(rxa); frames += drain(rxb)
-    samples.sort()
-    print(f"pass p50 {samples[N//2]*1e6:.1f} us, p10 {samples[N//10]*1e6:.1f}, p90 {samples[9*N//10]*1e6:.1f}; state msgs/frame {states/N:.2f}, frames {frames}")
-    if prof:
-        pstats.Stats(prof).sort_stats("tottime").print_stats(200)
-    for q in (tx, rxa, rxb, txb): q.close()
-    return 0
-class PassScheduler(RealtimeScheduler):
-    """A subclass, not a patched class: a class compiled by mypyc is closed (docs/compiled-hot-path.md)."""
-    run = fake_run
-service.RealtimeScheduler = PassScheduler
-dm = service.Daemon(scene, runtime_dir=os.path.join(d, "rt"))
-try:
-    dm.run()
-finally:
-    from hilgate.gli.queues import unlink_queues
-    unlink_queues((a, b))
+            _drain(from_a)
+            _drain(from_b)
+            message = frame(b"ping" * 5, 0, 2)
+            profiler = cProfile.Profile() if profile else None
+            samples, states, frames = [], 0, 0
+            for _ in range(passes):
+                to_a.send(message)
+                started = time.perf_counter()
+                if profiler:
+                    profiler.enable()
+                self._handle_inputs(0.0)
+                while self.peek() <= self.model_time():
+                    self._fire_due(self.model_time())
+                if self._deferred:
+                    self.run_deferred()
+                if profiler:
+                    profiler.disable()
+                samples.append(time.perf_counter() - started)
+                states += _drain(from_a)
+                frames += _drain(from_b)
+            samples.sort()
+            print(f"one daemon pass (a's queue -> b's queue, in process), {passes:,} passes: "
+                  f"p10 {samples[passes // 10] * 1e6:.1f} µs, p50 {samples[passes // 2] * 1e6:.1f} µs, "
+                  f"p90 {samples[9 * passes // 10] * 1e6:.1f} µs; READY messages per frame {states / passes:.2f}, "
+                  f"frames delivered {frames:,}", flush=True)
+            if profiler:
+                pstats.Stats(profiler).sort_stats("tottime").print_stats(40)
+            for queue in queues.values():
+                queue.close()
+            return 0
+
+    return PassScheduler
+
+
+def main() -> int:
+    passes = int(sys.argv[1]) if len(sys.argv) > 1 else 20000
+    a, b = f"ppa{os.getpid()}", f"ppb{os.getpid()}"
+    directory = tempfile.mkdtemp(prefix="hilgate-pass-")
+    scene = os.path.join(directory, "scene.yaml")
+    with open(scene, "w") as handle:
+        handle.write(SCENE.format(a=a, b=b))
+    service.RealtimeScheduler = measuring_scheduler(a, b, passes, bool(os.environ.get("PROF")))
+    try:
+        return service.Daemon(scene, runtime_dir=os.path.join(directory, "rt")).run()
+    finally:
+        unlink_queues((a, b))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -28,6 +28,11 @@ def benchmarks(ns3_python: str | None) -> list[list[str]]:
         ["benchmarks/ring_aloha.py", "--drop-when-busy", *ns3],
         ["benchmarks/realtime_lateness.py", *ns3],
         ["benchmarks/gli_roundtrip.py"],
+        ["benchmarks/pass_cost.py", "20000"],
+        ["benchmarks/multihost.py"],
+        ["benchmarks/many_links.py"],
+        ["benchmarks/ring_scale.py", "--nodes", "50", "200", "1000"],
+        ["benchmarks/ring_aloha.py", "--nodes", "1000", "--sim-time", "3600", "--repeats", "1"],
         ["benchmarks/aruco.py"],
     ]
 
