@@ -200,6 +200,41 @@ def through_hilgate(count: int) -> list[float]:
         daemon.close()
 
 
+def send_paced(link: str, count: int, size: int, rate: float | None) -> float:
+    """As an application on ``link``: send ``count`` frames of ``size``-byte payloads to address 2 at
+    ``rate`` a second (sleeping until each is due, in steps of >= 0.5 ms, the sleep's own resolution;
+    never spinning: on a 2-core machine a spinning sender takes the daemon's core), or as fast as the
+    queue takes them (None), while a thread reads READY/BUSY as a dccomms application's service thread
+    does.  Returns when the sending started (``perf_counter``).  Shared with multihost.py."""
+    tx, rx = open_queue(f"/{link}_tx_dlnk_phy"), open_queue(f"/{link}_rx_dlnk_phy")
+    stop = threading.Event()
+
+    def drain_states() -> None:
+        while not stop.is_set():
+            try:
+                rx.receive(0.1)
+            except posix_ipc.BusyError:
+                pass
+
+    reader = threading.Thread(target=drain_states, daemon=True)
+    reader.start()
+    messages = [frame(b"x" * size, i, 2) for i in range(count)]
+    start = time.perf_counter()
+    try:
+        for i, message in enumerate(messages):
+            if rate:
+                ahead = start + i / rate - time.perf_counter()
+                if ahead > 0.0005:
+                    time.sleep(ahead)
+            tx.send(message)  # blocks when the queue is full, as dccomms' WritePacket does by default
+    finally:
+        stop.set()
+        reader.join()
+        tx.close()
+        rx.close()
+    return start
+
+
 def throughput(count: int, size: int, rate: float | None) -> tuple[float, int, int]:
     """Frames per second seen by the receiver, frames lost, frames the daemon counted as dropped.
     ``rate`` paces the sender (None: as fast as its queue takes them)."""
@@ -210,33 +245,9 @@ def throughput(count: int, size: int, rate: float | None) -> tuple[float, int, i
         counter = mp.Process(target=_echo, args=(b, count, "count", result))
         counter.start()
         time.sleep(1.0)  # (the counter is up and has said REQ_STATE)
-        tx, rx = open_queue(f"/{a}_tx_dlnk_phy"), open_queue(f"/{a}_rx_dlnk_phy")
-        stop = threading.Event()
-
-        def drain_states() -> None:  # a dccomms application's service thread reads READY/BUSY
-            while not stop.is_set():
-                try:
-                    rx.receive(0.1)
-                except posix_ipc.BusyError:
-                    pass
-
-        reader = threading.Thread(target=drain_states, daemon=True)
-        reader.start()
-        payload = b"x" * size
-        messages = [frame(payload, i, 2) for i in range(count)]
-        start = time.perf_counter()
-        for i, message in enumerate(messages):
-            if rate:  # sleep until the frame is due (in batches of >= 0.5 ms: the sleep's own resolution)
-                ahead = start + i / rate - time.perf_counter()
-                if ahead > 0.0005:
-                    time.sleep(ahead)
-            tx.send(message)  # blocks when the queue is full, as dccomms' WritePacket does by default
+        start = send_paced(a, count, size, rate)
         received, first, last = result.get(timeout=120)
         counter.join()
-        stop.set()
-        reader.join()
-        tx.close()
-        rx.close()
         elapsed = (last - start) or float("nan")
         drops = sum(link["drops"] for link in daemon.status()["links"])
         return received / elapsed, count - received, drops

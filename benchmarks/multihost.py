@@ -34,10 +34,8 @@ import threading
 import time
 import uuid
 
-import posix_ipc
-
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from gli_roundtrip import MESSAGE, _echo, frame, open_queue, percentiles  # noqa: E402
+from gli_roundtrip import MESSAGE, _echo, frame, open_queue, percentiles, send_paced  # noqa: E402
 
 from hilgate.gli.queues import unlink_queues  # noqa: E402
 
@@ -209,32 +207,9 @@ def throughput(count: int, size: int, rate: float | None) -> tuple[float, int, i
         counter = SPAWN.Process(target=_echo, args=(b, count, "count", result))
         counter.start()
         time.sleep(1.0)  # (the counter is up and has said REQ_STATE)
-        tx, rx = open_queue(f"/{a}_tx_dlnk_phy"), open_queue(f"/{a}_rx_dlnk_phy")
-        stop = threading.Event()
-
-        def drain_states() -> None:  # a dccomms application's service thread reads READY/BUSY
-            while not stop.is_set():
-                try:
-                    rx.receive(0.1)
-                except posix_ipc.BusyError:
-                    pass
-
-        reader = threading.Thread(target=drain_states, daemon=True)
-        reader.start()
-        messages = [frame(b"x" * size, i, 2) for i in range(count)]
-        start = time.perf_counter()
-        for i, message in enumerate(messages):
-            if rate:
-                ahead = start + i / rate - time.perf_counter()
-                if ahead > 0.0005:
-                    time.sleep(ahead)
-            tx.send(message)  # blocks when the queue is full, as dccomms' WritePacket does
+        start = send_paced(a, count, size, rate)
         received, first, last = result.get(timeout=120)
         counter.join()
-        stop.set()
-        reader.join()
-        tx.close()
-        rx.close()
         links = network.status("A")["links"] + network.status("B")["links"]
         drops = sum(link["drops"] + link["unread"] for link in links)
         gaps = sum(view["gaps"] for view in network.status("B")["network"]["hosts"])

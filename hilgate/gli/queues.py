@@ -285,13 +285,20 @@ class MqEndpoint:
     # -- application → link --------------------------------------------------------------------
 
     def _readable(self) -> None:
-        # Bounded: a flood on one queue must not starve the other links' timers.
+        # Bounded: a flood on one queue must not starve the other links' timers.  The queue's count
+        # says when it is empty: a receive that fails costs as much as a send and a receive together.
+        queue = self.from_app
         for _ in range(MAX_MESSAGES):
             try:
-                message, _priority = self.from_app.receive()
+                message, _priority = queue.receive()
             except posix_ipc.BusyError:
                 return
             self._handle(message)
+            try:
+                if not queue.current_messages:
+                    return
+            except posix_ipc.Error:  # closed while handling (a reload removed the link)
+                return
 
     def _handle(self, message: bytes) -> None:
         match self.protocol.receive(message):
