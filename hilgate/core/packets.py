@@ -17,7 +17,7 @@ import binascii
 import re
 import struct
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import fastcrc
 
@@ -48,9 +48,9 @@ def crc32(data: bytes) -> int:
     return fastcrc.crc32.cksum(data) ^ 0xFFFFFFFF
 
 
-@dataclass(frozen=True)
-class Decoded:
-    """What a GLI frame carries. ``real`` is the real packet (what goes on air)."""
+class Decoded(NamedTuple):
+    """What a GLI frame carries. ``real`` is the real packet (what goes on air).  A named tuple, not a
+    frozen dataclass: one is made per frame, and it is made in a third of the time."""
 
     real: bytes
     payload: bytes

@@ -317,14 +317,19 @@ class RealtimeScheduler(VirtualScheduler):
                 self._input_came(now, timeout > 0)
             self._last_input = now
             self._begin_inputs(blind)
+        fresh = True  # the clock was just brought to the wall clock's time: the first input needs no other
         for fd, events in events_ready:
             if events & select.EPOLLOUT:
-                self._input_time()
+                if not fresh:
+                    self._input_time()
+                fresh = False
                 writer = self._writers.get(fd)  # looked up after overdue timers, which may close it
                 if writer is not None:
                     self._call(writer)
             if events & ~select.EPOLLOUT:
-                self._input_time()
+                if not fresh:
+                    self._input_time()
+                fresh = False
                 reader = self._readers.get(fd)
                 if reader is not None:
                     self._call(reader)
