@@ -42,7 +42,7 @@ from typing import Any, Callable
 
 from .access import AccessError
 from .netcodec import NetError, decode_pose, decode_transmission, encode_pose, encode_transmission, to_local
-from ..gli.zenoh_door import ZenohDoor
+from ..gli.zenoh_door import WatchedPublisher, ZenohDoor
 from ..sim.live_vehicle import LiveVehicle, RemoteVehicle
 
 log = logging.getLogger(__name__)
@@ -276,11 +276,11 @@ class Network:
             # a gap in the message numbers on the receiving host (traced net_gap, counted in status).
             # Batched, not express: a put costs a sixth, and a lone message is sent at once anyway.
             # (only to other sessions: this host's own subscriber would decode each of its frames again)
-            publisher = self._publishers[sender.tx_channel] = self.session.declare_publisher(
+            publisher = self._publishers[sender.tx_channel] = WatchedPublisher(self.session.declare_publisher(
                 f"{self.prefix}/tx/{sender.tx_channel}", congestion_control=zenoh.CongestionControl.DROP,
-                allowed_destination=zenoh.Locality.REMOTE)
+                allowed_destination=zenoh.Locality.REMOTE))
         self._remember(self.sent, (frame.src_link, frame.id), frame)
-        if not publisher.matching_status:
+        if not publisher.matching:
             return
         self.number += 1
         publisher.put(encode_transmission(self.host, self.epoch_ns, self.number, frame, t, duration,
