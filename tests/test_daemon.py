@@ -287,12 +287,13 @@ def test_status_command_prints_the_documented_json(pair):
 
 def test_send_and_listen_tools(pair):
     daemon, a, b = pair
-    listener = subprocess.Popen([sys.executable, "-m", "hilgate", "listen", b, "--count", "2", "--timeout", "10",
+    listener = subprocess.Popen([sys.executable, "-m", "hilgate", "listen", b, "--count", "2", "--timeout", "60",
                                  "--runtime-dir", daemon.runtime], stdout=subprocess.PIPE, text=True)
-    time.sleep(1.0)
+    daemon.wait_clients(b)  # it hears only what is sent once it is attached, and its start-up alone takes about
+    # a second on a loaded host: a fixed 1 s sleep here lost "first line" whenever it was slower
     subprocess.run([sys.executable, "-m", "hilgate", "send", a, "--to", "2", "--runtime-dir", daemon.runtime],
-                   input="first line\nsecond line\n", text=True, check=True, timeout=20)
-    out, _ = listener.communicate(timeout=30)
+                   input="first line\nsecond line\n", text=True, check=True, timeout=60)
+    out, _ = listener.communicate(timeout=90)
     assert [line.split(": ", 1)[1] for line in out.splitlines()] == ["first line", "second line"]
     assert all(" 1 -> 2: " in line for line in out.splitlines())
 
