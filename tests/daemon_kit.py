@@ -141,6 +141,6 @@ class Daemon:
         unlink_queues(self.links)
 
 
-def peer_events(process: subprocess.Popen, timeout: float = 30.0) -> list[dict]:
+def peer_events(process: subprocess.Popen, timeout: float = 90.0) -> list[dict]:
     out, _ = process.communicate(timeout=timeout)
     return [json.loads(line) for line in out.splitlines() if line.strip()]

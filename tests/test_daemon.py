@@ -65,7 +65,7 @@ def test_ready_only_once_every_endpoint_is_up(pair):
 
 def test_dccomms_peers_exchange_frames_through_the_queues(pair):
     daemon, a, b = pair
-    receiver = daemon.peer(b, "--receive", "5", "--timeout", "15")
+    receiver = daemon.peer(b, "--receive", "5", "--timeout", "60")
     time.sleep(0.3)
     sender = daemon.peer(a, "--send", "5", "--dst", "2", "--interval", "0.4", "--receive", "0", "--timeout", "3")
     sent = [e for e in peer_events(sender) if e["ev"] == "sent"]
@@ -183,7 +183,7 @@ def test_bad_frames_are_counted_traced_and_dropped(pair):
     queue = posix_ipc.MessageQueue(f"/{a}_tx_dlnk_phy")
     queue.send(empty)
     queue.close()
-    receiver = daemon.peer(b, "--receive", "1", "--timeout", "10")
+    receiver = daemon.peer(b, "--receive", "1", "--timeout", "60")
     time.sleep(0.3)
     after = daemon.peer(a, "--send", "1", "--dst", "2", "--timeout", "1")
     peer_events(after)

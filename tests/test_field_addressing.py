@@ -43,7 +43,7 @@ def test_a_dccomms_application_that_leaves_the_destination_at_0(tmp_path, addres
     daemon = Daemon(tmp_path, scene(a, b, addressing), [a, b])
     try:
         daemon.wait_for("READY=1")
-        receiver = daemon.peer(b, "--receive", "3", "--timeout", "20" if not addressing else "3")
+        receiver = daemon.peer(b, "--receive", "3", "--timeout", "60" if not addressing else "3")
         assert next(iter(receiver.stdout.readline, ""))  # its REQ_STATE is out: it is there
         sender = daemon.peer(a, "--send", "3", "--dst", "0", "--size", "20", "--interval", "0.2", "--timeout", "1")
         peer_events(sender, 60)
