@@ -134,7 +134,7 @@ def status_of(daemon, name):
     return next(v for v in daemon.status()["vehicles"] if v["name"] == name)
 
 
-def wait_until(predicate, timeout=15.0):
+def wait_until(predicate, timeout=60.0):
     deadline = time.monotonic() + timeout
     while not predicate():
         assert time.monotonic() < deadline, "timed out"

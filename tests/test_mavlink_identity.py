@@ -68,7 +68,7 @@ class Vehicle:
         self.link.close()
 
 
-def wait_until(predicate, timeout=20.0, why="timed out"):
+def wait_until(predicate, timeout=60.0, why="timed out"):
     deadline = time.monotonic() + timeout
     while not predicate():
         assert time.monotonic() < deadline, why

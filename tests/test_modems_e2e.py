@@ -37,7 +37,7 @@ links:
 """
 
 
-def wait_up(daemon, links, timeout=15):
+def wait_up(daemon, links, timeout=60):
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         states = {l["id"]: l["state"] for l in daemon.status()["links"]}

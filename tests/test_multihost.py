@@ -33,7 +33,7 @@ def free_port(kind: int = socket.SOCK_STREAM) -> int:
         return probe.getsockname()[1]
 
 
-def wait_until(predicate, timeout: float = 20.0, what: str = "a condition"):
+def wait_until(predicate, timeout: float = 60.0, what: str = "a condition"):
     deadline = time.monotonic() + timeout
     while True:
         value = predicate()
@@ -93,7 +93,7 @@ class AtClient:
         kind = b"ack" if ack else b"noack"
         self.port.write(b"AT*SENDIM,%d,%d,%s," % (len(data), dst, kind) + data + b"\r\n")
 
-    def wait_line(self, prefix: bytes, timeout: float = 15.0) -> bytes | None:
+    def wait_line(self, prefix: bytes, timeout: float = 60.0) -> bytes | None:
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             for line in self.buffer.split(b"\r\n")[:-1]:
@@ -102,7 +102,7 @@ class AtClient:
             self.buffer += self.port.read(4096)
         return None
 
-    def recvim(self, timeout: float = 10.0) -> tuple[int, bytes] | None:
+    def recvim(self, timeout: float = 60.0) -> tuple[int, bytes] | None:
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             match = re.search(rb"RECVIM,(\d+),(\d+),(\d+),(no)?ack,(-?\d+),(-?\d+),(\d+),(-?[\d.]+),", self.buffer)

@@ -95,7 +95,7 @@ links:
     def state() -> str:
         return next(l["state"] for l in daemon.status()["links"] if l["id"] == r)
 
-    def wait_state(wanted: str, timeout: float = 20.0) -> None:
+    def wait_state(wanted: str, timeout: float = 60.0) -> None:
         deadline = time.monotonic() + timeout
         while state() != wanted:
             assert time.monotonic() < deadline, f"{r} never became {wanted}"
