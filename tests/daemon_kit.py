@@ -99,6 +99,18 @@ class Daemon:
     def link_status(self, link: str) -> dict:
         return next(l for l in self.status()["links"] if l["id"] == link)
 
+    def wait_clients(self, link: str, count: int = 1, timeout: float = 60.0) -> None:
+        """Wait until ``count`` socket clients are attached to ``link``: a client process started just
+        before (``hilgate listen``, ``hilgate app``) gets only the frames sent once it is attached, and
+        on a loaded host its start-up alone can take seconds.  The bound only guards against a hang."""
+        deadline = time.monotonic() + timeout
+        while self.link_status(link)["clients"] < count:
+            if time.monotonic() > deadline:
+                raise AssertionError(f"fewer than {count} clients on {link} after {timeout} s:\n{self.output()}")
+            if self.process.poll() is not None:
+                raise AssertionError(f"daemon exited with {self.process.returncode}:\n{self.output()}")
+            time.sleep(0.05)
+
     def reload(self, scene_text: str | None = None) -> None:
         if scene_text is not None:
             self.scene.write_text(scene_text)
@@ -129,6 +141,6 @@ class Daemon:
         unlink_queues(self.links)
 
 
-def peer_events(process: subprocess.Popen, timeout: float = 30.0) -> list[dict]:
+def peer_events(process: subprocess.Popen, timeout: float = 90.0) -> list[dict]:
     out, _ = process.communicate(timeout=timeout)
     return [json.loads(line) for line in out.splitlines() if line.strip()]

@@ -79,6 +79,8 @@ def test_the_same_classes_run_as_processes_against_the_daemon(tmp_path):
                                  "--until", "60", *common], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                 text=True)
         processes.append(pong)
+        daemon.wait_clients(b)  # Pong hears only the pings sent once it is attached: on a loaded host its start-up
+        # can take longer than Ping's own start-up and first period together
         ping = subprocess.run([sys.executable, "-m", "hilgate", "-v", "app", f"{EXAMPLE}:Ping", "--link", a,
                                "--param", "period_s=1", "--param", "peer=2", "--param", "count=3", "--seed", "1",
                                "--until", "8", *common], capture_output=True, text=True, timeout=60)

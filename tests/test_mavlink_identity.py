@@ -68,7 +68,7 @@ class Vehicle:
         self.link.close()
 
 
-def wait_until(predicate, timeout=20.0, why="timed out"):
+def wait_until(predicate, timeout=60.0, why="timed out"):
     deadline = time.monotonic() + timeout
     while not predicate():
         assert time.monotonic() < deadline, why
@@ -157,7 +157,7 @@ def test_an_asked_heartbeat_is_an_onboard_peripherals_and_feedback_goes_as_the_s
         (command,) = configured.messages("COMMAND_LONG")
         assert (command.get_srcSystem(), command.get_srcComponent()) == (7, 193)
         assert command.param1 == MAV.MAVLINK_MSG_ID_LOCAL_POSITION_NED and command.param2 == 100000
-        estimate = autopilot.recv_match(type="VISION_POSITION_ESTIMATE", blocking=True, timeout=10)
+        estimate = autopilot.recv_match(type="VISION_POSITION_ESTIMATE", blocking=True, timeout=30)
         assert estimate is not None and (estimate.x, estimate.y, estimate.z) == pytest.approx((4.0, 3.0, 2.0))
         assert (estimate.get_srcSystem(), estimate.get_srcComponent()) == (7, 193)  # one identity for all
         assert_never_a_ground_station(configured.messages() + companion.messages() + [estimate])

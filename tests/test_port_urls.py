@@ -186,7 +186,7 @@ links:
 """
 
 
-def wait_state(daemon, link, wanted, timeout=20.0):
+def wait_state(daemon, link, wanted, timeout=60.0):
     deadline = time.monotonic() + timeout
     while (state := daemon.link_status(link)["state"]) != wanted:
         assert time.monotonic() < deadline, f"{link} is {state}, never {wanted}:\n{daemon.output()}"

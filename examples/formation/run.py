@@ -63,6 +63,43 @@ def wait_ready(notify: socket.socket, daemon: subprocess.Popen) -> bool:
     return False
 
 
+def control(runtime: str, request: dict) -> dict:
+    """One request on the daemon's control socket (line-delimited JSON; the first line is its VERSION)."""
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as sock:
+        sock.settimeout(30)
+        sock.connect(os.path.join(runtime, "control.sock"))
+        reader = sock.makefile("r")
+        reader.readline()
+        sock.sendall((json.dumps(request) + "\n").encode())
+        return json.loads(reader.readline())
+
+
+def wait_attached(runtime: str, links: list[str], daemon: subprocess.Popen, timeout: float = 120.0) -> None:
+    """Wait until each of ``links`` has its application attached (a client on its GLI socket).  Starting
+    several Python processes takes seconds on a loaded host: a fixed sleep let the operator start its
+    route before the others were there, or the route run late into the model's time."""
+    deadline = time.monotonic() + timeout
+    while True:
+        clients = {link["id"]: link["clients"] for link in control(runtime, {"class": "STATUS"})["links"]}
+        if all(clients.get(link, 0) > 0 for link in links):
+            return
+        if daemon.poll() is not None or time.monotonic() > deadline:
+            raise SystemExit(f"the applications of {', '.join(links)} did not attach (clients: {clients})")
+        time.sleep(0.05)
+
+
+def stop(processes: list[subprocess.Popen]) -> None:
+    for process in processes:
+        if process.poll() is None:
+            process.send_signal(signal.SIGTERM)
+    for process in processes:
+        try:
+            process.wait(30)  # the daemon writes the end of its trace and its summary first
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+
+
 def free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
         probe.bind(("127.0.0.1", 0))
@@ -115,7 +152,11 @@ def main() -> int:
 def realtime(args: argparse.Namespace, kind: str, label: str) -> str:
     """One real-time run against ``hilgate run`` with the fake BlueROV as the leader; the applications
     are the process-style scripts (``kind="processes"``: operator.py, leader.py, follower.py) or the
-    classes of apps.py through ``hilgate app`` (``kind="apps"``).  Returns the trace's path."""
+    classes of apps.py through ``hilgate app`` (``kind="apps"``).  Returns the trace's path.
+
+    The operator starts once the leader's and the followers' applications are attached, and the run
+    lasts ``args.seconds`` from then (the model's time counts from the daemon's start: the start-up, a
+    few seconds on a loaded host, comes before the operator's first waypoint, see :func:`leader_start`)."""
     runtime = tempfile.mkdtemp(prefix="hilgate-formation-")
     prefix = args.prefix if args.prefix is not None else f"f{uuid.uuid4().hex[:6]}_"
     links = {name: prefix + name for name in LINKS}
@@ -138,9 +179,10 @@ def realtime(args: argparse.Namespace, kind: str, label: str) -> str:
     notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
     notify.bind(notify_path)
     hilgate = [sys.executable, "-m", "hilgate"]
+    limit = str(args.seconds + 300)  # a bound in case this script dies: it stops them itself
     daemon = subprocess.Popen(
         [*hilgate, "run", scene, *(x for o in overrides for x in ("--set", o)), "--runtime-dir", runtime,
-         "--trace", trace, "--summary", summary, "--until", str(args.seconds), "--no-status-line"],
+         "--trace", trace, "--summary", summary, "--until", limit, "--no-status-line"],
         env=dict(os.environ, NOTIFY_SOCKET=notify_path))
     apps: list[subprocess.Popen] = []
     try:
@@ -152,7 +194,7 @@ def realtime(args: argparse.Namespace, kind: str, label: str) -> str:
                                       str(args.seconds + 5), "--to", f"udpout:127.0.0.1:{vehicle_port}",
                                       "--listen", f"udpin:127.0.0.1:{autopilot_port}"]))
         autopilot = f"udpout:127.0.0.1:{autopilot_port}"
-        app = [*hilgate, "app", "--until", str(max(1.0, args.seconds - 3))]  # done before the daemon ends
+        app = [*hilgate, "app", "--until", limit]
         classes = os.path.join(HERE, "apps.py")
         for i, (name, slot) in enumerate(SLOTS.items(), 1):
             if kind == "apps":
@@ -169,7 +211,7 @@ def realtime(args: argparse.Namespace, kind: str, label: str) -> str:
             command = [python, os.path.join(HERE, "leader.py"), "--link", links["leader_ac"], "--autopilot", autopilot,
                        *common]
         apps.append(subprocess.Popen(command))
-        time.sleep(1.0)
+        wait_attached(runtime, [links[name] for name in LINKS if name != "buoy_ac"], daemon)
         if kind == "apps":
             command = [*app, f"{classes}:Operator", "--link", links["buoy_ac"], "--param", "leader=1",
                        "--param", f"legs={args.legs}", "--param", "leg_s=12", "--param", "repeat_s=2", *common]
@@ -177,16 +219,15 @@ def realtime(args: argparse.Namespace, kind: str, label: str) -> str:
             command = [python, os.path.join(HERE, "operator.py"), "--link", links["buoy_ac"], "--legs", str(args.legs),
                        *common]
         apps.append(subprocess.Popen(command))
-        daemon.wait(args.seconds + 60)
+        wait_attached(runtime, [links["buoy_ac"]], daemon)
+        try:
+            daemon.wait(args.seconds)  # the run, from the operator's start
+        except subprocess.TimeoutExpired:
+            pass
+        stop(apps)  # the applications first (they end their runs), then the daemon (its trace is complete)
+        stop([daemon])
     finally:
-        for process in [*apps, daemon]:
-            if process.poll() is None:
-                process.send_signal(signal.SIGTERM)
-        for process in [*apps, daemon]:
-            try:
-                process.wait(5)
-            except subprocess.TimeoutExpired:
-                process.kill()
+        stop([*apps, daemon])
         subprocess.run([*hilgate, "queues", scene, "--unlink"], capture_output=True)  # this run's own
         notify.close()
         shutil.rmtree(runtime, ignore_errors=True)
