@@ -3,7 +3,7 @@
 The S100 is a transparent byte pipe with no command set (``shared/protocols/s100-mavlink-aruco.md``):
 a packet is the link's packet bytes followed by CR LF.  Without RTS/CTS flow control the modem takes
 at most 45 bytes at a time, so the bridge writes 45-byte pieces paced at the air bitrate, then the
-CR LF.  The receiver hunts frames in the byte stream by the packet class's preamble, length and CRC,
+CR LF (hilgate's driver puts the CR LF in the last piece: see :func:`pieces`).  The receiver hunts frames in the byte stream by the packet class's preamble, length and CRC,
 skipping stray CR LF and ``+++…\\r\\n`` modem notices.  ``raw`` links, which have no framing of their
 own, get :class:`hilgate.core.packets.HilgateFrame`.
 """
@@ -83,13 +83,18 @@ def wire_class(packet: PacketClass) -> PacketClass:
 
 
 def pieces(real: bytes, rtscts: bool) -> list[bytes]:
-    """What to write, in order: the whole packet then CR LF with RTS/CTS; else 45-byte pieces, the
-    last one followed by CR LF (each piece is to be paced at the air bitrate)."""
+    """What to write, in order: the whole packet then CR LF with RTS/CTS; else the packet and its CR LF
+    cut into 45-byte pieces (each to be paced at the air bitrate).
+
+    The CR LF rides in the last piece rather than alone after it: a modem holding a piece shorter than
+    45 bytes sends it when its CR LF comes *or when its timeout runs out*, and a CR LF written one pacing
+    sleep later (``len * 8 / bitrate``, 80 ms for 10 bytes at 1 kbit/s) lands after that timeout on a
+    busy host, so the frame's tail would go on air as a packet of its own and the CR LF as another.
+    Every piece but the last is full (the modem sends it at once); the last ends with the terminator."""
     if rtscts:
         return [real + CRLF]
-    chunks = [real[i : i + PIECE] for i in range(0, len(real), PIECE)] or [b""]
-    chunks.append(CRLF)
-    return chunks
+    wire = real + CRLF
+    return [wire[i : i + PIECE] for i in range(0, len(wire), PIECE)]
 
 
 @dataclass(frozen=True)

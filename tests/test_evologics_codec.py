@@ -155,7 +155,13 @@ def test_s100_pieces_and_hunting():
     real = simple.encode(bytes(range(0x41, 0x52)))
     assert pieces(real, rtscts=True) == [real + b"\r\n"]
     long = packet_class("vl2b").encode(b"x" * 100)
-    assert [len(p) for p in pieces(long, rtscts=False)] == [45, 45, 15, 2]
+    cut = pieces(long, rtscts=False)
+    assert [len(p) for p in cut] == [45, 45, 17] and b"".join(cut) == long + b"\r\n"
+    # the CR LF is never written after a pacing sleep on its own, behind a short piece
+    for size in range(0, 140):
+        cut = pieces(bytes(size), rtscts=False)
+        assert b"".join(cut) == bytes(size) + b"\r\n" and all(len(p) == 45 for p in cut[:-1])
+        assert cut[-1].endswith(b"\n") and 0 < len(cut[-1]) <= 45
     hunter = FrameHunter(simple)
     events = hunter.receive_data(b"\r\n+++NOTICE\r\njunk" + real[:7])
     events += hunter.receive_data(real[7:] + b"\r\n")

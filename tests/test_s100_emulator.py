@@ -256,9 +256,10 @@ links:
 
 @pytest.mark.parametrize("rtscts,on_air", [(False, [45, 45, 12]), (True, [100])])
 def test_hilgates_driver_gets_a_long_frame_across_in_45_byte_pieces_without_flow_control(tmp_path, rtscts, on_air):
-    """hilgate's S100 driver writes a 100-byte SimplePacket as 45 + 45 + 10 bytes paced at the air bitrate, then
-    CR LF: the emulated S100 sends each piece as the real one would (45, 45, then 10 + CR LF) and loses none;
-    the far driver joins them.  With RTS/CTS the frame goes whole."""
+    """hilgate's S100 driver writes a 100-byte SimplePacket and its CR LF as 45 + 45 + 12 bytes paced at the air
+    bitrate (the CR LF in the last piece, so no pacing sleep can put the modem's timeout between the tail and
+    its terminator, as it did on a loaded CI host): the emulated S100 sends each piece as the real one would
+    (45, 45, then 10 + CR LF) and loses none; the far driver joins them.  With RTS/CTS the frame goes whole."""
     from hilgate.client import Link
     from test_modems_e2e import wait_up
 
