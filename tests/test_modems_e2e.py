@@ -47,6 +47,15 @@ def wait_up(daemon, links, timeout=60):
     raise AssertionError(f"links not up: {states}\n{daemon.output()}")
 
 
+def wait_ready(daemon, link, timeout=60):
+    """Until ``link`` tells its applications READY: its modem has done with the last frame (a hang
+    guard: it returns as soon as that is so; a fixed sleep raced the acknowledgement on a loaded host)."""
+    deadline = time.monotonic() + timeout
+    while not daemon.link_status(link)["ready"]:
+        assert time.monotonic() < deadline, f"{link} never ready again\n{daemon.output()}"
+        time.sleep(0.02)
+
+
 @pytest.mark.parametrize("protocol,packet", [("evologics", "vl2b"), ("s100", "simple:20")])
 def test_application_to_application_through_real_drivers_and_emulators(tmp_path, protocol, packet):
     a, b, ea, eb = unique("da"), unique("db"), unique("ea"), unique("eb")
@@ -69,7 +78,7 @@ def test_application_to_application_through_real_drivers_and_emulators(tmp_path,
                 size = 1 + 2 + len(payload) + 2 if packet == "vl2b" else 20
                 expected.append(0.05 + size * 8 / 1000 + 0.1)
                 assert seen >= expected[-1] - 0.002, (seen, expected[-1])  # never earlier than the model says
-                time.sleep(0.3)  # let the DELIVEREDIM come back before the next IM
+                wait_ready(daemon, a)  # the DELIVEREDIM came back (evologics): the next IM goes alone
         daemon.stop()
         events = daemon.trace_events()
         sim_rx = [e for e in events if e.get("link") == eb and e["ev"] == "rx"]

@@ -303,6 +303,9 @@ class RoutedLink:
             "unread": causes.get("no_reader", 0) + self.unread_kept,
             "drop_causes": causes,
             "clients": self.clients,
+            # what the link's applications are told (READY/BUSY): false while a frame is still in the
+            # modem's hands, e.g. a real modem's IM until its DELIVEREDIM or FAILEDIM
+            "ready": self.ready,
         }
         if figures.get("reason"):
             status["reason"] = figures["reason"]
