@@ -14,6 +14,11 @@ and a sender with many moving neighbours finds them through a grid of where they
 widened by how far their top speed can have taken them since.  Both keep the list order, so traces
 are the same as with a full scan; the work per transmission no longer grows with the number of modems.
 
+Each pair's loss model is bound once, when the pair is listed (``path.py``: the receiver's error model
+with the sender's front end and bit rate).  A receiver that refuses a sender (bands that do not overlap:
+it hears nothing; a modulation it does not decode: interference only) leaves that pair off the fast path,
+so only such pairs pay for the check.
+
 The arithmetic is DESIGN.md's "timing and loss model", step 3 (and the PER of step 5).
 """
 
