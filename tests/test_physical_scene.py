@@ -81,6 +81,13 @@ def test_preset_source_levels_put_per_near_0_1_at_the_datasheet_range(preset, ra
      "links.la.error.colisions", "did you mean 'collisions'"),
     ("acoustic: {band_khz: [7, 17], source_level_db: 150, levle: 2}", "links.la.acoustic.levle",
      "did you mean 'level'"),
+    ("acoustic: {band_khz: [7, 17], source_level_db: 150, decodes: [bfsk, ofdm]}", "links.la.acoustic.decodes[1]",
+     "must be one of"),
+    ("acoustic: {band_khz: [7, 17], source_level_db: 150, decodes: bfsk}", "links.la.acoustic.decodes",
+     "must be a list"),
+    ("acoustic: {band_khz: [7, 17], source_level_db: 150, decodes: [qpsk, qpsk]}", "links.la.acoustic.decodes[1]",
+     "given twice"),
+    ("model: evologics-s2cr-7-17, acoustic: {band_khz: [7]}", "links.la.acoustic.band_khz", "must be [low, high]"),
 ])
 def test_bad_physical_keys_are_one_line_errors(bad, where, message):
     error = error_of(f"""\
