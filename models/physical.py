@@ -27,6 +27,7 @@ noise (:meth:`per_sinr`) and drops an arrival whose signal-to-interference ratio
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, replace
 
@@ -216,7 +217,7 @@ class PhysicalErrorModel:
         rate = self.bitrate_bps if bitrate_bps is None else float(bitrate_bps)
         if sender == self.sender and rate == self.sender_bitrate_bps:
             return self
-        return PhysicalErrorModel(self.env, self.acoustic, self.bitrate_bps, sender, rate)
+        return _bound(self.env, self.acoustic, self.bitrate_bps, sender, rate)
 
     def with_env(self, **changes: object) -> "PhysicalErrorModel":
         """A copy with other environment values (``hilgate fit`` varies spreading and the floor)."""
@@ -245,3 +246,11 @@ class PhysicalErrorModel:
         return (f"PhysicalErrorModel({a.band_khz[0]:g}-{a.band_khz[1]:g} kHz{heard}, SL {self.source_db:g} dB, "
                 f"{self.modulation}, {self.sender_bitrate_bps:g} bit/s, {self.env.absorption}, "
                 f"k={self.env.spreading:g})")
+
+
+@functools.lru_cache(maxsize=4096)
+def _bound(env: Environment, acoustic: Acoustic, bitrate_bps: float, sender: Acoustic,
+           sender_bitrate_bps: float) -> PhysicalErrorModel:
+    """One model per distinct (receiver, sender) configuration: a scene of a thousand links in two
+    groups binds a million pairs from a handful of models (each costs a noise integral)."""
+    return PhysicalErrorModel(env, acoustic, bitrate_bps, sender, sender_bitrate_bps)

@@ -286,3 +286,26 @@ def test_a_path_is_bound_once_per_pair_not_per_frame(monkeypatch):
     assert len(calls) == 2
     assert len(net.of("rx", "b")) == 200  # b's error model is none: nothing lost on a -> b
     assert {e[4] for e in net.of("err", "a")} == {"modulation"} and len(net.of("err", "a")) == 200
+
+
+def test_an_undecodable_sender_still_interferes_under_sinr():
+    """With ``collisions: sinr`` a sender the receiver cannot decode (BFSK at a BPSK receiver) adds its
+    received power to the interference of what it overlaps: a strong one 100 m away spoils a weak
+    decodable frame from 1000 m, and its own frame ends as ``modulation``, not captured."""
+    env = Environment(collisions="sinr", capture_db=10.0)
+    bpsk = Acoustic((18.0, 34.0), 160.0)
+    bfsk = Acoustic((18.0, 34.0), 160.0, modulation="bfsk")
+    outcomes = {}
+    for strong_modulation in (bpsk, bfsk):
+        net = Net(Channel("ac", 1500.0), seed=3)
+        net.modem("r", (0, 0, 0), bitrate_bps=8000.0, error=PhysicalErrorModel(env, bpsk, 8000.0), acoustic=bpsk)
+        net.modem("strong", (100, 0, 0), bitrate_bps=8000.0, acoustic=strong_modulation)
+        net.modem("weak", (0, 1000, 0), bitrate_bps=8000.0, acoustic=bpsk)
+        strong = net.send("strong", "r", 100, at=1.0 - 100 / 1500.0)
+        weak = net.send("weak", "r", 100, at=1.0 - 1000 / 1500.0 + 0.05)
+        net.run()
+        names = {strong.id: "strong", weak.id: "weak"}
+        got = {names[e[3]]: "rx" for e in net.of("rx", "r")}
+        got.update({names[e[3]]: e[4] for e in net.of("err", "r")})
+        outcomes[strong_modulation.modulation] = got
+    assert outcomes == {"bpsk": {"strong": "rx", "weak": "mult"}, "bfsk": {"strong": "modulation", "weak": "mult"}}
