@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 CAUSE_COLOURS = {"prop": "#e69f00", "col": "#d62728", "mult": "#9467bd", "fifo": "#222222", "range": "#1f77b4",
-                 "closed": "#7f7f7f"}
+                 "closed": "#7f7f7f", "band": "#17becf", "modulation": "#bcbd22"}
 MISSING_MATPLOTLIB = ("hilgate report needs matplotlib, an optional extra: pip install 'hilgate[report]' "
                       "(or pip install matplotlib); --csv tables need nothing more")
 
