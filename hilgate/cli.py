@@ -269,12 +269,11 @@ def cmd_app(args: argparse.Namespace) -> int:
     """``hilgate app MODULE:CLASS --link ID …``: the application as a process against a running daemon."""
     import os
 
-    import yaml
-
     from .core.application import Application
     from .daemon.service import parse_tcp
     from .gli.app_runner import run_application
     from .scene.plugins import PluginError, load_plugin
+    from .scene.yaml_nodes import parse_value
 
     entry, colon, class_name = args.application.rpartition(":")
     if not colon or not entry or not class_name.isidentifier():
@@ -290,11 +289,10 @@ def cmd_app(args: argparse.Namespace) -> int:
     for item in args.params:
         key, equals, value = item.partition("=")
         if not equals or not key.isidentifier():
-            raise SceneError("--param", 0, "", f"{item!r} is not KEY=VALUE")
-        try:
-            params[key] = yaml.safe_load(value) if value else ""
-        except yaml.YAMLError:
-            params[key] = value
+            raise SceneError("--param", 0, "", f"{item[:60]!r} is not KEY=VALUE")
+        # read as a scene's values are, within the same limits: 20 000 nested brackets or a number of
+        # 100 000 digits is one line (not a RecursionError after 16 s, nor a ValueError)
+        params[key] = parse_value(value, f"--param {key}") if value else ""
     zenoh = None
     if args.zenoh:
         zenoh = {"connect": args.zenoh, **({"prefix": args.zenoh_prefix} if args.zenoh_prefix else {})}
@@ -319,6 +317,25 @@ def _tcp_address(value: str) -> str:
         parse_tcp(value)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+    return value
+
+
+def _zenoh_endpoint(value: str) -> str:
+    """``--zenoh``/``--zenoh-connect``/``--zenoh-listen``: checked as a scene's ``zenoh.connect`` is, so
+    ``'{"a":'`` is a usage error here rather than a zenoh.ZError from inside the session."""
+    from .scene.hosts import ENDPOINT
+
+    if not ENDPOINT.fullmatch(value):
+        raise argparse.ArgumentTypeError(f"{value[:60]!r} is not a Zenoh endpoint like tcp/192.168.1.10:7447")
+    return value
+
+
+def _zenoh_prefix(value: str) -> str:
+    from .scene.hosts import PREFIX
+
+    if not PREFIX.fullmatch(value):
+        raise argparse.ArgumentTypeError(f"{value[:60]!r} is not a key prefix (one to four words of letters, "
+                                         "digits, '_', '.' or '-' joined by '/')")
     return value
 
 
@@ -513,9 +530,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="socket GLI clients at once, all links together (default 256)")
     p.add_argument("--host", metavar="NAME",
                    help="this daemon's host in a scene spread over hosts (default: the machine's host name)")
-    p.add_argument("--zenoh-connect", action="append", default=[], metavar="ENDPOINT",
+    p.add_argument("--zenoh-connect", action="append", default=[], metavar="ENDPOINT", type=_zenoh_endpoint,
                    help="a daemon to join, e.g. tcp/192.168.1.10:7447 (repeatable; besides the scene's zenoh.connect)")
-    p.add_argument("--zenoh-listen", action="append", default=[], metavar="ENDPOINT",
+    p.add_argument("--zenoh-listen", action="append", default=[], metavar="ENDPOINT", type=_zenoh_endpoint,
                    help="where the others may connect (default: the scene's zenoh.listen, else loopback only)")
     p.add_argument("--clock-offset-s", type=float, default=0.0, metavar="S",
                    help="act as if this host's clock were S seconds ahead (to measure what an offset does)")
@@ -575,9 +592,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, help="seed of ctx.random (default: not reproducible)")
     p.add_argument("--until", type=float, metavar="S", help="stop after S seconds (default: SIGTERM/SIGINT)")
     p.add_argument("--tcp", metavar="[HOST:]PORT", type=_tcp_address, help="the daemon's TCP GLI listener")
-    p.add_argument("--zenoh", action="append", metavar="ENDPOINT",
+    p.add_argument("--zenoh", action="append", metavar="ENDPOINT", type=_zenoh_endpoint,
                    help="reach the links over Zenoh through this daemon endpoint (repeatable)")
-    p.add_argument("--zenoh-prefix", help="the network's Zenoh key prefix (default: hilgate)")
+    p.add_argument("--zenoh-prefix", type=_zenoh_prefix, help="the network's Zenoh key prefix (default: hilgate)")
     p.add_argument("--runtime-dir")
 
     p = sub.add_parser("send", help="send text to a link (arguments, or one frame per stdin line)")
