@@ -30,6 +30,7 @@ from typing import Any, Callable
 
 from hilgate.core.backend import AppFrame, PhyEvent
 from hilgate.core.endpoint import TAKEN, LinkPort
+from hilgate.core.outputs import OutputError, pty_link_problem
 from hilgate.core.packets import BROADCAST, Decoded, Raw
 from hilgate.core.streams import Connection, Listener
 
@@ -68,14 +69,31 @@ class PtyHost:
         except OSError as exc:
             log.warning("%s: cannot give the pty to the daemon's group: %s", name, exc)
         os.set_blocking(self.master, False)
-        if os.path.islink(path):
-            os.unlink(path)
-        elif os.path.exists(path):
-            raise OSError(f"{path} exists and is not a link: will not replace it")
-        os.symlink(os.ttyname(self.slave), path)
+        self.target = os.ttyname(self.slave)
+        try:
+            self._link(path)
+        except OSError:
+            for fd in (self.master, self.slave):
+                os.close(fd)
+            raise
         scheduler.add_reader(self.master, self._readable)
         self.paused = False
         log.info("%s: emulated modem at %s (%s)", name, path, os.ttyname(self.slave))
+
+    def _link(self, path: str) -> None:
+        """Link the pty at ``path``: where nothing is, or over a pty link a previous run left (the scene
+        loader checked it too; the file system may have changed since).  symlink(2) never replaces, so
+        something that appears meanwhile is refused, not removed."""
+        problem = pty_link_problem(path)
+        if problem is not None:
+            raise OutputError(problem)
+        if os.path.islink(path):
+            os.unlink(path)
+        try:
+            os.symlink(self.target, path)
+        except FileExistsError:
+            raise OutputError(f"{path} appeared while the emulated modem's pty link was being made: "
+                              f"not replacing it") from None
 
     def pause(self) -> None:
         """Stop reading: what the application writes waits in the kernel's pty buffer, and once that is
@@ -114,7 +132,7 @@ class PtyHost:
             except OSError:
                 pass
         try:
-            if os.path.islink(self.path):
+            if os.readlink(self.path) == self.target:  # only our own link: not one that replaced it since
                 os.unlink(self.path)
         except OSError:
             pass

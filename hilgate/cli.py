@@ -64,6 +64,7 @@ def _queue_budget(scene) -> str:
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
+    from .core.outputs import OutputError, open_output, output_problem
     from .scene.load import load_scene
     from .sim.simulate import simulate, write_summary
     from .report.tables import format_summary
@@ -72,7 +73,11 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if args.until is not None and args.until <= 0:
         raise SceneError("--until", 0, "", f"must be positive, not {args.until:g}")
     trace_path = args.trace if args.trace is not None else scene.trace_file
-    trace = open(trace_path, "w", encoding="utf-8", buffering=1 << 20) if trace_path else None
+    if args.summary:  # refused before the run, not after it
+        problem = output_problem(args.summary, "summary")
+        if problem is not None:
+            raise OutputError(problem)
+    trace = open_output(trace_path, "trace", append=False, buffering=1 << 20) if trace_path else None
     try:
         progress = sys.stderr.isatty() and not args.quiet
         summary = simulate(scene, until=args.until, seed=args.seed, trace=trace, progress=progress)

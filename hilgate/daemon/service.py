@@ -30,6 +30,7 @@ from ..scene.hosts import HOST_NAME, ZenohSpec
 from ..scene.links import require_narrow_addresses
 from ..scene.worker import SceneJob, request_for
 from ..core.notify import notify, watchdog_interval
+from ..core.outputs import OutputError, open_output, output_problem
 from ..sim.simulate import write_summary
 
 log = logging.getLogger(__name__)
@@ -99,7 +100,13 @@ class Daemon:
         raise_queue_budget()
         raise_descriptor_limit()
         trace_path = self.trace_path or scene.trace_file
-        self.trace = open(trace_path, "a", encoding="utf-8", buffering=1 << 16) if trace_path else None
+        if self.summary_path:  # refused now, not after a run of hours
+            problem = output_problem(self.summary_path, "summary")
+            if problem is not None:
+                raise OutputError(problem)
+        self.group = group
+        self.trace = (open_output(trace_path, "trace", append=True, group=group, buffering=1 << 16)
+                      if trace_path else None)
         self.scheduler = scheduler = RealtimeScheduler(self.speed)
         self.recorder = Recorder(self.trace)
         self.run_id = uuid.uuid4().hex[:12]
@@ -307,7 +314,10 @@ class Daemon:
         if self.summary_path and router is not None and router.world is not None:
             summary = self.recorder.summary(self.scene, router.world.seed, self.scheduler.now(), 0.0,
                                             router.world.modems.values())
-            write_summary(summary, self.summary_path)
+            try:
+                write_summary(summary, self.summary_path, getattr(self, "group", None))
+            except OSError as exc:
+                log.error("summary not written: %s", exc)
         if self._reload_job is not None:
             self._reload_job.cancel()
         for closer in (getattr(self, "live", None), self.control, self.tcp_listener, router, self.network):
