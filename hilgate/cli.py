@@ -13,6 +13,8 @@ from .scene.yaml_nodes import SceneError
 log = logging.getLogger(__name__)
 
 EXIT_SCENE = 2
+TOKEN_HELP = ("with --tcp: the daemon's TCP GLI token (default $HILGATE_TCP_TOKEN_FILE, else the local daemon's "
+              "RUNTIME/tcp.token)")
 
 
 def _add_scene_args(parser: argparse.ArgumentParser, optional: bool = False) -> None:
@@ -109,7 +111,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                     args.trace, args.summary, args.until, status_line, args.gli_backlog, args.group,
                     args.max_clients, args.max_link_clients, plugins=args.plugins, preset_dirs=args.preset_dirs,
                     host=args.host, zenoh_connect=args.zenoh_connect, zenoh_listen=args.zenoh_listen,
-                    clock_offset_s=args.clock_offset_s)
+                    clock_offset_s=args.clock_offset_s, tcp_token=args.tcp_token)
     return daemon.run()
 
 
@@ -249,7 +251,8 @@ def _open_link(args: argparse.Namespace):
     from .gli.client import Link
     from .daemon.service import parse_tcp
 
-    return Link.open(args.link, tcp=parse_tcp(args.tcp) if args.tcp else None, runtime_dir=args.runtime_dir)
+    return Link.open(args.link, tcp=parse_tcp(args.tcp) if args.tcp else None, runtime_dir=args.runtime_dir,
+                     token_file=args.token_file)
 
 
 def cmd_send(args: argparse.Namespace) -> int:
@@ -302,7 +305,8 @@ def cmd_app(args: argparse.Namespace) -> int:
     if args.zenoh:
         zenoh = {"connect": args.zenoh, **({"prefix": args.zenoh_prefix} if args.zenoh_prefix else {})}
     return run_application(cls, args.links, params, name=args.name, seed=args.seed, runtime_dir=args.runtime_dir,
-                           tcp=parse_tcp(args.tcp) if args.tcp else None, zenoh=zenoh, until=args.until)
+                           tcp=parse_tcp(args.tcp) if args.tcp else None, zenoh=zenoh, until=args.until,
+                           token_file=args.token_file)
 
 
 def _address(value: str) -> int:
@@ -513,7 +517,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_scene_args(p, optional=True)
     p.add_argument("--speed", type=float, default=1.0, help="run the model at K times real time (default 1)")
     p.add_argument("--tcp", metavar="[HOST:]PORT", type=_tcp_address,
-                   help="also serve the socket GLI over TCP (loopback by default)")
+                   help="also serve the socket GLI over TCP (loopback by default); applications prove that they "
+                        "hold the token of --tcp-token")
+    p.add_argument("--tcp-token", metavar="FILE",
+                   help="the TCP GLI's secret (default RUNTIME/tcp.token; made 0640 for --group if absent): copy "
+                        "it to the hosts whose applications connect over TCP")
     p.add_argument("--runtime-dir", help="where the sockets go (default: $RUNTIME_DIRECTORY, /run/hilgate, "
                                           "$XDG_RUNTIME_DIR/hilgate or /tmp/hilgate-UID)")
     p.add_argument("--trace", help="append the event trace (JSON lines) here")
@@ -597,6 +605,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, help="seed of ctx.random (default: not reproducible)")
     p.add_argument("--until", type=float, metavar="S", help="stop after S seconds (default: SIGTERM/SIGINT)")
     p.add_argument("--tcp", metavar="[HOST:]PORT", type=_tcp_address, help="the daemon's TCP GLI listener")
+    p.add_argument("--token-file", metavar="FILE", help=TOKEN_HELP)
     p.add_argument("--zenoh", action="append", metavar="ENDPOINT", type=_zenoh_endpoint,
                    help="reach the links over Zenoh through this daemon endpoint (repeatable)")
     p.add_argument("--zenoh-prefix", type=_zenoh_prefix, help="the network's Zenoh key prefix (default: hilgate)")
@@ -607,6 +616,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("text", nargs="*")
     p.add_argument("--to", type=_address, default=255, help="destination address (default 255, broadcast)")
     p.add_argument("--tcp", metavar="[HOST:]PORT", type=_tcp_address)
+    p.add_argument("--token-file", metavar="FILE", help=TOKEN_HELP)
     p.add_argument("--runtime-dir")
 
     p = sub.add_parser("listen", help="print what a link receives")
@@ -615,6 +625,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--timeout", type=float, help="stop after S seconds without a frame")
     p.add_argument("--hex", action="store_true", help="print payloads in hex")
     p.add_argument("--tcp", metavar="[HOST:]PORT", type=_tcp_address)
+    p.add_argument("--token-file", metavar="FILE", help=TOKEN_HELP)
     p.add_argument("--runtime-dir")
     return parser
 

@@ -20,6 +20,7 @@ from .control import ControlServer
 from ..drivers.emulators import EmulatorDoor
 from ..gli.queues import QueueDoor, forget_created, plan_message_size, raise_queue_budget, unlink_created
 from ..gli.sockets import ClientLimits, SocketDoor, tcp_listener
+from ..gli.token import TOKEN_FILE, TokenCheck, load_or_create
 from .live_sources import LiveSources
 from ..core.realtime import RealtimeScheduler
 from ..sim.recorder import Recorder
@@ -59,7 +60,8 @@ class Daemon:
                  max_link_clients: int = 32, plugins: list[str] | tuple[str, ...] = (),
                  preset_dirs: list[str] | tuple[str, ...] = (), host: str | None = None,
                  zenoh_connect: list[str] | tuple[str, ...] = (), zenoh_listen: list[str] | tuple[str, ...] = (),
-                 clock_offset_s: float = 0.0):
+                 clock_offset_s: float = 0.0, tcp_token: str | None = None):
+        self.tcp_token = tcp_token
         self.host = host
         self.zenoh_connect = list(zenoh_connect)
         self.zenoh_listen = list(zenoh_listen)
@@ -97,6 +99,10 @@ class Daemon:
         group = resolve_group(self.group_name)
         prepare_private_dir(self.runtime_dir, group)
         prepare_private_dir(os.path.join(self.runtime_dir, "gli"), group)
+        token_check = None
+        if self.tcp:  # before anything opens: a token that cannot be used refuses the start
+            token_path = self.tcp_token or os.path.join(self.runtime_dir, TOKEN_FILE)
+            token_check = TokenCheck(load_or_create(token_path, group), token_path)
         raise_queue_budget()
         raise_descriptor_limit()
         trace_path = self.trace_path or scene.trace_file
@@ -139,7 +145,9 @@ class Daemon:
                 self.router.world.sample_poses(scene.trace_poses_s * self.speed, self.recorder.event)
             if self.tcp:
                 host, port = parse_tcp(self.tcp)
-                self.tcp_listener = tcp_listener(host, port, scheduler, self.clients, self.router.port)
+                self.tcp_listener = tcp_listener(host, port, scheduler, self.clients, self.router.port, token_check)
+                log.info("TCP GLI on %s:%d: applications prove the token in %s (readable by the daemon's group)",
+                         host, port, token_check.path)
             self.control = ControlServer(os.path.join(self.runtime_dir, "control.sock"), scheduler,
                                          self.status, self.reload, group=group,
                                          deferred={"NETWORK": self._network_status})
@@ -220,7 +228,10 @@ class Daemon:
             ping()
 
     def status(self) -> dict[str, Any]:
-        return {**self.router.status(), "cameras": self.live.status()}
+        status = {**self.router.status(), "cameras": self.live.status()}
+        if self.tcp_listener is not None:  # what the TCP GLI refused, by cause; how many wait to authenticate
+            status["tcp"] = {"refused": dict(self.clients.refused), "waiting": sum(self.clients.pending.values())}
+        return status
 
     def status_text(self) -> str:
         status = self.router.status()
