@@ -218,6 +218,10 @@ def _print_status(status: dict, as_json: bool) -> None:
     print(_render(["vehicle", "source", "x", "y", "z", "age s"],
                   [[v["name"], v["source"], *(f"{c:.3f}" for c in (v["position"] or [float("nan")] * 3)),
                     "-" if v["age_s"] is None else f"{v['age_s']:.2f}"] for v in status["vehicles"]]), flush=True)
+    tcp = status.get("tcp")
+    if tcp:
+        refused = ", ".join(f"{cause} {n}" for cause, n in sorted(tcp["refused"].items()) if n) or "none"
+        print(f"\nTCP GLI: refused {refused}; {tcp['waiting']} connections waiting to authenticate", flush=True)
     if status.get("cameras"):
         print()
         print(_render(["camera", "frames/s", "frames", "problem"],
