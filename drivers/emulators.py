@@ -30,11 +30,12 @@ from typing import Any, Callable
 
 from hilgate.core.backend import AppFrame, PhyEvent
 from hilgate.core.endpoint import TAKEN, LinkPort
+from hilgate.core.outputs import OutputError, pty_link_problem
 from hilgate.core.packets import BROADCAST, Decoded, Raw
 from hilgate.core.streams import Connection, Listener
 
 from .evologics_codec import BadCommand, Command, Data, ModemCodec
-from .evologics_settings import Firmware, Settings
+from .evologics_settings import Firmware, Settings, decimal
 from .s100_codec import (CRLF, IDLE_S, PIECE, TERMINATOR, FrameHunter, InputBuffer, Notice, SerialLine, Skipped,
                          wire_class)
 from .table import emulator_for
@@ -45,6 +46,10 @@ IM_MAX = 64
 BURST_MAX = 1024
 FOREVER = 1 << 30  # !RI255: retry for ever
 BATTERY_V = 24.0  # AT?BV: no battery is modelled; a charged 24 V pack
+MAX_TIME_S = 2 ** 32 - 1  # AT!UT: the modem's system time is a 32-bit count of seconds
+MAX_TCP_CLIENTS = 8  # an emulated modem's TCP port: hosts at once (a real S2C serves a few on its port)
+TCP_OUTPUT_CAP = 256 * 1024  # answers kept for a TCP host that does not read (beyond: not sent)
+LINE_AHEAD_S = 2.0  # the emulated S100 reads at most this far ahead of its serial line (then the writer waits)
 
 
 class PtyHost:
@@ -64,13 +69,43 @@ class PtyHost:
         except OSError as exc:
             log.warning("%s: cannot give the pty to the daemon's group: %s", name, exc)
         os.set_blocking(self.master, False)
+        self.target = os.ttyname(self.slave)
+        try:
+            self._link(path)
+        except OSError:
+            for fd in (self.master, self.slave):
+                os.close(fd)
+            raise
+        scheduler.add_reader(self.master, self._readable)
+        self.paused = False
+        log.info("%s: emulated modem at %s (%s)", name, path, os.ttyname(self.slave))
+
+    def _link(self, path: str) -> None:
+        """Link the pty at ``path``: where nothing is, or over a pty link a previous run left (the scene
+        loader checked it too; the file system may have changed since).  symlink(2) never replaces, so
+        something that appears meanwhile is refused, not removed."""
+        problem = pty_link_problem(path)
+        if problem is not None:
+            raise OutputError(problem)
         if os.path.islink(path):
             os.unlink(path)
-        elif os.path.exists(path):
-            raise OSError(f"{path} exists and is not a link: will not replace it")
-        os.symlink(os.ttyname(self.slave), path)
-        scheduler.add_reader(self.master, self._readable)
-        log.info("%s: emulated modem at %s (%s)", name, path, os.ttyname(self.slave))
+        try:
+            os.symlink(self.target, path)
+        except FileExistsError:
+            raise OutputError(f"{path} appeared while the emulated modem's pty link was being made: "
+                              f"not replacing it") from None
+
+    def pause(self) -> None:
+        """Stop reading: what the application writes waits in the kernel's pty buffer, and once that is
+        full its writes block, as on a real serial port that carries bytes only at its baud rate."""
+        if not self.paused:
+            self.paused = True
+            self.scheduler.remove_reader(self.master)
+
+    def resume(self) -> None:
+        if self.paused:
+            self.paused = False
+            self.scheduler.add_reader(self.master, self._readable)
 
     def _readable(self) -> None:
         try:
@@ -89,6 +124,7 @@ class PtyHost:
             log.debug("pty %s: %s", self.path, exc)
 
     def close(self) -> None:
+        self.paused = True
         self.scheduler.remove_reader(self.master)
         for fd in (self.master, self.slave):
             try:
@@ -96,26 +132,41 @@ class PtyHost:
             except OSError:
                 pass
         try:
-            if os.path.islink(self.path):
+            if os.readlink(self.path) == self.target:  # only our own link: not one that replaced it since
                 os.unlink(self.path)
         except OSError:
             pass
 
 
 class TcpHosts:
-    """A loopback listener; each client is a host with its own protocol state."""
+    """A loopback listener; each client is a host with its own protocol state.
 
-    def __init__(self, port: int, scheduler: Any, on_data, on_connect, name: str, host: str = "127.0.0.1"):
+    At most :data:`MAX_TCP_CLIENTS` at once (each holds a codec and up to :data:`TCP_OUTPUT_CAP` bytes of
+    answers it has not read): the next one is closed at once, as a modem's ``listen-single`` port does
+    with a second client, and counted in :attr:`refused`."""
+
+    def __init__(self, port: int, scheduler: Any, on_data, on_connect, name: str, host: str = "127.0.0.1",
+                 on_disconnect=None):
         self.scheduler = scheduler
         self.on_data = on_data
         self.on_connect = on_connect
+        self.on_disconnect = on_disconnect
+        self.name = name
         self.clients: set[_TcpClient] = set()
+        self.refused = 0
         sock = socket.create_server((host, port))
         sock.setblocking(False)
         self.listener = Listener(sock, scheduler, self._accept)
         log.info("%s: emulated modem on tcp://%s:%d", name, host, port)
 
     def _accept(self, sock: socket.socket) -> None:
+        if len(self.clients) >= MAX_TCP_CLIENTS:
+            self.refused += 1
+            if self.refused & (self.refused - 1) == 0:  # the 1st, 2nd, 4th, 8th…: a flood costs a few lines
+                log.warning("%s: emulated modem refused a TCP client: %d connected already (%d refused so far)",
+                            self.name, len(self.clients), self.refused)
+            sock.close()
+            return
         client = _TcpClient(self, sock)
         self.clients.add(client)
         self.on_connect(client)
@@ -130,7 +181,12 @@ class _TcpClient:
     def __init__(self, hosts: TcpHosts, sock: socket.socket):
         self.hosts = hosts
         self.connection = Connection(sock, hosts.scheduler, lambda data: hosts.on_data(self, data),
-                                     lambda: hosts.clients.discard(self))
+                                     self._closed, max_buffer=TCP_OUTPUT_CAP)
+
+    def _closed(self) -> None:
+        self.hosts.clients.discard(self)
+        if self.hosts.on_disconnect is not None:
+            self.hosts.on_disconnect(self)  # its protocol state goes with it (1 500 clients leave nothing)
 
     def write(self, data: bytes) -> None:
         self.connection.write(data)
@@ -139,12 +195,12 @@ class _TcpClient:
         self.connection.close()
 
 
-def _open_hosts(spec: dict, scheduler: Any, on_data, on_connect, name: str):
+def _open_hosts(spec: dict, scheduler: Any, on_data, on_connect, name: str, on_disconnect=None):
     if "pty" in spec:
         host = PtyHost(spec["pty"], scheduler, on_data, name)
         on_connect(host)
         return host
-    return TcpHosts(int(spec["tcp"]), scheduler, on_data, on_connect, name)
+    return TcpHosts(int(spec["tcp"]), scheduler, on_data, on_connect, name, on_disconnect=on_disconnect)
 
 
 class EvologicsEmulator:
@@ -178,7 +234,8 @@ class EvologicsEmulator:
         self.last_integrity = 150
         self.last_velocity = 0.0
         self.received = False  # AT?P answers zeros until something was received
-        self.hosts = _open_hosts(spec, scheduler, self._on_data, self._on_connect, port.id)
+        self.hosts = _open_hosts(spec, scheduler, self._on_data, self._on_connect, port.id,
+                                 lambda host: self.codecs.pop(host, None))
 
     def _on_connect(self, host: Any) -> None:
         self.codecs[host] = ModemCodec()
@@ -277,11 +334,15 @@ class EvologicsEmulator:
         reply(self.firmware.information(command.args))
 
     def _set_time(self, host: Any, codec: ModemCodec, command: Command, reply) -> None:
-        """``AT!UT<s>``: the modem's system time (``AT?UT``) reads ``s`` now."""
-        if not command.args.strip().isdigit():
+        """``AT!UT<s>``: the modem's system time (``AT?UT``) reads ``s`` now (seconds, 32 bits)."""
+        seconds = decimal(command.args)
+        if seconds is None or seconds < 0:
             reply("ERROR WRONG FORMAT")
             return
-        self.clock_offset = int(command.args.strip()) - self.scheduler.now()
+        if seconds > MAX_TIME_S:
+            reply("ERROR OUT OF RANGE")
+            return
+        self.clock_offset = seconds - self.scheduler.now()
         reply("OK")
 
     def _reset_counter(self, host: Any, codec: ModemCodec, command: Command, reply) -> None:
@@ -613,6 +674,7 @@ class _S100Host:
         self.other = bytearray()  # bytes that are no frame of the link's class: passed on as they are
         self.waiting: tuple[Decoded, bytes] | None = None  # a frame and the part of its CR LF still to come
         self.idle_timer = None
+        self.resume_timer = None  # while reading is paused: when the line has room again
 
 
 class S100Emulator:
@@ -703,6 +765,21 @@ class S100Emulator:
             self.scheduler.at(arrivals[local - 1] if local > 0 else start, self._piece, state, hunter.take(PIECE))
         self.scheduler.cancel(state.idle_timer)
         state.idle_timer = self.scheduler.at(line.free_at + IDLE_S * self.speed, self._idle, state)
+        self._pace(host, state, now)
+
+    def _pace(self, host: Any, state: _S100Host, now: float) -> None:
+        """Read no further ahead of the serial line than :data:`LINE_AHEAD_S`: a pty takes a flood at
+        once, the real line ~1 KB/s at 9600 baud, and every byte read early is a timer (0.37 MB kept per
+        MB flooded before).  Reading resumes while the line is still busy, so the bytes read later are
+        timed exactly as if they had been read at once; meanwhile the writer waits, as on a real port."""
+        ahead = LINE_AHEAD_S * self.speed
+        if state.line_in.free_at - now > ahead and state.resume_timer is None:
+            host.pause()
+            state.resume_timer = self.scheduler.at(state.line_in.free_at - ahead, self._resume, host, state)
+
+    def _resume(self, host: Any, state: _S100Host) -> None:
+        state.resume_timer = None
+        host.resume()
 
     def _event(self, state: _S100Host, event: object) -> None:
         if isinstance(event, Decoded):
@@ -777,6 +854,7 @@ class S100Emulator:
     def close(self) -> None:
         for state in self.states.values():
             self.scheduler.cancel(state.idle_timer)
+            self.scheduler.cancel(state.resume_timer)
         self.hosts.close()
 
 

@@ -132,7 +132,7 @@ ModemEvent = Command | BadCommand | Data
 
 # -- helpers --------------------------------------------------------------------------------------
 
-_PID = re.compile(rb"p(\d+)$")
+_PID = re.compile(rb"p(\d{1,3})$")  # a protocol id is 0..7: bounded, so int() never meets 5 000 digits
 
 
 def _split_fields(header: bytes, count: int) -> list[bytes] | None:
@@ -271,7 +271,7 @@ def _notification(line: str) -> Notification:
     parts = line.split(",")
     pid = None
     fields = parts[1:]
-    if fields and re.fullmatch(r"p\d+", fields[0]) and parts[0] in PAYLOAD_FIELDS:
+    if fields and re.fullmatch(r"p\d{1,3}", fields[0]) and parts[0] in PAYLOAD_FIELDS:
         pid = int(fields[0][1:])
         fields = fields[1:]
     return Notification(parts[0], tuple(fields), None, pid)

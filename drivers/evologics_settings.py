@@ -30,6 +30,24 @@ RANGES: dict[str, tuple[int, int, int]] = {
 }
 
 
+MAX_DIGITS = 10
+"""Digits of the widest value a command takes (``ZL`` up to 1 048 576, ``AT!UT`` a 32-bit time).  A longer
+number is out of every range: it is read as such without converting it (``int`` of 5 000 digits is a
+ValueError, and an offset of 10^30 s an OverflowError further on)."""
+
+
+def decimal(text: str) -> int | None:
+    """The whole number ``text`` spells (ASCII digits, an optional leading ``-``), or None if it spells
+    none; beyond :data:`MAX_DIGITS` digits, ±10^MAX_DIGITS, which every range refuses."""
+    value = text.strip()
+    digits = value[1:] if value.startswith("-") else value
+    if not (digits.isascii() and digits.isdigit()):
+        return None
+    if len(digits) > MAX_DIGITS:
+        return -10 ** MAX_DIGITS if value.startswith("-") else 10 ** MAX_DIGITS
+    return int(value)
+
+
 class Settings:
     """The running values, the stored profile and the factory defaults of one emulated modem.
 
@@ -52,10 +70,9 @@ class Settings:
 
     def problem(self, name: str, text: str) -> str | None:
         """Why ``AT!<name><text>`` is refused (the reason after ``ERROR``), or None."""
-        value = text.strip()
-        if not value.lstrip("-").isdigit():
+        number = decimal(text)
+        if number is None:
             return "WRONG FORMAT"
-        number = int(value)
         _, low, high = RANGES[name]
         if name in ("AL", "AR"):
             high = self.running["AM"]
@@ -67,7 +84,7 @@ class Settings:
 
     def set(self, name: str, text: str) -> None:
         """Take a value :meth:`problem` accepted."""
-        self.running[name] = int(text.strip())
+        self.running[name] = decimal(text)
 
     def store(self) -> None:
         """``AT&W``."""

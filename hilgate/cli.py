@@ -13,6 +13,8 @@ from .scene.yaml_nodes import SceneError
 log = logging.getLogger(__name__)
 
 EXIT_SCENE = 2
+TOKEN_HELP = ("with --tcp: the daemon's TCP GLI token (default $HILGATE_TCP_TOKEN_FILE, else the local daemon's "
+              "RUNTIME/tcp.token)")
 
 
 def _add_scene_args(parser: argparse.ArgumentParser, optional: bool = False) -> None:
@@ -64,6 +66,7 @@ def _queue_budget(scene) -> str:
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
+    from .core.outputs import OutputError, open_output, output_problem
     from .scene.load import load_scene
     from .sim.simulate import simulate, write_summary
     from .report.tables import format_summary
@@ -72,7 +75,11 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if args.until is not None and args.until <= 0:
         raise SceneError("--until", 0, "", f"must be positive, not {args.until:g}")
     trace_path = args.trace if args.trace is not None else scene.trace_file
-    trace = open(trace_path, "w", encoding="utf-8", buffering=1 << 20) if trace_path else None
+    if args.summary:  # refused before the run, not after it
+        problem = output_problem(args.summary, "summary")
+        if problem is not None:
+            raise OutputError(problem)
+    trace = open_output(trace_path, "trace", append=False, buffering=1 << 20) if trace_path else None
     try:
         progress = sys.stderr.isatty() and not args.quiet
         summary = simulate(scene, until=args.until, seed=args.seed, trace=trace, progress=progress)
@@ -104,7 +111,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                     args.trace, args.summary, args.until, status_line, args.gli_backlog, args.group,
                     args.max_clients, args.max_link_clients, plugins=args.plugins, preset_dirs=args.preset_dirs,
                     host=args.host, zenoh_connect=args.zenoh_connect, zenoh_listen=args.zenoh_listen,
-                    clock_offset_s=args.clock_offset_s)
+                    clock_offset_s=args.clock_offset_s, tcp_token=args.tcp_token)
     return daemon.run()
 
 
@@ -211,6 +218,10 @@ def _print_status(status: dict, as_json: bool) -> None:
     print(_render(["vehicle", "source", "x", "y", "z", "age s"],
                   [[v["name"], v["source"], *(f"{c:.3f}" for c in (v["position"] or [float("nan")] * 3)),
                     "-" if v["age_s"] is None else f"{v['age_s']:.2f}"] for v in status["vehicles"]]), flush=True)
+    tcp = status.get("tcp")
+    if tcp:
+        refused = ", ".join(f"{cause} {n}" for cause, n in sorted(tcp["refused"].items()) if n) or "none"
+        print(f"\nTCP GLI: refused {refused}; {tcp['waiting']} connections waiting to authenticate", flush=True)
     if status.get("cameras"):
         print()
         print(_render(["camera", "frames/s", "frames", "problem"],
@@ -244,7 +255,8 @@ def _open_link(args: argparse.Namespace):
     from .gli.client import Link
     from .daemon.service import parse_tcp
 
-    return Link.open(args.link, tcp=parse_tcp(args.tcp) if args.tcp else None, runtime_dir=args.runtime_dir)
+    return Link.open(args.link, tcp=parse_tcp(args.tcp) if args.tcp else None, runtime_dir=args.runtime_dir,
+                     token_file=args.token_file)
 
 
 def cmd_send(args: argparse.Namespace) -> int:
@@ -269,12 +281,11 @@ def cmd_app(args: argparse.Namespace) -> int:
     """``hilgate app MODULE:CLASS --link ID …``: the application as a process against a running daemon."""
     import os
 
-    import yaml
-
     from .core.application import Application
     from .daemon.service import parse_tcp
     from .gli.app_runner import run_application
     from .scene.plugins import PluginError, load_plugin
+    from .scene.yaml_nodes import parse_value
 
     entry, colon, class_name = args.application.rpartition(":")
     if not colon or not entry or not class_name.isidentifier():
@@ -290,16 +301,16 @@ def cmd_app(args: argparse.Namespace) -> int:
     for item in args.params:
         key, equals, value = item.partition("=")
         if not equals or not key.isidentifier():
-            raise SceneError("--param", 0, "", f"{item!r} is not KEY=VALUE")
-        try:
-            params[key] = yaml.safe_load(value) if value else ""
-        except yaml.YAMLError:
-            params[key] = value
+            raise SceneError("--param", 0, "", f"{item[:60]!r} is not KEY=VALUE")
+        # read as a scene's values are, within the same limits: 20 000 nested brackets or a number of
+        # 100 000 digits is one line (not a RecursionError after 16 s, nor a ValueError)
+        params[key] = parse_value(value, f"--param {key}") if value else ""
     zenoh = None
     if args.zenoh:
         zenoh = {"connect": args.zenoh, **({"prefix": args.zenoh_prefix} if args.zenoh_prefix else {})}
     return run_application(cls, args.links, params, name=args.name, seed=args.seed, runtime_dir=args.runtime_dir,
-                           tcp=parse_tcp(args.tcp) if args.tcp else None, zenoh=zenoh, until=args.until)
+                           tcp=parse_tcp(args.tcp) if args.tcp else None, zenoh=zenoh, until=args.until,
+                           token_file=args.token_file)
 
 
 def _address(value: str) -> int:
@@ -319,6 +330,25 @@ def _tcp_address(value: str) -> str:
         parse_tcp(value)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+    return value
+
+
+def _zenoh_endpoint(value: str) -> str:
+    """``--zenoh``/``--zenoh-connect``/``--zenoh-listen``: checked as a scene's ``zenoh.connect`` is, so
+    ``'{"a":'`` is a usage error here rather than a zenoh.ZError from inside the session."""
+    from .scene.hosts import ENDPOINT
+
+    if not ENDPOINT.fullmatch(value):
+        raise argparse.ArgumentTypeError(f"{value[:60]!r} is not a Zenoh endpoint like tcp/192.168.1.10:7447")
+    return value
+
+
+def _zenoh_prefix(value: str) -> str:
+    from .scene.hosts import PREFIX
+
+    if not PREFIX.fullmatch(value):
+        raise argparse.ArgumentTypeError(f"{value[:60]!r} is not a key prefix (one to four words of letters, "
+                                         "digits, '_', '.' or '-' joined by '/')")
     return value
 
 
@@ -491,7 +521,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_scene_args(p, optional=True)
     p.add_argument("--speed", type=float, default=1.0, help="run the model at K times real time (default 1)")
     p.add_argument("--tcp", metavar="[HOST:]PORT", type=_tcp_address,
-                   help="also serve the socket GLI over TCP (loopback by default)")
+                   help="also serve the socket GLI over TCP (loopback by default); applications prove that they "
+                        "hold the token of --tcp-token")
+    p.add_argument("--tcp-token", metavar="FILE",
+                   help="the TCP GLI's secret (default RUNTIME/tcp.token; made 0640 for --group if absent): copy "
+                        "it to the hosts whose applications connect over TCP")
     p.add_argument("--runtime-dir", help="where the sockets go (default: $RUNTIME_DIRECTORY, /run/hilgate, "
                                           "$XDG_RUNTIME_DIR/hilgate or /tmp/hilgate-UID)")
     p.add_argument("--trace", help="append the event trace (JSON lines) here")
@@ -513,9 +547,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="socket GLI clients at once, all links together (default 256)")
     p.add_argument("--host", metavar="NAME",
                    help="this daemon's host in a scene spread over hosts (default: the machine's host name)")
-    p.add_argument("--zenoh-connect", action="append", default=[], metavar="ENDPOINT",
+    p.add_argument("--zenoh-connect", action="append", default=[], metavar="ENDPOINT", type=_zenoh_endpoint,
                    help="a daemon to join, e.g. tcp/192.168.1.10:7447 (repeatable; besides the scene's zenoh.connect)")
-    p.add_argument("--zenoh-listen", action="append", default=[], metavar="ENDPOINT",
+    p.add_argument("--zenoh-listen", action="append", default=[], metavar="ENDPOINT", type=_zenoh_endpoint,
                    help="where the others may connect (default: the scene's zenoh.listen, else loopback only)")
     p.add_argument("--clock-offset-s", type=float, default=0.0, metavar="S",
                    help="act as if this host's clock were S seconds ahead (to measure what an offset does)")
@@ -575,9 +609,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, help="seed of ctx.random (default: not reproducible)")
     p.add_argument("--until", type=float, metavar="S", help="stop after S seconds (default: SIGTERM/SIGINT)")
     p.add_argument("--tcp", metavar="[HOST:]PORT", type=_tcp_address, help="the daemon's TCP GLI listener")
-    p.add_argument("--zenoh", action="append", metavar="ENDPOINT",
+    p.add_argument("--token-file", metavar="FILE", help=TOKEN_HELP)
+    p.add_argument("--zenoh", action="append", metavar="ENDPOINT", type=_zenoh_endpoint,
                    help="reach the links over Zenoh through this daemon endpoint (repeatable)")
-    p.add_argument("--zenoh-prefix", help="the network's Zenoh key prefix (default: hilgate)")
+    p.add_argument("--zenoh-prefix", type=_zenoh_prefix, help="the network's Zenoh key prefix (default: hilgate)")
     p.add_argument("--runtime-dir")
 
     p = sub.add_parser("send", help="send text to a link (arguments, or one frame per stdin line)")
@@ -585,6 +620,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("text", nargs="*")
     p.add_argument("--to", type=_address, default=255, help="destination address (default 255, broadcast)")
     p.add_argument("--tcp", metavar="[HOST:]PORT", type=_tcp_address)
+    p.add_argument("--token-file", metavar="FILE", help=TOKEN_HELP)
     p.add_argument("--runtime-dir")
 
     p = sub.add_parser("listen", help="print what a link receives")
@@ -593,6 +629,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--timeout", type=float, help="stop after S seconds without a frame")
     p.add_argument("--hex", action="store_true", help="print payloads in hex")
     p.add_argument("--tcp", metavar="[HOST:]PORT", type=_tcp_address)
+    p.add_argument("--token-file", metavar="FILE", help=TOKEN_HELP)
     p.add_argument("--runtime-dir")
     return parser
 

@@ -149,7 +149,8 @@ def test_socket_clients_over_unix_and_tcp(tmp_path):
     daemon = Daemon(tmp_path, scene(a, b), [a, b], "--tcp", str(port))
     try:
         daemon.wait_for("READY=1")
-        with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, tcp=("127.0.0.1", port)) as lb:
+        with Link.open(a, runtime_dir=daemon.runtime) as la, \
+                Link.open(b, tcp=("127.0.0.1", port), runtime_dir=daemon.runtime) as lb:  # its RUNTIME/tcp.token
             assert (la.address, lb.address) == (1, 2)
             assert la.info["packet"] == "vl2b" and la.max_payload == 2048
             sent_at = time.monotonic()
@@ -167,7 +168,7 @@ def test_socket_clients_over_unix_and_tcp(tmp_path):
                 la.send(b"x" * 3000, dst=2)
                 la.recv(timeout=30)
         with pytest.raises(GliError, match="no link"):
-            Link.open("nosuchlink", tcp=("127.0.0.1", port))
+            Link.open("nosuchlink", tcp=("127.0.0.1", port), token_file=os.path.join(daemon.runtime, "tcp.token"))
     finally:
         daemon.close()
 

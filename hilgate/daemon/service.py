@@ -20,6 +20,7 @@ from .control import ControlServer
 from ..drivers.emulators import EmulatorDoor
 from ..gli.queues import QueueDoor, forget_created, plan_message_size, raise_queue_budget, unlink_created
 from ..gli.sockets import ClientLimits, SocketDoor, tcp_listener
+from ..gli.token import TOKEN_FILE, TokenCheck, load_or_create
 from .live_sources import LiveSources
 from ..core.realtime import RealtimeScheduler
 from ..sim.recorder import Recorder
@@ -30,6 +31,7 @@ from ..scene.hosts import HOST_NAME, ZenohSpec
 from ..scene.links import require_narrow_addresses
 from ..scene.worker import SceneJob, request_for
 from ..core.notify import notify, watchdog_interval
+from ..core.outputs import OutputError, open_output, output_problem
 from ..sim.simulate import write_summary
 
 log = logging.getLogger(__name__)
@@ -58,7 +60,8 @@ class Daemon:
                  max_link_clients: int = 32, plugins: list[str] | tuple[str, ...] = (),
                  preset_dirs: list[str] | tuple[str, ...] = (), host: str | None = None,
                  zenoh_connect: list[str] | tuple[str, ...] = (), zenoh_listen: list[str] | tuple[str, ...] = (),
-                 clock_offset_s: float = 0.0):
+                 clock_offset_s: float = 0.0, tcp_token: str | None = None):
+        self.tcp_token = tcp_token
         self.host = host
         self.zenoh_connect = list(zenoh_connect)
         self.zenoh_listen = list(zenoh_listen)
@@ -96,10 +99,20 @@ class Daemon:
         group = resolve_group(self.group_name)
         prepare_private_dir(self.runtime_dir, group)
         prepare_private_dir(os.path.join(self.runtime_dir, "gli"), group)
+        token_check = None
+        if self.tcp:  # before anything opens: a token that cannot be used refuses the start
+            token_path = self.tcp_token or os.path.join(self.runtime_dir, TOKEN_FILE)
+            token_check = TokenCheck(load_or_create(token_path, group), token_path)
         raise_queue_budget()
         raise_descriptor_limit()
         trace_path = self.trace_path or scene.trace_file
-        self.trace = open(trace_path, "a", encoding="utf-8", buffering=1 << 16) if trace_path else None
+        if self.summary_path:  # refused now, not after a run of hours
+            problem = output_problem(self.summary_path, "summary")
+            if problem is not None:
+                raise OutputError(problem)
+        self.group = group
+        self.trace = (open_output(trace_path, "trace", append=True, group=group, buffering=1 << 16)
+                      if trace_path else None)
         self.scheduler = scheduler = RealtimeScheduler(self.speed)
         self.recorder = Recorder(self.trace)
         self.run_id = uuid.uuid4().hex[:12]
@@ -132,7 +145,9 @@ class Daemon:
                 self.router.world.sample_poses(scene.trace_poses_s * self.speed, self.recorder.event)
             if self.tcp:
                 host, port = parse_tcp(self.tcp)
-                self.tcp_listener = tcp_listener(host, port, scheduler, self.clients, self.router.port)
+                self.tcp_listener = tcp_listener(host, port, scheduler, self.clients, self.router.port, token_check)
+                log.info("TCP GLI on %s:%d: applications prove the token in %s (readable by the daemon's group)",
+                         host, port, token_check.path)
             self.control = ControlServer(os.path.join(self.runtime_dir, "control.sock"), scheduler,
                                          self.status, self.reload, group=group,
                                          deferred={"NETWORK": self._network_status})
@@ -213,7 +228,10 @@ class Daemon:
             ping()
 
     def status(self) -> dict[str, Any]:
-        return {**self.router.status(), "cameras": self.live.status()}
+        status = {**self.router.status(), "cameras": self.live.status()}
+        if self.tcp_listener is not None:  # what the TCP GLI refused, by cause; how many wait to authenticate
+            status["tcp"] = {"refused": dict(self.clients.refused), "waiting": sum(self.clients.pending.values())}
+        return status
 
     def status_text(self) -> str:
         status = self.router.status()
@@ -307,7 +325,10 @@ class Daemon:
         if self.summary_path and router is not None and router.world is not None:
             summary = self.recorder.summary(self.scene, router.world.seed, self.scheduler.now(), 0.0,
                                             router.world.modems.values())
-            write_summary(summary, self.summary_path)
+            try:
+                write_summary(summary, self.summary_path, getattr(self, "group", None))
+            except OSError as exc:
+                log.error("summary not written: %s", exc)
         if self._reload_job is not None:
             self._reload_job.cancel()
         for closer in (getattr(self, "live", None), self.control, self.tcp_listener, router, self.network):

@@ -78,12 +78,12 @@ class RealtimeContext(ContextBase):
 
 def run_application(cls: type[Application], link_ids: list[str], params: dict[str, Any], *, name: str | None = None,
                     seed: int | None = None, runtime_dir: str | None = None, tcp: tuple[str, int] | None = None,
-                    zenoh: Any = None, until: float | None = None) -> int:
+                    zenoh: Any = None, until: float | None = None, token_file: str | None = None) -> int:
     """Open the links, run the application until SIGTERM/SIGINT (or ``until`` seconds), then stop it."""
     links: dict[str, Any] = {}
     try:
         for link_id in link_ids:
-            links[link_id] = Link.open(link_id, runtime_dir=runtime_dir, tcp=tcp, zenoh=zenoh)
+            links[link_id] = Link.open(link_id, runtime_dir=runtime_dir, tcp=tcp, zenoh=zenoh, token_file=token_file)
         scheduler = RealtimeScheduler()
         app = cls()
         context = RealtimeContext(scheduler, name or cls.__name__, links, params, seed)

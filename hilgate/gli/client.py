@@ -7,7 +7,7 @@
         message = link.recv(timeout=5.0)         # None on timeout
         print(message.src, message.data)
 
-    Link.open("rov0_rf", tcp=("topside", 4280))  # from another host (the daemon's --tcp listener)
+    Link.open("rov0_rf", tcp=("topside", 4280), token_file="tcp.token")  # the daemon's --tcp listener
     Link.open("rov0_rf", zenoh="tcp/topside:7447")  # from any host of a network of daemons (Zenoh)
 
 Blocking and single-threaded on purpose: one object per link per thread.  The framing is
@@ -24,8 +24,11 @@ from dataclasses import dataclass
 from typing import Any
 
 from . import wire
+from .token import TOKEN_FILE, TokenError, proof, read_token
 from ..core.packets import BROADCAST
 from ..core.paths import client_runtime_dir
+
+TOKEN_FILE_VARIABLE = "HILGATE_TCP_TOKEN_FILE"
 
 __all__ = ["Link", "Message", "GliError"]
 
@@ -52,19 +55,30 @@ class Link:
         self.errors: deque[str] = deque()
         self.ready = False
         self.info: dict[str, Any] = {}
+        self.nonce: bytes | None = None  # the TCP listener's CHALLENGE
 
     @classmethod
     def open(cls, link_id: str, *, tcp: tuple[str, int] | None = None, runtime_dir: str | None = None,
-             timeout: float = 5.0, zenoh: Any = None) -> "Link":
-        """``zenoh``: reach the link over Zenoh from any host of a network of daemons (an endpoint
+             timeout: float = 5.0, zenoh: Any = None, token: str | bytes | None = None,
+             token_file: str | None = None) -> "Link":
+        """``tcp``: the daemon's ``--tcp`` listener, where the application proves that it holds the
+        daemon's token (:mod:`hilgate.gli.token`): ``token``, else the file ``token_file``, else
+        ``$HILGATE_TCP_TOKEN_FILE``, else the local daemon's ``RUNTIME/tcp.token`` (readable by its group).
+
+        ``zenoh``: reach the link over Zenoh from any host of a network of daemons (an endpoint
         such as ``"tcp/10.0.0.5:7447"``, a list, or ``{"connect": [...], "prefix": ...}``); the object
         returned has the same methods (:class:`hilgate.gli.zenoh_client.ZenohLink`)."""
         if zenoh is not None:
             from .zenoh_client import ZenohLink
 
             return ZenohLink.open(link_id, zenoh, timeout)  # type: ignore[return-value]
+        secret = None
         if tcp is not None:
-            sock = socket.create_connection(tcp, timeout=timeout)
+            secret = _token(token, token_file, runtime_dir)  # before connecting: no token, no traffic
+            try:
+                sock = socket.create_connection(tcp, timeout=timeout)
+            except OSError as exc:
+                raise GliError(f"cannot reach hilgate's TCP GLI at {tcp[0]}:{tcp[1]}: {exc.strerror or exc}") from None
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         else:
             path = os.path.join(client_runtime_dir(runtime_dir), "gli", f"{link_id}.sock")
@@ -77,12 +91,21 @@ class Link:
                 raise GliError(f"cannot reach link {link_id!r} at {path}: {exc.strerror or exc}") from None
         link = cls(sock, link_id)
         try:
+            deadline = time.monotonic() + timeout
+            hello: dict[str, Any] = {"link": link_id}
+            if secret is not None:
+                while link.nonce is None:  # the CHALLENGE comes first
+                    link._pump(max(0.0, deadline - time.monotonic()))
+                    if link.errors:
+                        raise GliError(link.errors.popleft())
+                    if time.monotonic() >= deadline and link.nonce is None:
+                        raise GliError(f"no CHALLENGE from hilgate at {tcp[0]}:{tcp[1]} (not a hilgate TCP GLI?)")
+                hello["proof"] = proof(secret, link.nonce)
             link._connected()
             try:
-                sock.sendall(wire.encode_json(wire.HELLO, {"link": link_id}))
+                sock.sendall(wire.encode_json(wire.HELLO, hello))
             except (BrokenPipeError, ConnectionResetError):
                 pass  # hilgate refused the connection at once (a full link): its ERROR waits to be read
-            deadline = time.monotonic() + timeout
             while not link.info:
                 link._pump(max(0.0, deadline - time.monotonic()))
                 if link.errors:
@@ -169,6 +192,13 @@ class Link:
                 self.replies.append(wire.decode_json(body))
             elif kind == wire.ERROR:
                 self.errors.append(str(wire.decode_json(body).get("error")))
+            elif kind == wire.CHALLENGE:
+                challenge = wire.decode_json(body)
+                nonce = challenge.get("nonce") if isinstance(challenge, dict) else None
+                try:
+                    self.nonce = bytes.fromhex(nonce)
+                except (TypeError, ValueError):
+                    raise GliError("a CHALLENGE without a nonce") from None
         return True
 
     def close(self) -> None:
@@ -179,3 +209,20 @@ class Link:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _token(token: str | bytes | None, token_file: str | None, runtime_dir: str | None) -> bytes:
+    """The TCP GLI token the application was given, or the one it can read (see :meth:`Link.open`)."""
+    if token is not None:
+        return token.encode() if isinstance(token, str) else bytes(token)
+    path = token_file or os.environ.get(TOKEN_FILE_VARIABLE)
+    if not path:
+        path = os.path.join(client_runtime_dir(runtime_dir), TOKEN_FILE)
+        if not os.path.exists(path):
+            raise GliError(f"the TCP GLI needs the daemon's token and there is none at {path}: give token_file= "
+                           f"(hilgate --token-file, ${TOKEN_FILE_VARIABLE}) the daemon's RUNTIME/{TOKEN_FILE} or "
+                           f"its --tcp-token file")
+    try:
+        return read_token(path)
+    except TokenError as exc:
+        raise GliError(str(exc)) from None

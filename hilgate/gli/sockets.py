@@ -1,7 +1,11 @@
 """The GLI over stream sockets: a Unix socket per link and an optional TCP listener for all links.
 
 The framing is :mod:`hilgate.gli.wire`, the conversation :mod:`hilgate.gli.session`.  A client on
-a link's own Unix socket is attached to that link at once; a TCP client names its link in HELLO.
+a link's own Unix socket is attached to that link at once (the socket's mode and group say who may
+connect); a TCP client is sent a CHALLENGE and names its link in a HELLO that proves it holds the
+daemon's token (:mod:`hilgate.gli.token`), or is told why not and closed.  Connections that have not
+proved it yet are bounded (in all and per address) and closed after ``auth_timeout_s``, so a peer
+without the token cannot take the places of those that have it.
 Each client is an endpoint of its link (:class:`~hilgate.core.endpoint.Endpoint`) and reaches the
 link only through its :class:`~hilgate.core.endpoint.LinkPort`.  A client that breaks the framing
 gets an ERROR and is disconnected; one that vanishes mid-frame just leaves; one that stops reading
@@ -17,6 +21,7 @@ from typing import Any, Callable
 
 from . import wire
 from .session import Command, Hello, Send, Session, WireError
+from .token import TokenCheck
 from ..core.endpoint import ABSENT, TAKEN, LinkPort
 from ..core.packets import PacketError
 from ..core.streams import Connection, Listener, listen_unix, refuse
@@ -26,13 +31,28 @@ log = logging.getLogger(__name__)
 
 class ClientLimits:
     """How many socket clients the daemon serves at once, in all and per link, and how much output it
-    keeps for one that does not read."""
+    keeps for one that does not read; how many TCP connections may wait to authenticate, in all and
+    from one address, and for how long; and what was refused on TCP."""
 
-    def __init__(self, total: int = 256, per_link: int = 32, output_cap: int = 256 * 1024):
+    def __init__(self, total: int = 256, per_link: int = 32, output_cap: int = 256 * 1024,
+                 pending_total: int = 64, pending_per_address: int = 8, auth_timeout_s: float = 10.0):
         self.total = total
         self.per_link = per_link
         self.output_cap = output_cap
+        self.pending_total = pending_total
+        self.pending_per_address = pending_per_address
+        self.auth_timeout_s = auth_timeout_s
         self.clients: set[GliClient] = set()
+        self.pending: dict[str, int] = {}  # address → TCP connections not authenticated yet
+        self.refused = {"auth": 0, "auth_timeout": 0, "auth_pending": 0}
+
+    def refuse(self, cause: str, address: str, detail: str) -> None:
+        """Count a refused TCP connection and log it, the 1st, 2nd, 4th, 8th… of each cause only (a
+        flood of them costs a few log lines)."""
+        self.refused[cause] += 1
+        count = self.refused[cause]
+        if count & (count - 1) == 0:
+            log.warning("TCP GLI: refused %s: %s (%d refused so far for this cause)", address, detail, count)
 
 
 class GliClient:
@@ -42,16 +62,44 @@ class GliClient:
     busy = False
 
     def __init__(self, sock: socket.socket, scheduler: Any, limits: ClientLimits,
-                 lookup: Callable[[str], LinkPort | None], port: LinkPort | None = None):
+                 lookup: Callable[[str], LinkPort | None], port: LinkPort | None = None,
+                 check: TokenCheck | None = None, address: str = ""):
         self.limits = limits
         self.lookup = lookup
-        self.session = Session(port.id if port is not None else None)
+        self.scheduler = scheduler
+        self.session = Session(port.id if port is not None else None, check)
         self.port: LinkPort | None = None
         self.last_state: bool | None = None
+        self.address = address
+        self.waiting = check is not None  # among the TCP connections that have not authenticated yet
+        self.auth_timer = None
         self.connection = Connection(sock, scheduler, self._on_data, self._on_close, max_buffer=limits.output_cap)
         limits.clients.add(self)
+        if check is not None:
+            limits.pending[address] = limits.pending.get(address, 0) + 1
+            self.auth_timer = scheduler.after_wall(limits.auth_timeout_s, self._auth_timeout)
+            self.connection.write(self.session.challenge())
         if port is not None:
             self._bind(port.id)
+
+    def _stop_waiting(self) -> None:
+        """Authenticated, or gone: its place among the pending is free again (once)."""
+        if not self.waiting:
+            return
+        self.waiting = False
+        self.scheduler.cancel(self.auth_timer)
+        self.auth_timer = None
+        count = self.limits.pending.get(self.address, 0) - 1
+        if count > 0:
+            self.limits.pending[self.address] = count
+        else:
+            self.limits.pending.pop(self.address, None)
+
+    def _auth_timeout(self) -> None:
+        self.auth_timer = None
+        limit = f"no HELLO within {self.limits.auth_timeout_s:g} s"
+        self.limits.refuse("auth_timeout", self.address, limit)
+        self.fail(limit)
 
     def _bind(self, link_id: str) -> None:
         """Attach to a link: from now on its frames and READY/BUSY come here."""
@@ -80,11 +128,14 @@ class GliClient:
                     return
                 self._handle(event)
         except WireError as exc:
+            if not self.session.authenticated:  # a TCP peer that has not proved the token: counted
+                self.limits.refuse("auth", self.address, str(exc))
             self.fail(str(exc))
 
     def _handle(self, event: Hello | Send | Command) -> None:
         match event:
             case Hello(link=link_id, first=first):
+                self._stop_waiting()
                 if self.port is None:
                     self._bind(link_id)
                 if self.port is not None and first:
@@ -122,6 +173,7 @@ class GliClient:
             self.connection.close()
 
     def _on_close(self) -> None:
+        self._stop_waiting()
         if self.session.pending:
             log.info("GLI client on %s left mid-frame (%d bytes)", self.port.id if self.port else "?",
                      self.session.pending)
@@ -139,13 +191,26 @@ def welcome(port: LinkPort) -> dict[str, Any]:
 
 
 def accept(sock: socket.socket, scheduler: Any, limits: ClientLimits, lookup: Callable[[str], LinkPort | None],
-           port: LinkPort | None = None) -> None:
-    """A new socket client, unless the daemon serves as many as it may: then it is told why and closed."""
+           port: LinkPort | None = None, check: TokenCheck | None = None) -> None:
+    """A new socket client, unless the daemon serves as many as it may (or, on TCP, as many wait to
+    authenticate, in all or from its address): then it is told why and closed."""
     if len(limits.clients) >= limits.total:
         log.info("GLI client refused: %d clients already (--max-clients)", len(limits.clients))
         refuse(sock, wire.encode_json(wire.ERROR, {"error": f"too many clients ({limits.total})"}))
         return
-    GliClient(sock, scheduler, limits, lookup, port)
+    address = ""
+    if check is not None:
+        try:
+            address = str(sock.getpeername()[0])
+        except OSError:  # already gone
+            sock.close()
+            return
+        waiting = limits.pending.get(address, 0)
+        if waiting >= limits.pending_per_address or sum(limits.pending.values()) >= limits.pending_total:
+            limits.refuse("auth_pending", address, f"{waiting} connections from it wait to authenticate already")
+            refuse(sock, wire.encode_json(wire.ERROR, {"error": "too many connections waiting to authenticate"}))
+            return
+    GliClient(sock, scheduler, limits, lookup, port, check, address)
 
 
 class SocketDoor:
@@ -182,8 +247,8 @@ class SocketDoor:
 
 
 def tcp_listener(host: str, port: int, scheduler: Any, limits: ClientLimits,
-                 lookup: Callable[[str], LinkPort | None]) -> Listener:
-    """One TCP listener for every link: a client names its link in HELLO."""
+                 lookup: Callable[[str], LinkPort | None], check: TokenCheck) -> Listener:
+    """One TCP listener for every link: a client proves the token and names its link in HELLO."""
     sock = socket.create_server((host, port), reuse_port=False)
     sock.setblocking(False)
-    return Listener(sock, scheduler, lambda conn: accept(conn, scheduler, limits, lookup))
+    return Listener(sock, scheduler, lambda conn: accept(conn, scheduler, limits, lookup, None, check))

@@ -7,8 +7,9 @@ Every message is::
 ==========  ===================  =====================================================================
 type        direction            body
 ==========  ===================  =====================================================================
-1 HELLO     client → hilgate     UTF-8 JSON ``{"link": "<id>"}``; first message on TCP, optional on a
-                                 link's own Unix socket
+1 HELLO     client → hilgate     UTF-8 JSON ``{"link": "<id>"}``; optional on a link's own Unix
+                                 socket; on TCP the first message, answering CHALLENGE with
+                                 ``{"link": "<id>", "proof": "<hex>"}`` (:mod:`hilgate.gli.token`)
 2 WELCOME   hilgate → client     UTF-8 JSON ``{"link", "address", "packet", "max_payload", "version"}``
 3 SEND      client → hilgate     ``u8 dst`` (255 = broadcast) then the payload
 4 RECV      hilgate → client     ``u8 src | u8 dst | f64 model time of delivery (big-endian)`` then
@@ -17,6 +18,8 @@ type        direction            body
 6 ERROR     hilgate → client     UTF-8 JSON ``{"error": "..."}``
 7 COMMAND   client → hilgate     UTF-8 JSON, a request for the link's vehicle (see hilgate.client)
 8 REPLY     hilgate → client     UTF-8 JSON answer to a COMMAND
+9 CHALLENGE hilgate → client     TCP only, sent on connecting: UTF-8 JSON ``{"nonce": "<64 hex>"}``;
+                                 HELLO's ``proof`` is HMAC-SHA256(token, the nonce's 32 bytes) in hex
 ==========  ===================  =====================================================================
 
 Addresses are 8 bits (version 1).  Simulated links with wider addresses (up to 65534, ``hilgate sim``
@@ -36,9 +39,9 @@ from typing import Any
 
 from ..core import safejson
 
-HELLO, WELCOME, SEND, RECV, STATE, ERROR, COMMAND, REPLY = range(1, 9)
+HELLO, WELCOME, SEND, RECV, STATE, ERROR, COMMAND, REPLY, CHALLENGE = range(1, 10)
 NAMES = {HELLO: "HELLO", WELCOME: "WELCOME", SEND: "SEND", RECV: "RECV", STATE: "STATE", ERROR: "ERROR",
-         COMMAND: "COMMAND", REPLY: "REPLY"}
+         COMMAND: "COMMAND", REPLY: "REPLY", CHALLENGE: "CHALLENGE"}
 MAX_MESSAGE = 65536
 VERSION = 1
 _HEADER = struct.Struct(">IB")

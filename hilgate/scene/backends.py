@@ -13,7 +13,7 @@ from __future__ import annotations
 from typing import Any
 
 from ..drivers.table import DRIVERS, Option, emulated_protocols, emulator_options, scene_options
-from .checks import Checker, Fields, boolean, choice, integer, number, path_value, text
+from .checks import Checker, Fields, boolean, choice, integer, number, path_value, pty_path, text
 from .yaml_nodes import Node
 
 __all__ = ["backend_names", "driver_keys", "driver_options", "emulated_device"]
@@ -93,4 +93,4 @@ def emulated_device(node: Node, path: str) -> tuple[tuple[str, Any], ...]:
             raise f.child("tcp").error(f.sub("tcp"), f"only the {speakers} speaks TCP; "
                                                      f"the {DRIVERS[protocol].title} is serial")
         return (("protocol", protocol), ("tcp", f.get("tcp", integer(1, 65535))), *extra)
-    return (("protocol", protocol), ("pty", f.get("pty", path_value)), *extra)
+    return (("protocol", protocol), ("pty", f.get("pty", pty_path)), *extra)

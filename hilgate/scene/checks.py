@@ -12,6 +12,7 @@ import math
 import os
 from typing import Any, Callable, Iterable, Sequence
 
+from ..core.outputs import output_problem, pty_link_problem
 from .yaml_nodes import Node, SceneError, one_line
 
 MISSING: Any = object()
@@ -195,3 +196,22 @@ def path_value(node: Node, path: str) -> str:
     if "\0" in value:
         raise node.error(path, "a path cannot contain a NUL character")
     return os.path.normpath(os.path.join(base_dir(node), value))
+
+
+def pty_path(node: Node, path: str) -> str:
+    """Checker: where an emulated modem's pty link goes; nothing but a pty link may be there already
+    (``pty: /etc/localtime`` would have removed a system file; :mod:`hilgate.core.outputs`)."""
+    value = path_value(node, path)
+    problem = pty_link_problem(value)
+    if problem is not None:
+        raise node.error(path, problem)
+    return value
+
+
+def trace_path(node: Node, path: str) -> str:
+    """Checker: a trace file the scene asks for; absent, empty or a trace already (:mod:`hilgate.core.outputs`)."""
+    value = path_value(node, path)
+    problem = output_problem(value, "trace")
+    if problem is not None:
+        raise node.error(path, problem)
+    return value

@@ -13,9 +13,13 @@ from .checks import Fields, boolean, integer, number, text
 from .specs import LinkSpec
 from .yaml_nodes import Node
 
-__all__ = ["FLOW_KEYS", "flow_spec"]
+__all__ = ["FLOW_KEYS", "MAX_FRAME_BYTES", "flow_spec"]
 
 FLOW_KEYS = ("from", "to", "size_bytes", "interval_s", "rate_hz", "poisson", "start_s", "stop_s", "ack_retries")
+MAX_FRAME_BYTES = 1 << 20
+"""The largest frame a flow may offer: 1 MiB, the largest transmit buffer of any modem hilgate knows (an
+EvoLogics ``ZL``) and twice a link's default FIFO.  Without a bound ``1e300`` was a frame whose airtime
+no float can hold."""
 
 
 def flow_spec(node: Node, path: str, links: dict[str, LinkSpec], duration: float) -> FlowSpec:
@@ -35,7 +39,7 @@ def flow_spec(node: Node, path: str, links: dict[str, LinkSpec], duration: float
                 f"{dst!r} listens on channel {links[dst].params.rx_channel!r} but {src!r} transmits on "
                 f"{links[src].params.tx_channel!r}: it can never hear this flow",
             )
-    size = f.get("size_bytes", integer(1))
+    size = f.get("size_bytes", integer(1, MAX_FRAME_BYTES))
     if ("interval_s" in f) == ("rate_hz" in f):
         raise f.error("give exactly one of interval_s or rate_hz")
     if "interval_s" in f:

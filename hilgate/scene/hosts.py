@@ -26,6 +26,7 @@ __all__ = ["ZenohSpec", "HOST_NAME", "host_name", "zenoh_spec", "resolve_hosts"]
 
 HOST_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}")
 ENDPOINT = re.compile(r"(tcp|udp|tls|quic|unixsock-stream|ws)/[^\s]{1,200}")
+PREFIX = re.compile(r"[A-Za-z0-9_.-]{1,64}(/[A-Za-z0-9_.-]{1,64}){0,3}")
 ZENOH_KEYS = ("connect", "listen", "multicast_scouting", "prefix", "lease_s", "pose_rate_hz", "config")
 LOOPBACK = ("tcp/127.0.0.1:0",)
 
@@ -65,7 +66,7 @@ def _endpoints(node: Node, path: str) -> tuple[str, ...]:
 
 def _prefix(node: Node, path: str) -> str:
     value = text(node, path)
-    if not re.fullmatch(r"[A-Za-z0-9_.-]{1,64}(/[A-Za-z0-9_.-]{1,64}){0,3}", value):
+    if not PREFIX.fullmatch(value):
         raise node.error(path, "a key prefix is one to four words of letters, digits, '_', '.' or '-' joined by '/'")
     return value
 

@@ -16,7 +16,7 @@ from typing import Sequence
 
 from ..models.flows import FlowSpec
 from ..models.medium import Channel
-from .checks import Fields, base_dir, integer, items, join_path, mapping, number, path_value, quote, text
+from .checks import Fields, base_dir, integer, items, join_path, mapping, number, quote, text, trace_path
 from .apps import app_specs
 from .flows import flow_spec
 from .hosts import resolve_hosts, zenoh_spec
@@ -117,7 +117,7 @@ def _validate(root: Node | None, file: str, plugins: Sequence[str] = (), preset_
     trace_node = f.child("trace")
     if trace_node is not None:
         tf = Fields(trace_node, "trace", ("file", "poses_s"))
-        trace_file = tf.get("file", path_value, None)
+        trace_file = tf.get("file", trace_path, None)
         trace_poses = tf.get("poses_s", number(0), 1.0) or None
     return Scene(name, seed, duration, channels, vehicles, links, flows, trace_file, file, cameras, trace_poses,
                  hosts, zenoh, apps)

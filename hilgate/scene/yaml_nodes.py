@@ -31,8 +31,8 @@ from typing import Any, Iterator
 import yaml
 from yaml.nodes import MappingNode, ScalarNode, SequenceNode
 
-__all__ = ["SceneError", "Node", "load_file", "load_text", "parse_scalar", "read_limited", "one_line", "size_text",
-           "MAX_FILE_BYTES"]
+__all__ = ["SceneError", "LimitError", "Node", "load_file", "load_text", "parse_scalar", "parse_value", "read_limited",
+           "one_line", "size_text", "MAX_FILE_BYTES"]
 
 log = logging.getLogger(__name__)
 
@@ -64,6 +64,11 @@ class SceneError(Exception):
         file, path, message = one_line(self.file), one_line(self.path), one_line(self.message, MAX_MESSAGE)
         where = f"{file}:{self.line}" if self.line else file
         return f"{where}: {path}: {message}" if path else f"{where}: {message}"
+
+
+class LimitError(SceneError):
+    """The text breaks one of this module's limits (size, depth, values, number length): not a value
+    anyone wrote, whether or not it is valid YAML."""
 
 
 def one_line(text: str, limit: int = MAX_QUOTE) -> str:
@@ -157,8 +162,8 @@ class _Builder:
         self.made = 0                      # nodes made so far (aliases count each time they are used)
         self.open: set[int] = set()        # ids of the YAML nodes being converted (the current path)
 
-    def error(self, line: int, message: str, path: str = "") -> SceneError:
-        return SceneError(self.file, line, path, message)
+    def error(self, line: int, message: str, path: str = "", kind: type[SceneError] = SceneError) -> SceneError:
+        return kind(self.file, line, path, message)
 
     def build(self) -> Node | None:
         try:
@@ -169,7 +174,7 @@ class _Builder:
             raise self.error(line, f"not valid YAML: control character #x{exc.character:02x} is not allowed "
                                    "(only tab, newline and printable characters)") from None
         except _Limit as exc:
-            raise self.error(exc.mark.line + 1, exc.message) from None
+            raise self.error(exc.mark.line + 1, exc.message, kind=LimitError) from None
         except yaml.MarkedYAMLError as exc:
             mark = exc.problem_mark or exc.context_mark
             line = mark.line + 1 if mark else 0
@@ -177,7 +182,7 @@ class _Builder:
         except yaml.YAMLError as exc:
             raise self.error(0, f"not valid YAML: {exc}") from None
         except RecursionError:  # only if the caller's own stack was already deep
-            raise self.error(0, "nested too deeply") from None
+            raise self.error(0, "nested too deeply", kind=LimitError) from None
         finally:
             if self.loader is not None:
                 self.loader.dispose()
@@ -189,9 +194,9 @@ class _Builder:
         line = node.start_mark.line + 1
         self.made += 1
         if self.made > MAX_NODES:
-            raise self.error(line, f"aliases expand to more than {MAX_NODES} values", path)
+            raise self.error(line, f"aliases expand to more than {MAX_NODES} values", path, LimitError)
         if depth > MAX_DEPTH:
-            raise self.error(line, f"nested deeper than {MAX_DEPTH} levels (through aliases)", path)
+            raise self.error(line, f"nested deeper than {MAX_DEPTH} levels (through aliases)", path, LimitError)
         if isinstance(node, ScalarNode):
             return Node(self.scalar(node, path), self.file, line)
         if node.tag not in _COLLECTION_TAGS:
@@ -255,7 +260,7 @@ class _Builder:
     def scalar(self, node: ScalarNode, path: str) -> Any:
         line = node.start_mark.line + 1
         if node.tag in _NUMBER_TAGS and len(node.value) > MAX_NUMBER_CHARS:
-            raise self.error(line, f"a number longer than {MAX_NUMBER_CHARS} characters", path)
+            raise self.error(line, f"a number longer than {MAX_NUMBER_CHARS} characters", path, LimitError)
         if node.tag not in type(self.loader).yaml_constructors:
             raise self.error(line, f"unsupported tag {_short_tag(node.tag)!r}", path)
         try:
@@ -271,7 +276,7 @@ class _Builder:
 def load_text(text: str, file: str = "<string>", limit: int = MAX_FILE_BYTES) -> Node | None:
     """Read YAML text into located nodes, or raise one :class:`SceneError`."""
     if len(text) > limit:
-        raise SceneError(file, 0, "", f"larger than {size_text(limit)}; a scene or preset is a few KB")
+        raise LimitError(file, 0, "", f"larger than {size_text(limit)}; a scene or preset is a few KB")
     return _Builder(text, file).build()
 
 
@@ -329,6 +334,19 @@ def _reason(exc: BaseException) -> str:
 
 def load_file(path: str, limit: int = MAX_FILE_BYTES) -> Node | None:
     return load_text(read_limited(path, limit, "the scene"), path, limit)
+
+
+def parse_value(text: str, what: str) -> Any:
+    """A command-line value read as YAML (``10``, ``0.5``, ``[1, 2]``), within the limits of a file: a
+    :class:`LimitError` naming ``what`` if it breaks one (20 000 nested brackets, a number of 100 000
+    digits), the text itself if it is not YAML at all."""
+    try:
+        node = load_text(text, what)
+    except LimitError:
+        raise
+    except SceneError:
+        return text
+    return None if node is None else node.plain()
 
 
 def parse_scalar(text: str) -> Any:

@@ -10,6 +10,7 @@ from typing import Any, TextIO
 
 from .recorder import Recorder
 from ..scene import Scene
+from ..core.outputs import open_output
 from ..core.scheduler import VirtualScheduler
 from .apps import VirtualApps
 from .world import World
@@ -93,7 +94,8 @@ def simulate(
     return Simulation(scene, until, seed, trace).run(progress)
 
 
-def write_summary(summary: dict[str, Any], path: str) -> None:
-    with open(path, "w", encoding="utf-8") as handle:
+def write_summary(summary: dict[str, Any], path: str, group: int | None = None) -> None:
+    """Into a new file (0640, ``group``) or over an earlier summary only (:mod:`hilgate.core.outputs`)."""
+    with open_output(path, "summary", append=False, group=group) as handle:
         json.dump(summary, handle, indent=2)
         handle.write("\n")
