@@ -5,6 +5,8 @@ modem on a pty, driven by an AT client of this test (its own framing, not hilgat
 only a socket-GLI application.  Each daemon has its own runtime directory, free loopback ports and
 a Zenoh key prefix of its own test run, so other runs on the machine never meet it.  Model times
 are compared across hosts through the epochs each daemon writes in its trace (``network`` line).
+The daemons join with credentials made by ``hilgate network init`` for this module (TLS, access
+control); the attacks on them are in tests/test_netauth.py.
 """
 
 from __future__ import annotations
@@ -25,6 +27,19 @@ import serial
 from daemon_kit import Daemon, unique  # noqa: E402
 from hilgate.client import Link  # noqa: E402
 from test_live_poses import FakeBlueRov  # noqa: E402  (pymavlink's ArduSub, as in the one-host test)
+
+
+CREDS = ""  # the lab's credentials for this module's daemons (hosts A-D and solo, applications app-1, app-2)
+
+
+@pytest.fixture(scope="module", autouse=True)
+def credentials(tmp_path_factory):
+    from hilgate.netinit import init_network
+
+    global CREDS
+    CREDS = str(tmp_path_factory.mktemp("creds"))
+    init_network(CREDS, ["A", "B", "C", "D", "solo"], 2)
+    return CREDS
 
 
 def free_port(kind: int = socket.SOCK_STREAM) -> int:
@@ -52,8 +67,8 @@ class Host:
         self.dir = tmp_path / name
         self.dir.mkdir(parents=True, exist_ok=True)
         self.listen = listen
-        args = ["--host", name, "--zenoh-listen", f"tcp/127.0.0.1:{listen}",
-                *(arg for port in connect for arg in ("--zenoh-connect", f"tcp/127.0.0.1:{port}")), *extra]
+        args = ["--host", name, "--zenoh-listen", f"tls/127.0.0.1:{listen}",
+                *(arg for port in connect for arg in ("--zenoh-connect", f"tls/127.0.0.1:{port}")), *extra]
         self.daemon = Daemon(self.dir, scene, links, *args)
 
     def status(self) -> dict:
@@ -130,7 +145,7 @@ seen down under load): a killed host is seen down at once anyway, when its conne
 def network_scene(prefix: str, a: str, b: str, c: str, pty) -> str:
     return f"""\
 channels: {{ac: {{speed_mps: {SLOW_SOUND_MPS}}}}}
-zenoh: {{prefix: {prefix}, lease_s: 5}}
+zenoh: {{prefix: {prefix}, lease_s: 5, credentials: {CREDS}}}
 vehicles:
   va: {{pose: {{static: [0, 0, 0]}}}}
   vb: {{pose: {{static: [150, 0, 0]}}}}
@@ -272,8 +287,9 @@ def test_an_application_reaches_a_link_over_zenoh_from_anywhere(network):
     a = network["links"][0]
     at = AtClient(network["pty"])
     try:
-        endpoint = f"tcp/127.0.0.1:{network['ports'][2]}"  # through C's daemon, for a link A serves
-        with Link.open(a, zenoh={"connect": [endpoint], "prefix": network["prefix"]}) as link:
+        endpoint = f"tls/127.0.0.1:{network['ports'][2]}"  # through C's daemon, for a link A serves
+        with Link.open(a, zenoh={"connect": [endpoint], "prefix": network["prefix"],
+                                 "credentials": f"{CREDS}/apps/app-1"}) as link:
             assert link.address == 1 and link.max_payload > 0
             assert link.command({"class": "POSE"})["position"] == [0.0, 0.0, 0.0]
             link.send(b"over zenoh", dst=2)
@@ -308,7 +324,7 @@ def test_a_pose_measured_on_one_host_moves_the_delays_on_another_exactly(tmp_pat
     mav_port = free_udp = free_port(socket.SOCK_DGRAM)
     scene = f"""\
 channels: {{ac: {{speed_mps: 1500}}}}
-zenoh: {{prefix: {prefix}}}
+zenoh: {{prefix: {prefix}, credentials: {CREDS}}}
 vehicles:
   topside: {{pose: {{static: [0, 0, 0]}}, host: A}}
   bluerov:
@@ -357,7 +373,7 @@ def test_a_clock_offset_shifts_arrivals_and_a_late_one_is_delivered_at_once_and_
     speed, offset = 150.0, 2.0
     scene = f"""\
 channels: {{ac: {{speed_mps: {speed}}}}}
-zenoh: {{prefix: {prefix}}}
+zenoh: {{prefix: {prefix}, credentials: {CREDS}}}
 vehicles:
   va: {{pose: {{static: [0, 0, 0]}}}}
   vb: {{pose: {{static: [150, 0, 0]}}}}
@@ -404,7 +420,7 @@ def test_a_scene_with_zenoh_but_no_host_names_is_all_this_daemons(tmp_path):
     a, b = unique("sa"), unique("sb")
     scene = f"""\
 channels: {{ac: {{speed_mps: 1500}}}}
-zenoh: {{prefix: hilgate-test-{uuid.uuid4().hex[:8]}}}
+zenoh: {{prefix: hilgate-test-{uuid.uuid4().hex[:8]}, credentials: {CREDS}}}
 vehicles: {{va: {{pose: {{static: [0, 0, 0]}}}}, vb: {{pose: {{static: [150, 0, 0]}}}}}}
 links:
   {a}: {{vehicle: va, address: 1, bitrate_bps: 1000, addressing: strict}}
@@ -438,7 +454,7 @@ def test_forged_messages_from_the_network_are_counted_and_change_nothing(tmp_pat
     a, b = unique("fa"), unique("fb")
     scene = f"""\
 channels: {{ac: {{speed_mps: 1500}}}}
-zenoh: {{prefix: {prefix}}}
+zenoh: {{prefix: {prefix}, credentials: {CREDS}}}
 vehicles: {{va: {{pose: {{static: [0, 0, 0]}}}}, vb: {{pose: {{static: [150, 0, 0]}}}}}}
 links:
   {a}: {{vehicle: va, host: A, address: 1, bitrate_bps: 1000}}
