@@ -131,7 +131,8 @@ def acl(prefix: str, identity: Identity) -> dict[str, Any]:
     else from anyone (another application, a certificate of a name the manifest does not list) is
     refused: the default is deny."""
     p = prefix
-    rules = [_allow("out", ALL_MESSAGES, [f"{p}/**"], "egress")]
+    # what goes out: anything to a host, only link keys to an application (not even which hosts are alive)
+    rules = [_allow("out", ALL_MESSAGES, [f"{p}/**"], "egress"), _allow("out-app", ALL_MESSAGES, [f"{p}/link/**"], "egress")]
     subjects: list[dict[str, Any]] = []
     policies: list[dict[str, Any]] = []
     for i, host in enumerate(identity.hosts):
@@ -166,7 +167,7 @@ def acl(prefix: str, identity: Identity) -> dict[str, Any]:
                 rules.append(_allow(f"a{i}r{j}", messages, keys))
                 ids.append(f"a{i}r{j}")
             subjects.append({"id": f"a{i}", "cert_common_names": [app]})
-            policies.append({"rules": ["out", *ids], "subjects": [f"a{i}"]})
+            policies.append({"rules": ["out-app", *ids], "subjects": [f"a{i}"]})
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
             "policies": policies}
 
