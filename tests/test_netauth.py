@@ -377,22 +377,30 @@ def test_a_query_flood_keeps_the_daemons_talking(lab):
                 pass
             asked[0] += 1
 
+    B = lab.hosts["B"]
+    views = []
+
+    def watch() -> None:  # what each daemon thinks of the other, all along the flood
+        while not stop.is_set():
+            views.append((A.sees("B"), B.sees("A")))
+            time.sleep(0.05)
+
     try:
         wait_until(lambda: peers(flooder), what="the flooder to connect")
-        threads = [threading.Thread(target=ask) for _ in range(16)]
+        threads = [threading.Thread(target=ask) for _ in range(16)] + [threading.Thread(target=watch)]
         for thread in threads:
             thread.start()
         wait_until(lambda: asked[0] > 500, what="the query flood to run")
         with lab.app(lab.a) as honest:
             assert honest.command({"class": "POSE"})["position"] == [0.0, 0.0, 0.0]
+        wait_until(lambda: asked[0] > 2000, what="more of the flood")
         stop.set()
         for thread in threads:
             thread.join()
         assert A.daemon.link_status(lab.a)["drop_causes"].get("query_refused", 0) > 0
+        assert views and all(a and b for a, b in views), views
     finally:
         stop.set()
         flooder.close()
-    A.daemon.stop()
-    lab.hosts["B"].daemon.stop()
-    for host in (A, lab.hosts["B"]):
-        assert [e for e in host.events() if e.get("ev") == "host" and e["state"] == "down"] == []
+    B.daemon.stop()  # (B first: A then sees it go down, but only once the flood is over)
+    assert [e["state"] for e in B.events() if e.get("ev") == "host"] == ["up"]  # A: up once, never down
