@@ -3,7 +3,9 @@
 
 1. Bare: two processes bounce a 2 066-byte message over Zenoh (peer mode, loopback TCP, no scouting).
 2. hilgate: daemon A and daemon B (two processes, their own runtime directories and Zenoh ports),
-   one link each on an ideal channel (same place, 1e12 bit/s, no delays).  A dccomms-layout
+   one link each on an ideal channel (same place, 1e12 bit/s, no delays), joined as shipped (mutual
+   TLS with credentials from ``hilgate network init``, Zenoh's access control) and, in the same run,
+   ``insecure`` (plain TCP): what authentication costs the round trip.  A dccomms-layout
    application on A's queue sends a 2 066-byte queue message (a 2 048-byte VariableLength2B payload)
    to B's link; an echo application on B sends it back: app → A → Zenoh → B → app → B → Zenoh → A →
    app.  Target: p50 ≤ 3 × the bare ping-pong.  (With no propagation delay every frame from the other
@@ -14,7 +16,8 @@
    as its queue takes them, the one on B counts; frames per second and frames lost, by cause
    (target ≥ 5 000 frames/s, zero loss).
 
-Bare and hilgate round trips alternate, ``--repeats`` times; the ratio is printed as min/median/max.
+Bare, TLS and plain round trips alternate, ``--repeats`` times; the ratio (TLS against bare) is printed as
+min/median/max.
 
     python benchmarks/multihost.py [--round-trips 2000] [--frames 20000] [--repeats 3]
 """
@@ -110,7 +113,7 @@ def bare(count: int) -> list[float]:
 SCENE = """\
 name: multihost-bench
 channels: {{ideal: {{speed_mps: 3.0e8}}}}
-zenoh: {{prefix: {prefix}}}
+zenoh: {{prefix: {prefix}, {security}}}
 vehicles: {{v: {{pose: {{static: [0, 0, 0]}}}}}}
 links:
   {a}: {{vehicle: v, host: A, address: 1, bitrate_bps: 1.0e12, fifo_bytes: 10000000, packet: vl2b}}
@@ -121,15 +124,21 @@ links:
 class Network:
     """Daemons A and B, joined over loopback TCP."""
 
-    def __init__(self, a: str, b: str, template: str = SCENE):
+    def __init__(self, a: str, b: str, template: str = SCENE, secure: bool = True):
+        from hilgate.netinit import init_network
+
         self.dir = tempfile.mkdtemp(prefix="hilgate-multihost-bench-")
         scene = os.path.join(self.dir, "scene.yaml")
+        if secure:
+            init_network(os.path.join(self.dir, "creds"), ["A", "B"], 1)
+        security = f"credentials: {os.path.join(self.dir, 'creds')}" if secure else "insecure: true"
         with open(scene, "w") as handle:
-            handle.write(template.format(a=a, b=b, prefix=f"bench-{uuid.uuid4().hex[:8]}"))
+            handle.write(template.format(a=a, b=b, prefix=f"bench-{uuid.uuid4().hex[:8]}", security=security))
         port = free_port()
+        scheme = "tls" if secure else "tcp"
         self.processes = []
-        for host, args in (("A", ["--zenoh-listen", f"tcp/127.0.0.1:{port}"]),
-                           ("B", ["--zenoh-connect", f"tcp/127.0.0.1:{port}"])):
+        for host, args in (("A", ["--zenoh-listen", f"{scheme}/127.0.0.1:{port}"]),
+                           ("B", ["--zenoh-connect", f"{scheme}/127.0.0.1:{port}"])):
             notify_path = os.path.join(self.dir, f"notify-{host}")
             notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
             notify.bind(notify_path)
@@ -168,9 +177,9 @@ class Network:
         unlink_queues(self.links)
 
 
-def through_hilgate(count: int) -> list[float]:
+def through_hilgate(count: int, secure: bool = True) -> list[float]:
     a, b = f"mha{os.getpid()}", f"mhb{os.getpid()}"
-    network = Network(a, b)
+    network = Network(a, b, secure=secure)
     try:
         result = SPAWN.Queue()
         echo = SPAWN.Process(target=_echo, args=(b, count + WARM_UP, "echo", result))
@@ -221,7 +230,7 @@ def throughput(count: int, size: int, rate: float | None) -> tuple[float, int, i
 ACOUSTIC = """\
 name: multihost-on-time
 channels: {{ac: {{speed_mps: 1500}}}}
-zenoh: {{prefix: {prefix}}}
+zenoh: {{prefix: {prefix}, {security}}}
 vehicles:
   va: {{pose: {{static: [0, 0, 0]}}}}
   vb: {{pose: {{static: [150, 0, 0]}}}}
@@ -265,19 +274,24 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--on-time", type=int, default=100, help="frames for the wall-clock delivery check")
     args = parser.parse_args()
-    ratios, bares, hils = [], [], []
+    ratios, bares, hils, plains = [], [], [], []
     for repeat in range(args.repeats):
         bare_p50, bare_p99 = percentiles(bare(args.round_trips))
-        hil_p50, hil_p99 = percentiles(through_hilgate(args.round_trips))
+        hil_p50, hil_p99 = percentiles(through_hilgate(args.round_trips, secure=True))
+        plain_p50, plain_p99 = percentiles(through_hilgate(args.round_trips, secure=False))
         bares.append(bare_p50)
         hils.append(hil_p50)
+        plains.append(plain_p50)
         ratios.append(hil_p50 / bare_p50)
         print(f"repeat {repeat + 1}: bare Zenoh ping-pong p50 {bare_p50 * 1e6:.0f} µs (p99 {bare_p99 * 1e6:.0f}); "
-              f"through two daemons p50 {hil_p50 * 1e6:.0f} µs (p99 {hil_p99 * 1e6:.0f}); "
-              f"ratio {hil_p50 / bare_p50:.2f}", flush=True)
+              f"through two daemons, TLS p50 {hil_p50 * 1e6:.0f} µs (p99 {hil_p99 * 1e6:.0f}), "
+              f"insecure p50 {plain_p50 * 1e6:.0f} µs (p99 {plain_p99 * 1e6:.0f}); "
+              f"ratio TLS/bare {hil_p50 / bare_p50:.2f}", flush=True)
     print(f"round trip of a {MESSAGE}-byte frame, p50: bare {statistics.median(bares) * 1e6:.0f} µs, hilgate "
-          f"{statistics.median(hils) * 1e6:.0f} µs (median of {args.repeats}); ratio min/median/max "
-          f"{min(ratios):.2f} / {statistics.median(ratios):.2f} / {max(ratios):.2f} (target <= 3)")
+          f"with TLS {statistics.median(hils) * 1e6:.0f} µs, insecure {statistics.median(plains) * 1e6:.0f} µs "
+          f"(median of {args.repeats}; TLS costs {(statistics.median(hils) - statistics.median(plains)) * 1e6:+.0f} µs); "
+          f"ratio TLS/bare min/median/max {min(ratios):.2f} / {statistics.median(ratios):.2f} / {max(ratios):.2f} "
+          f"(target <= 3)")
     errors = sorted(on_time(args.on_time))
     print(f"delivery on the wall clock A -> B (150 m, 1000 b/s), application to application, minus the model: "
           f"min {errors[0] * 1e3:+.2f} ms, p50 {errors[len(errors) // 2] * 1e3:+.2f} ms, "

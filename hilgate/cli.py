@@ -111,7 +111,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                     args.trace, args.summary, args.until, status_line, args.gli_backlog, args.group,
                     args.max_clients, args.max_link_clients, plugins=args.plugins, preset_dirs=args.preset_dirs,
                     host=args.host, zenoh_connect=args.zenoh_connect, zenoh_listen=args.zenoh_listen,
-                    clock_offset_s=args.clock_offset_s, tcp_token=args.tcp_token)
+                    clock_offset_s=args.clock_offset_s, tcp_token=args.tcp_token,
+                    zenoh_credentials=args.zenoh_credentials, zenoh_insecure=args.zenoh_insecure)
     return daemon.run()
 
 
@@ -307,7 +308,8 @@ def cmd_app(args: argparse.Namespace) -> int:
         params[key] = parse_value(value, f"--param {key}") if value else ""
     zenoh = None
     if args.zenoh:
-        zenoh = {"connect": args.zenoh, **({"prefix": args.zenoh_prefix} if args.zenoh_prefix else {})}
+        zenoh = {"connect": args.zenoh, **({"prefix": args.zenoh_prefix} if args.zenoh_prefix else {}),
+                 **({"credentials": args.zenoh_credentials} if args.zenoh_credentials else {})}
     return run_application(cls, args.links, params, name=args.name, seed=args.seed, runtime_dir=args.runtime_dir,
                            tcp=parse_tcp(args.tcp) if args.tcp else None, zenoh=zenoh, until=args.until,
                            token_file=args.token_file)
@@ -447,7 +449,37 @@ def cmd_fit(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_network(args: argparse.Namespace) -> int:
+    """``hilgate network init DIR --hosts A,B --apps N``: the lab's credentials (:mod:`hilgate.netinit`)."""
+    from .netinit import NetworkInitError, init_network
+
+    hosts = [h.strip() for h in args.hosts.split(",") if h.strip()]
+    apps: list[str] | int
+    if args.apps.isdigit():
+        apps = int(args.apps)
+        if apps > 1000:
+            print("hilgate: network init: at most 1000 applications", file=sys.stderr)
+            return EXIT_SCENE
+    else:
+        apps = [a.strip() for a in args.apps.split(",") if a.strip()]
+    try:
+        result = init_network(args.directory, hosts, apps)
+    except NetworkInitError as exc:
+        print(f"hilgate: network init: {exc}", file=sys.stderr)
+        return EXIT_SCENE
+    where = result["directory"]
+    print(f"credentials in {where}: made {', '.join(result['made']) or 'nothing'}"
+          f"{'; kept ' + ', '.join(result['kept']) if result['kept'] else ''}")
+    print(f"  hosts: {', '.join(f'{where}/hosts/{h}' for h in result['hosts'])}")
+    if result["apps"]:
+        print(f"  applications: {where}/apps/{{{','.join(result['apps'])}}}")
+    print(f"  keep {where}/ca/ca.key off the lab's computers; copy each host's directory to it and point the "
+          f"scene at it (zenoh: {{credentials: DIR}}) or start the daemon with --zenoh-credentials DIR")
+    return 0
+
+
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "network": cmd_network,
     "report": cmd_report,
     "fit": cmd_fit,
     "emulate": cmd_emulate,
@@ -551,6 +583,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a daemon to join, e.g. tcp/192.168.1.10:7447 (repeatable; besides the scene's zenoh.connect)")
     p.add_argument("--zenoh-listen", action="append", default=[], metavar="ENDPOINT", type=_zenoh_endpoint,
                    help="where the others may connect (default: the scene's zenoh.listen, else loopback only)")
+    p.add_argument("--zenoh-credentials", metavar="DIR",
+                   help="the lab's credentials (hilgate network init; DIR or DIR/hosts/HOST): overrides zenoh.credentials")
+    p.add_argument("--zenoh-insecure", action="store_true",
+                   help="join without credentials: plain TCP, no access control (as zenoh.insecure: true)")
     p.add_argument("--clock-offset-s", type=float, default=0.0, metavar="S",
                    help="act as if this host's clock were S seconds ahead (to measure what an offset does)")
     p.add_argument("--max-link-clients", type=int, default=32, metavar="N",
@@ -568,6 +604,15 @@ def build_parser() -> argparse.ArgumentParser:
     for action in p._actions:  # the daemon's own options (speed, runtime dir, trace…), not its --tcp
         if action.dest not in ("help", "scene", "overrides", "plugins", "preset_dirs", "tcp") and action.option_strings:
             e._add_action(action)
+
+    p = sub.add_parser("network", help="a lab's credentials for a network of daemons over Zenoh")
+    n = p.add_subparsers(dest="network_command", metavar="ACTION")
+    n.required = True
+    i = n.add_parser("init", help="a CA and a certificate per host and per application (TLS, access control)")
+    i.add_argument("directory", help="where the credentials go (made 0750; keys 0600)")
+    i.add_argument("--hosts", required=True, metavar="A,B,...", help="the hosts' names (their daemons' --host)")
+    i.add_argument("--apps", default="0", metavar="N|A,B,...",
+                   help="applications: a number (app-1 … app-N) or names (default 0)")
 
     p = sub.add_parser("queues", help="list (or --unlink) the dccomms POSIX queues of a scene's links")
     _add_scene_args(p)
@@ -613,6 +658,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--zenoh", action="append", metavar="ENDPOINT", type=_zenoh_endpoint,
                    help="reach the links over Zenoh through this daemon endpoint (repeatable)")
     p.add_argument("--zenoh-prefix", type=_zenoh_prefix, help="the network's Zenoh key prefix (default: hilgate)")
+    p.add_argument("--zenoh-credentials", metavar="DIR",
+                   help="this application's credentials (hilgate network init: DIR/apps/NAME)")
     p.add_argument("--runtime-dir")
 
     p = sub.add_parser("send", help="send text to a link (arguments, or one frame per stdin line)")

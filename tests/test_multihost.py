@@ -5,6 +5,8 @@ modem on a pty, driven by an AT client of this test (its own framing, not hilgat
 only a socket-GLI application.  Each daemon has its own runtime directory, free loopback ports and
 a Zenoh key prefix of its own test run, so other runs on the machine never meet it.  Model times
 are compared across hosts through the epochs each daemon writes in its trace (``network`` line).
+The daemons join with credentials made by ``hilgate network init`` for this module (TLS, access
+control); the attacks on them are in tests/test_netauth.py.
 """
 
 from __future__ import annotations
@@ -27,6 +29,19 @@ from hilgate.client import Link  # noqa: E402
 from test_live_poses import FakeBlueRov  # noqa: E402  (pymavlink's ArduSub, as in the one-host test)
 
 
+CREDS = ""  # the lab's credentials for this module's daemons (hosts A-D and solo, applications app-1, app-2)
+
+
+@pytest.fixture(scope="module", autouse=True)
+def credentials(tmp_path_factory):
+    from hilgate.netinit import init_network
+
+    global CREDS
+    CREDS = str(tmp_path_factory.mktemp("creds"))
+    init_network(CREDS, ["A", "B", "C", "D", "solo"], 2)
+    return CREDS
+
+
 def free_port(kind: int = socket.SOCK_STREAM) -> int:
     with socket.socket(socket.AF_INET, kind) as probe:
         probe.bind(("127.0.0.1", 0))
@@ -47,13 +62,13 @@ class Host:
     """One daemon of the network, in its own directory."""
 
     def __init__(self, tmp_path, name: str, scene: str, links: list[str], listen: int, connect: list[int] = (),
-                 extra: tuple[str, ...] = ()):
+                 extra: tuple[str, ...] = (), scheme: str = "tls"):
         self.name = name
         self.dir = tmp_path / name
         self.dir.mkdir(parents=True, exist_ok=True)
         self.listen = listen
-        args = ["--host", name, "--zenoh-listen", f"tcp/127.0.0.1:{listen}",
-                *(arg for port in connect for arg in ("--zenoh-connect", f"tcp/127.0.0.1:{port}")), *extra]
+        args = ["--host", name, "--zenoh-listen", f"{scheme}/127.0.0.1:{listen}",
+                *(arg for port in connect for arg in ("--zenoh-connect", f"{scheme}/127.0.0.1:{port}")), *extra]
         self.daemon = Daemon(self.dir, scene, links, *args)
 
     def status(self) -> dict:
@@ -130,7 +145,7 @@ seen down under load): a killed host is seen down at once anyway, when its conne
 def network_scene(prefix: str, a: str, b: str, c: str, pty) -> str:
     return f"""\
 channels: {{ac: {{speed_mps: {SLOW_SOUND_MPS}}}}}
-zenoh: {{prefix: {prefix}, lease_s: 5}}
+zenoh: {{prefix: {prefix}, lease_s: 5, credentials: {CREDS}}}
 vehicles:
   va: {{pose: {{static: [0, 0, 0]}}}}
   vb: {{pose: {{static: [150, 0, 0]}}}}
@@ -266,14 +281,17 @@ def test_a_host_that_dies_is_down_on_the_others_and_rejoins_without_restarting_t
     assert [(e["cause"], e["dst"]) for e in errors] == [("host_down", b)]
     states = [e["state"] for e in A.events() if e.get("ev") == "host" and e["host"] == "B"]
     assert states[-2:] == ["down", "up"]
+    # the restarted B numbers its messages from 1 again: a new session, not a gap (nor a replay)
+    assert not [e for e in A.events() if e.get("cause") in ("net_gap", "replay")]
 
 
 def test_an_application_reaches_a_link_over_zenoh_from_anywhere(network):
     a = network["links"][0]
     at = AtClient(network["pty"])
     try:
-        endpoint = f"tcp/127.0.0.1:{network['ports'][2]}"  # through C's daemon, for a link A serves
-        with Link.open(a, zenoh={"connect": [endpoint], "prefix": network["prefix"]}) as link:
+        endpoint = f"tls/127.0.0.1:{network['ports'][2]}"  # through C's daemon, for a link A serves
+        with Link.open(a, zenoh={"connect": [endpoint], "prefix": network["prefix"],
+                                 "credentials": f"{CREDS}/apps/app-1"}) as link:
             assert link.address == 1 and link.max_payload > 0
             assert link.command({"class": "POSE"})["position"] == [0.0, 0.0, 0.0]
             link.send(b"over zenoh", dst=2)
@@ -308,7 +326,7 @@ def test_a_pose_measured_on_one_host_moves_the_delays_on_another_exactly(tmp_pat
     mav_port = free_udp = free_port(socket.SOCK_DGRAM)
     scene = f"""\
 channels: {{ac: {{speed_mps: 1500}}}}
-zenoh: {{prefix: {prefix}}}
+zenoh: {{prefix: {prefix}, credentials: {CREDS}}}
 vehicles:
   topside: {{pose: {{static: [0, 0, 0]}}, host: A}}
   bluerov:
@@ -357,7 +375,7 @@ def test_a_clock_offset_shifts_arrivals_and_a_late_one_is_delivered_at_once_and_
     speed, offset = 150.0, 2.0
     scene = f"""\
 channels: {{ac: {{speed_mps: {speed}}}}}
-zenoh: {{prefix: {prefix}}}
+zenoh: {{prefix: {prefix}, credentials: {CREDS}}}
 vehicles:
   va: {{pose: {{static: [0, 0, 0]}}}}
   vb: {{pose: {{static: [150, 0, 0]}}}}
@@ -404,7 +422,7 @@ def test_a_scene_with_zenoh_but_no_host_names_is_all_this_daemons(tmp_path):
     a, b = unique("sa"), unique("sb")
     scene = f"""\
 channels: {{ac: {{speed_mps: 1500}}}}
-zenoh: {{prefix: hilgate-test-{uuid.uuid4().hex[:8]}}}
+zenoh: {{prefix: hilgate-test-{uuid.uuid4().hex[:8]}, credentials: {CREDS}}}
 vehicles: {{va: {{pose: {{static: [0, 0, 0]}}}}, vb: {{pose: {{static: [150, 0, 0]}}}}}}
 links:
   {a}: {{vehicle: va, address: 1, bitrate_bps: 1000, addressing: strict}}
@@ -422,9 +440,11 @@ links:
         host.daemon.close()
 
 
-def test_forged_messages_from_the_network_are_counted_and_change_nothing(tmp_path):
-    """A peer that sends transmissions of a host the scene does not name, times a day away, and
-    liveliness tokens of strangers: counted or ignored, never a traceback, the daemon goes on."""
+def test_an_insecure_network_is_asked_for_warned_about_and_still_checks_what_it_hears(tmp_path):
+    """``insecure: true``: plain TCP, a warning at start; a peer without credentials then reaches the
+    daemon, and what it forges (a host nobody named, a host speaking for another, times a day away,
+    garbage, strangers' tokens) is counted or ignored, never a traceback.  Without ``insecure`` or
+    credentials the same scene does not start."""
     import json as json_
 
     import zenoh
@@ -438,35 +458,41 @@ def test_forged_messages_from_the_network_are_counted_and_change_nothing(tmp_pat
     a, b = unique("fa"), unique("fb")
     scene = f"""\
 channels: {{ac: {{speed_mps: 1500}}}}
-zenoh: {{prefix: {prefix}}}
+zenoh: {{prefix: {prefix}, insecure: true}}
 vehicles: {{va: {{pose: {{static: [0, 0, 0]}}}}, vb: {{pose: {{static: [150, 0, 0]}}}}}}
 links:
   {a}: {{vehicle: va, host: A, address: 1, bitrate_bps: 1000}}
   {b}: {{vehicle: vb, host: B, address: 2, bitrate_bps: 1000}}
 """
+    refused = Host(tmp_path / "refused", "A", scene.replace(", insecure: true", ""), [a], free_port(), scheme="tcp")
+    assert refused.daemon.process.wait(30) != 0
+    assert "zenoh: {credentials: DIR}" in refused.daemon.output() and "Traceback" not in refused.daemon.output()
+    refused.daemon.close()
     port = free_port()
-    host = Host(tmp_path, "A", scene, [a], port)
+    host = Host(tmp_path, "A", scene, [a], port, scheme="tcp")
     config = zenoh.Config()
     config.insert_json5("mode", '"peer"')
     config.insert_json5("scouting/multicast/enabled", "false")
-    config.insert_json5("listen/endpoints", '["tcp/127.0.0.1:0"]')
+    config.insert_json5("listen/endpoints", '[]')
     config.insert_json5("connect/endpoints", json_.dumps([f"tcp/127.0.0.1:{port}"]))
     try:
         host.daemon.wait_for("READY=1")
+        assert "INSECURE network" in host.daemon.output()
         session = zenoh.open(config)
         try:
-            token = session.liveliness().declare_token(f"{prefix}/alive/hosts/stranger/0123")
+            token = session.liveliness().declare_token(f"{prefix}/alive/stranger/host/0123")
             vl2b = packet_class("vl2b")
             frame = Frame(1, b, a, 1, 9, 0.0, app_frame=AppFrame(vl2b.encode(b"x", 2, 1), b"x", vl2b, 1, 2, 1, 0.0))
             frame.src_addr = 2
-            publisher = session.declare_publisher(f"{prefix}/tx/ac")
-            wait_until(lambda: publisher.matching_status, what="the daemon's subscriber")
-            publisher.put(encode_transmission("Z", 0, 1, frame, 0.0, 0.1, None))          # a host nobody named
-            publisher.put(encode_transmission("B", time.time_ns(), 1, frame, 86400.0, 0.1, None))  # a day ahead
-            publisher.put(b"\x00\x00\x00\x05garbage")                                       # not a message
-            counters = wait_until(lambda: (lambda c: c if len(c) >= 3 else None)(host.status()["network"]["counters"]),
+            publishers = {h: session.declare_publisher(f"{prefix}/tx/{h}/ac") for h in "ZBA"}
+            wait_until(lambda: all(p.matching_status for p in publishers.values()), what="the daemon's subscriber")
+            publishers["Z"].put(encode_transmission("Z", 0, 1, frame, 0.0, 0.1, None))         # a host nobody named
+            publishers["B"].put(encode_transmission("B", time.time_ns(), 1, frame, 86400.0, 0.1, None))  # a day ahead
+            publishers["B"].put(b"\x00\x00\x00\x05garbage")                                   # not a message
+            publishers["A"].put(encode_transmission("B", time.time_ns(), 2, frame, 0.0, 0.1, None))  # A speaking for B
+            counters = wait_until(lambda: (lambda c: c if len(c) >= 4 else None)(host.status()["network"]["counters"]),
                                   what="the counters")
-            assert counters["foreign_sender"] == 1 and counters["out_of_time"] == 1 and counters["bad_message"] == 1
+            assert counters == {"foreign_sender": 1, "out_of_time": 1, "bad_message": 1, "forged": 1}
             assert {v["host"] for v in host.status()["network"]["hosts"]} == {"B"}  # no stranger
             token.undeclare()
         finally:

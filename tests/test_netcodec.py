@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import io
+import json
+import struct
+import zlib
+
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -9,7 +14,8 @@ from hypothesis import strategies as st
 from hilgate.core.backend import AppFrame
 from hilgate.core.packets import packet_class
 from hilgate.daemon.netcodec import (
-    NetError, decode_pose, decode_transmission, encode_pose, encode_transmission, to_local,
+    KIND, LINK_NAME, MAX_TRANSMISSION, NetError, ReplayWindow, decode_pose, decode_transmission, encode_pose,
+    encode_transmission, to_local,
 )
 from hilgate.models.frame import CTS, Frame
 
@@ -86,10 +92,116 @@ def test_a_damaged_transmission_is_read_or_refused_never_raised(which, flips, cu
     assert message.duration >= 0 and isinstance(message.host, str) and message.frame.size >= 0
 
 
+def _sealed(body: bytes) -> bytes:
+    """``body`` with a CRC that matches: damage an attacker made on purpose, past the CRC, to the fields."""
+    return body + struct.pack(">I", zlib.crc32(body))
+
+
 def test_another_version_and_trailing_bytes_are_refused():
     blob = _valid_blobs()[1]
     with pytest.raises(NetError, match="another hilgate version"):
         decode_transmission(b"\x00" + blob[1:])  # what the JSON format (version 1) started with
-    with pytest.raises(NetError, match="trailing"):
+    with pytest.raises(NetError, match="damaged"):
         decode_transmission(blob + b"x")
+    with pytest.raises(NetError, match="trailing"):
+        decode_transmission(_sealed(blob[:-4] + b"x"))
     assert decode_transmission(blob).frame.ack is None and decode_transmission(_valid_blobs()[0]).frame.ack == 3
+
+
+def test_every_bit_flipped_is_refused_as_damaged():
+    """The issue's mutated copies: 3 250 of 20 000 were delivered with corrupted payloads.  One bit
+    flipped anywhere (every one of them, both messages) is refused, counted ``damaged``."""
+    refused = 0
+    for blob in _valid_blobs():
+        for i in range(1, len(blob)):  # (byte 0 is the version: refused as another version)
+            for bit in range(8):
+                damaged = bytearray(blob)
+                damaged[i] ^= 1 << bit
+                with pytest.raises(NetError) as error:
+                    decode_transmission(bytes(damaged))
+                assert error.value.cause == "damaged"
+                refused += 1
+    assert refused == sum(len(blob) - 1 for blob in _valid_blobs()) * 8
+
+
+def test_a_message_longer_than_any_transmission_is_refused_unread():
+    with pytest.raises(NetError, match="longer than any transmission"):
+        decode_transmission(b"\x03" + bytes(8 << 20))  # the issue's 8 MB message
+    assert MAX_TRANSMISSION >= len(_valid_blobs()[0])
+
+
+def _trace_lines(message) -> list[str]:
+    """What the trace writes of a frame from another host (the recorder's own formatting)."""
+    from hilgate.sim.recorder import Recorder
+
+    class Modem:
+        json_id, queued_bytes = json.dumps("here"), 0
+
+    out = io.StringIO()
+    recorder = Recorder(out)
+    for frame in (message.frame, message.frame.ref):
+        if frame is not None:
+            recorder._line(1.0, "rx", Modem(), frame, "col")
+            recorder.event({"t": 1.0, "ev": "drop", "src": message.host, "cause": "replay", "kind": frame.kind})
+    return out.getvalue().splitlines()
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.sampled_from([0, 1]), st.sampled_from(["kind", "src", "dst", "host", "packet"]),
+       st.text(min_size=1, max_size=40))
+def test_names_from_another_host_are_checked_so_the_trace_stays_json(which, field, text):
+    """Kinds, link ids, host and packet names with quotes, NUL, newlines or any Unicode, sealed with a
+    right CRC: refused, or names of their kind; and whatever is read makes trace lines that parse."""
+    vl2b = packet_class("vl2b")
+    app = AppFrame(vl2b.encode(b"hi", 1, 2), b"hi", vl2b, 7, 1, 2, 12.5, None)
+    names = {"kind": "data", "src": "a", "dst": "b", "host": "hostA", "packet": "vl2b", field: text}
+    frame = Frame(41, names["src"], names["dst"], 2, len(app.real), 12.5, app_frame=app, kind=names["kind"])
+    frame.src_addr = 1
+    app.packet = type("P", (), {"name": names["packet"]})()
+    try:
+        blob = encode_transmission(names["host"], 5, 1, frame, 12.5, 0.1, None)
+    except ValueError:
+        return  # (too long to encode)
+    try:
+        message = decode_transmission(blob)
+    except NetError:
+        return
+    assert KIND.fullmatch(message.frame.kind) and LINK_NAME.fullmatch(message.frame.src_link)
+    assert LINK_NAME.fullmatch(message.frame.dst_link) and LINK_NAME.fullmatch(message.host)
+    for line in _trace_lines(message):
+        json.loads(line)
+
+
+@settings(max_examples=400, deadline=None)
+@given(st.sampled_from([0, 1]), st.lists(st.tuples(st.integers(0, 400), st.integers(0, 255)), min_size=1, max_size=6))
+def test_fields_damaged_past_the_crc_are_refused_or_read_into_valid_trace_lines(which, flips):
+    blob = bytearray(_valid_blobs()[which][:-4])
+    for at, value in flips:
+        if at < len(blob):
+            blob[at] = value
+    try:
+        message = decode_transmission(_sealed(bytes(blob)))
+    except NetError as error:
+        assert error.cause == "bad_message"
+        return
+    for line in _trace_lines(message):
+        json.loads(line)
+
+
+def test_the_replay_window_takes_each_number_once_per_session():
+    window = ReplayWindow()
+    assert [window.admit("s1", 100, n) for n in (1, 2, 3)] == [0, 0, 0]
+    assert window.admit("s1", 100, 2) == "replay"                # seen
+    assert window.admit("s1", 100, 7) == 3                       # 4, 5, 6 skipped: gaps
+    assert window.admit("s1", 100, 5) == 0                       # late, never seen: taken once
+    assert window.admit("s1", 100, 5) == "replay"
+    assert window.admit("s1", 100, 7 + ReplayWindow.MAX_JUMP + 1) == "bad_message"  # numbers made up far ahead
+    assert window.admit("s1", 100, 7 + ReplayWindow.WINDOW) == ReplayWindow.WINDOW - 1
+    assert window.admit("s1", 100, 7) == "replay"                # older than the window
+    # the host restarts: a new session (later epoch) counts from 1 again, no gap of 10^20
+    assert window.admit("s2", 200, 1) == 0 and window.admit("s2", 200, 2) == 0
+    assert window.admit("s1", 100, 9999) == "replay"             # the earlier session's, replayed
+    # the host was down: its numbers went on for the others, a jump ahead is no gap (once)
+    window.resync = True
+    assert window.admit("s2", 200, 10_000_000_000) == 0
+    assert window.admit("s2", 200, 10_000_000_002) == 1

@@ -61,8 +61,8 @@ class LinkPort(Protocol):
     def send_decoded(self, decoded: Decoded) -> None:
         """Send a frame a dccomms application wrote (real packet and virtual area, decoded)."""
 
-    def lost(self, cause: str, size: int, src: str = "medium") -> None:
-        """A frame this endpoint could not take or pass on: counted by cause and traced."""
+    def lost(self, cause: str, size: int, src: str = "medium", n: int = 1) -> None:
+        """A frame this endpoint could not take or pass on (``n`` alike): counted by cause and traced."""
 
     def state_changed(self) -> None:
         """Something that READY depends on changed (an emulated modem's pending acknowledgement)."""

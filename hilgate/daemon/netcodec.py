@@ -6,20 +6,25 @@ the sender's position at the start) and for the receiving applications to get th
 (the application's packet and what the receiving modem needs to print it).  Binary, big-endian (it is
 on every frame's path across hosts, where JSON cost a third of the round trip)::
 
-    u8 version (2) | u8 flags (1 position, 2 served frame, 4 application frame) | i64 epoch_ns |
-    u64 number | f64 t | f64 duration | f64 x, y, z | name host | frame | [frame served] |
-    [application frame]
+    u8 version (3) | u8 flags (1 position, 2 served frame, 4 application frame) | i64 epoch_ns |
+    u64 number | f64 t | f64 duration | f64 x, y, z | name host | name session | frame |
+    [frame served] | [application frame] | u32 CRC-32 of all before
     frame:             i64 id | i16 src addr | u16 dst addr | u32 size | f64 t0 | i64 seq |
                        u16 ACK retries (0xFFFF: none) | name src link | name dst link | name kind
     application frame: i64 seq | i16 src | u16 dst | f64 t0 | u32 meta length | u32 real length |
                        name packet class | meta (JSON object, or nothing) | real packet | payload
     name:              u16 length | UTF-8
 
-``epoch_ns`` is the sender's epoch (ns of the UNIX clock at its model time 0), ``number`` the host's
-message counter (gaps are frames Zenoh dropped), ``t`` the start in the sender's model time, ``kind``
-``data``, ``rts``, ``cts``, ``ack`` or ``modem_ack``; the served frame is the one a control frame or an
-acoustic ACK answers.  A message of another version is refused (counted ``bad_message``): the hosts of
-one network run the same hilgate.
+``epoch_ns`` is the sender's epoch (ns of the UNIX clock at its model time 0), ``session`` the sender's
+Zenoh session id (new at every start), ``number`` the session's message counter (gaps are frames Zenoh
+dropped; a number seen before is a replay: :class:`ReplayWindow`), ``t`` the start in the sender's model
+time, ``kind`` a MAC's word (``data``, ``rts``, ``cts``, ``ack``, ``modem_ack``); the served frame is the one
+a control frame or an acoustic ACK answers.  What is refused (:class:`NetError`, counted, never raised
+into the loop): a message longer than :data:`MAX_TRANSMISSION` (before anything is read), one whose
+CRC does not match (``damaged``: bits changed on the way; TLS keeps outsiders from doing it on
+purpose, the CRC catches the rest), one of another version (the hosts of one network run the same
+hilgate), and any field out of range: names are link ids (letters, digits, ``_ . -``), kinds lowercase
+words, numbers finite; so nothing from another host reaches the trace unchecked.
 
 A **pose** is UTF-8 JSON ``{"h", "e", "v" vehicle, "t" measured (sender's model time), "p" [x, y, z],
 "u" velocity or null}``.  Model times convert between hosts through the epochs:
@@ -31,7 +36,9 @@ from __future__ import annotations
 import functools
 import json
 import math
+import re
 import struct
+import zlib
 from dataclasses import dataclass
 from typing import Any
 
@@ -41,14 +48,26 @@ from ..core.packets import Raw, packet_class
 from ..models.frame import Frame
 
 __all__ = ["Transmission", "encode_transmission", "decode_transmission", "encode_pose", "decode_pose",
-           "NetError", "to_local"]
+           "NetError", "to_local", "ReplayWindow", "MAX_TRANSMISSION"]
 
 MAX_HEADER = 16384
 MAX_DURATION_S = 3600.0  # a frame longer on air than this is not one a modem sends
+MAX_TRANSMISSION = 65536
+"""Bytes of the longest transmission (a 2 kB payload, its packet, a served frame and the largest meta
+JSON take under 24 kB): a longer message is refused before it is read."""
+LINK_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,200}|\*")  # a link id (scene.links.LINK_ID), or * (broadcast)
+KIND = re.compile(r"[a-z][a-z0-9_]{0,31}")
+PACKET_NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")
+SESSION = re.compile(r"[0-9a-f]{1,32}")
 
 
 class NetError(ValueError):
-    """A message from another host that cannot be read (counted, never raised into the loop)."""
+    """A message from another host that cannot be read (counted, never raised into the loop).
+    ``cause`` is the counter it goes to: ``bad_message`` or ``damaged``."""
+
+    def __init__(self, message: str, cause: str = "bad_message"):
+        super().__init__(message)
+        self.cause = cause
 
 
 @dataclass
@@ -61,6 +80,7 @@ class Transmission:
     duration: float
     position: tuple[float, float, float] | None
     ref_key: tuple[str, int] | None = None  # the served frame, to be matched with one this host knows
+    session: str = ""
 
 
 def to_local(t_there: float, epoch_there_ns: int, epoch_here_ns: int) -> float:
@@ -70,7 +90,8 @@ def to_local(t_there: float, epoch_there_ns: int, epoch_here_ns: int) -> float:
 
 # -- transmissions: a binary layout (JSON cost 25 + 36 µs a frame, a third of a cross-host round trip) --
 
-VERSION = 2
+VERSION = 3
+_CRC = struct.Struct(">I")
 _FIXED = struct.Struct(">BBqQddddd")       # version, flags, epoch_ns, number, t, duration, x, y, z
 _FRAME = struct.Struct(">qhHIdqH")          # id, src_addr, dst_addr, size, t0, seq, ack retries (0xFFFF: none)
 _APP = struct.Struct(">qhHdII")             # seq, src, dst, t0, meta length, real length
@@ -97,7 +118,7 @@ def _put_frame(parts: list[bytes], frame: Frame) -> None:
 
 
 def encode_transmission(host: str, epoch_ns: int, number: int, frame: Frame, t: float, duration: float,
-                        position: Any) -> bytes:
+                        position: Any, session: str = "0") -> bytes:
     flags = 0
     x = y = z = 0.0
     if position is not None:
@@ -110,6 +131,7 @@ def encode_transmission(host: str, epoch_ns: int, number: int, frame: Frame, t: 
         flags |= HAS_APP
     parts = [_FIXED.pack(VERSION, flags, epoch_ns, number, t, duration, x, y, z)]
     _put_name(parts, host)
+    _put_name(parts, session)
     _put_frame(parts, frame)
     if frame.ref is not None:
         _put_frame(parts, frame.ref)
@@ -121,7 +143,8 @@ def encode_transmission(host: str, epoch_ns: int, number: int, frame: Frame, t: 
         parts.append(meta)
         parts.append(real)
         parts.append(bytes(app.payload))
-    return b"".join(parts)
+    body = b"".join(parts)
+    return body + _CRC.pack(zlib.crc32(body))
 
 
 def _jsonable(value: Any) -> Any:
@@ -167,7 +190,7 @@ class _Reader:
         self.at = at + layout.size
         return layout.unpack_from(self.data, at)
 
-    def name(self, what: str) -> str:
+    def name(self, what: str, pattern: re.Pattern | None = None) -> str:
         (length,) = self.fixed(_NAME)
         at = self.at
         if not 0 < length <= MAX_NAME * 4 or at + length > len(self.data):
@@ -179,6 +202,8 @@ class _Reader:
             raise NetError(f"{what} is not UTF-8") from None
         if len(text) > MAX_NAME:
             raise NetError(f"{what} is too long")
+        if pattern is not None and not pattern.fullmatch(text):
+            raise NetError(f"{what} is not a name of its kind")
         return text
 
     def take(self, length: int) -> bytes:
@@ -190,7 +215,9 @@ class _Reader:
 
     def frame(self) -> Frame:
         id_, src_addr, dst_addr, size, t0, seq, ack = self.fixed(_FRAME)
-        src_link, dst_link, kind = self.name("the source link"), self.name("the destination link"), self.name("the kind")
+        src_link = self.name("the source link", LINK_NAME)
+        dst_link = self.name("the destination link", LINK_NAME)
+        kind = self.name("the kind", KIND)
         if not (-1 <= src_addr <= 255 and dst_addr <= 255 and size <= 1 << 24 and math.isfinite(t0)):
             raise NetError("a frame's address, size or time is out of range")
         frame = Frame(id_, src_link, dst_link, dst_addr, size, t0, None, None, kind, None, seq)
@@ -225,10 +252,15 @@ def _loads(data: bytes) -> Any:
 
 
 def decode_transmission(data: bytes) -> Transmission:
-    if not data:
-        raise NetError("empty")
+    if len(data) > MAX_TRANSMISSION:
+        raise NetError(f"{len(data)} bytes: longer than any transmission")
+    if len(data) < _FIXED.size + _CRC.size:
+        raise NetError("truncated")
     if data[0] != VERSION:
         raise NetError(f"format {data[0]}, not {VERSION}: another hilgate version")
+    if zlib.crc32(memoryview(data)[:-_CRC.size]) != _CRC.unpack_from(data, len(data) - _CRC.size)[0]:
+        raise NetError("the CRC does not match: damaged on the way", "damaged")
+    data = data[:-_CRC.size]
     reader = _Reader(data)
     _, flags, epoch_ns, number, t, duration, x, y, z = reader.fixed(_FIXED)
     if not (math.isfinite(t) and math.isfinite(duration)):
@@ -240,7 +272,8 @@ def decode_transmission(data: bytes) -> Transmission:
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
             raise NetError("a position that is not a number")
         position = (x, y, z)
-    host = reader.name("the host")
+    host = reader.name("the host", LINK_NAME)
+    session = reader.name("the session", SESSION)
     frame = reader.frame()
     ref_key = None
     if flags & HAS_REF:
@@ -252,7 +285,7 @@ def decode_transmission(data: bytes) -> Transmission:
             raise NetError("an application frame's address or time is out of range")
         if meta_length > MAX_HEADER:
             raise NetError("meta that long")
-        packet = _packet(reader.name("the packet class"))
+        packet = _packet(reader.name("the packet class", PACKET_NAME))
         meta = None
         if meta_length:
             meta = _loads(reader.take(meta_length))
@@ -263,7 +296,53 @@ def decode_transmission(data: bytes) -> Transmission:
         frame.app_frame = AppFrame(real, payload, packet, seq, src, dst, t0, meta)
     elif reader.at != len(data):
         raise NetError("trailing bytes")
-    return Transmission(host, epoch_ns, number, frame, t, duration, position, ref_key)
+    return Transmission(host, epoch_ns, number, frame, t, duration, position, ref_key, session)
+
+
+class ReplayWindow:
+    """The message numbers of one host's sessions: which were seen, which are new.
+
+    A session is the sender's start (its Zenoh session id and epoch): numbers count from 1 in each, so a
+    restarted host is a new session, never a gap.  A session with an older epoch than the current one
+    is a replay of the past.  Within a session the window remembers the last :data:`WINDOW` numbers
+    (IPsec's anti-replay window, RFC 4303 §3.4.3): a number seen, or older than that, is a replay; a
+    number ahead counts the numbers skipped as gaps (what Zenoh dropped), at most :data:`MAX_JUMP` at
+    once (a larger jump is refused: numbers are not made up that far ahead).  After the host was down,
+    any jump ahead is taken without a gap (numbers went on for the hosts that still heard it)."""
+
+    WINDOW = 1024
+    MAX_JUMP = 1 << 24
+
+    __slots__ = ("session", "epoch_ns", "highest", "seen", "resync")
+
+    def __init__(self) -> None:
+        self.session: str | None = None
+        self.epoch_ns = 0
+        self.highest = 0
+        self.seen = 0  # bit i: number highest - i was seen
+        self.resync = False
+
+    def admit(self, session: str, epoch_ns: int, number: int) -> str | int:
+        """``"replay"``, ``"bad_message"`` (a jump too far), or the count of numbers skipped (0: in order)."""
+        if session != self.session:
+            if self.session is not None and epoch_ns <= self.epoch_ns:
+                return "replay"  # an earlier start of the host, or a second one beside it
+            self.session, self.epoch_ns, self.highest, self.seen, self.resync = session, epoch_ns, 0, 0, False
+        if number > self.highest:
+            skipped = number - self.highest - 1
+            if self.resync:
+                skipped, self.resync = 0, False
+            elif skipped >= self.MAX_JUMP:
+                return "bad_message"
+            shift = number - self.highest
+            self.seen = ((self.seen << shift) | 1) & ((1 << self.WINDOW) - 1) if shift < self.WINDOW else 1
+            self.highest = number
+            return skipped
+        back = self.highest - number
+        if back >= self.WINDOW or (self.seen >> back) & 1:
+            return "replay"
+        self.seen |= 1 << back  # late but never seen (counted as a gap when it was skipped)
+        return 0
 
 
 def encode_pose(host: str, epoch_ns: int, vehicle: str, t: float, position: Any, velocity: Any) -> bytes:
@@ -281,6 +360,8 @@ def decode_pose(data: bytes) -> dict[str, Any]:
         raise NetError("a pose is an object")
     result = {"host": _text(message, "h"), "epoch_ns": _integer(message, "e"), "vehicle": _text(message, "v"),
               "t": _number(message, "t")}
+    if not LINK_NAME.fullmatch(result["host"]):
+        raise NetError("a host that is not a name")
     for key, name in (("p", "position"), ("u", "velocity")):
         value = message.get(key)
         if value is not None and not (isinstance(value, list) and len(value) == 3 and all(

@@ -24,16 +24,24 @@ is cut off loses them within the Zenoh lease (``lease_s``), its links show ``dow
 addressed to them are traced and counted ``host_down``.  A second daemon with the same host name or
 link is refused at start.
 
+**Who says what.** Every key a host writes carries its name, so that Zenoh's access control (built
+from the lab's credentials, :mod:`hilgate.gli.zenoh_auth`) lets each host publish, answer and hold
+tokens only under its own name.  What a key's host says is then checked against the scene (a
+transmission from a link the scene gives another host, a token of a link that is not its own: ignored,
+counted ``foreign_sender``), against the message (a transmission whose host is not its key's:
+``forged``), and against what was heard before (:class:`~.netcodec.ReplayWindow`: ``replay``).
+
 Key layout (under ``<prefix>``, ``hilgate`` unless the scene's ``zenoh.prefix`` says otherwise):
-``tx/<channel>`` transmissions, ``pose/<vehicle>`` poses, ``alive/hosts/<host>/<zid>`` and
-``alive/links/<link>/<host>/<zid>`` liveliness, ``status/<host>`` a queryable with each host's status,
-``link/<id>/…`` the GLI (:mod:`hilgate.gli.zenoh_door`).
+``tx/<host>/<channel>`` transmissions, ``pose/<host>/<vehicle>`` poses, ``alive/<host>/host/<zid>`` and
+``alive/<host>/link/<link>/<zid>`` liveliness, ``status/<host>`` a queryable with each host's status,
+``link/<host>/<id>/…`` the GLI (:mod:`hilgate.gli.zenoh_door`).
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import math
 import sys
 import threading
 import time
@@ -41,7 +49,10 @@ from collections import Counter, OrderedDict
 from typing import Any, Callable
 
 from .access import AccessError
-from .netcodec import NetError, decode_pose, decode_transmission, encode_pose, encode_transmission, to_local
+from .netcodec import (MAX_TRANSMISSION, NetError, ReplayWindow, decode_pose, decode_transmission, encode_pose,
+                       encode_transmission, to_local)
+from ..core.inbox import Inbox
+from ..gli.zenoh_auth import Identity, session_config
 from ..gli.zenoh_door import WatchedPublisher, ZenohDoor
 from ..sim.live_vehicle import LiveVehicle, RemoteVehicle
 
@@ -53,32 +64,28 @@ REMEMBERED_FRAMES = 4096  # frames a control frame of another host may still ref
 JOIN_WAIT_S = 2.0
 SWITCH_INTERVAL_S = 0.0002
 TIME_WINDOW_S = 60.0  # another host's transmission or pose further from now than this is dropped (counted)
-FIFO_DEPTH = 65536  # transmissions Zenoh keeps for the loop (beyond that it holds back its own reader)
+FIFO_DEPTH = 2048
+"""Transmissions Zenoh keeps for the loop (beyond that it holds back its own reader): at most
+FIFO_DEPTH × the size filter's 128 kB = 256 MB, reached only by a host with credentials sending
+nothing but messages hilgate never makes; a frame's transmission is 0.1-3 kB (≤ 6 MB)."""
+INBOX_DEPTH = 4096  # poses and liveliness changes waiting for the loop (each a few hundred bytes)
 
 
-def zenoh_config(spec: Any, connect: list[str] | tuple[str, ...] = (), listen: list[str] | tuple[str, ...] = ()) -> Any:
-    """The Zenoh configuration of a daemon (or a client): peer mode, multicast scouting off unless
-    asked, listening on loopback unless told where, the lease that bounds fault detection."""
-    import zenoh
-
-    config = zenoh.Config.from_file(spec.config) if spec.config else zenoh.Config()
-    if not spec.config:
-        config.insert_json5("mode", '"peer"')
-    config.insert_json5("scouting/multicast/enabled", json.dumps(bool(spec.multicast_scouting)))
-    config.insert_json5("listen/endpoints", json.dumps(list(listen or spec.listen)))
-    endpoints = list(dict.fromkeys([*spec.connect, *connect]))
-    if endpoints:
-        config.insert_json5("connect/endpoints", json.dumps(endpoints))
-    config.insert_json5("transport/link/tx/lease", str(int(spec.lease_s * 1000)))
-    config.insert_json5("transport/link/tx/keep_alive", "4")
-    return config
+def zenoh_config(spec: Any, identity: Identity | None, connect: list[str] | tuple[str, ...] = (),
+                 listen: list[str] | tuple[str, ...] = ()) -> Any:
+    """The Zenoh configuration of a daemon: :func:`hilgate.gli.zenoh_auth.session_config` with the
+    scene's endpoints, scouting and lease (the command line's endpoints added)."""
+    return session_config(listen=list(listen or spec.listen), connect=[*spec.connect, *connect],
+                          identity=identity, prefix=spec.prefix, multicast_scouting=spec.multicast_scouting,
+                          lease_s=spec.lease_s, config_file=spec.config,
+                          size_filter=[f"{spec.prefix}/tx/**", f"{spec.prefix}/pose/**"])
 
 
 class HostView:
     """What this daemon knows of another host."""
 
     __slots__ = ("name", "up", "zids", "links", "heard", "gaps", "late", "late_max", "delay_sum", "delay_max",
-                 "expected", "epoch_ns")
+                 "window", "pose_t")
 
     def __init__(self, name: str):
         self.name = name
@@ -91,8 +98,8 @@ class HostView:
         self.late_max = 0.0
         self.delay_sum = 0.0
         self.delay_max = 0.0
-        self.expected: int | None = None
-        self.epoch_ns: int | None = None
+        self.window = ReplayWindow()
+        self.pose_t: dict[str, float] = {}  # vehicle → the measurement time of its latest pose
 
     def status(self) -> dict[str, Any]:
         return {"host": self.name, "state": "up" if self.up else "down",
@@ -108,7 +115,8 @@ class Network:
 
     def __init__(self, scheduler: Any, router: Any, recorder: Any, host: str, spec: Any,
                  connect: list[str] | tuple[str, ...] = (), listen: list[str] | tuple[str, ...] = (),
-                 clock_offset_s: float = 0.0):
+                 clock_offset_s: float = 0.0, identity: Identity | None = None):
+        self.identity = identity
         self.scheduler = scheduler
         self.router = router
         self.recorder = recorder
@@ -141,7 +149,7 @@ class Network:
         """Join the network; refuse (AccessError) a host name or a link another daemon serves."""
         import zenoh
 
-        config = zenoh_config(self.spec, self.connect, self.listen)
+        config = zenoh_config(self.spec, self.identity, self.connect, self.listen)
         self.session = session = zenoh.open(config)
         self.zid = str(session.zid())
         deadline = time.monotonic() + JOIN_WAIT_S
@@ -153,6 +161,10 @@ class Network:
     def _alive(self, *parts: str) -> str:
         return "/".join((self.prefix, "alive", *parts))
 
+    def _key_host(self, key: str, kind: str) -> str:
+        """The host a key ``<prefix>/<kind>/<host>/…`` is under (the name Zenoh's access control vouches for)."""
+        return key[len(self.prefix) + len(kind) + 2:].partition("/")[0]
+
     def _mine(self, scene: Any) -> set[str]:
         """The links this daemon serves (a scene that names no host is all this daemon's)."""
         return {link.id for link in scene.links.values() if link.host in (None, self.host)}
@@ -161,10 +173,10 @@ class Network:
         """Declare this host and its links, then check nobody else claims them (both daemons of a
         race see each other and both refuse: never two daemons serving one link)."""
         liveliness = self.session.liveliness()
-        self._tokens["host"] = liveliness.declare_token(self._alive("hosts", self.host, self.zid))
+        self._tokens["host"] = liveliness.declare_token(self._alive(self.host, "host", self.zid))
         mine = self._mine(scene)
         for link_id in mine:
-            self._tokens[link_id] = liveliness.declare_token(self._alive("links", link_id, self.host, self.zid))
+            self._tokens[link_id] = liveliness.declare_token(self._alive(self.host, "link", link_id, self.zid))
         theirs = []  # every other daemon's token, in one query (each query waits for its replies)
         for reply in liveliness.get(self._alive("**"), timeout=1.0):
             if reply.ok is not None:
@@ -172,13 +184,14 @@ class Network:
                 parts = key[len(self.prefix) + 1:].split("/")
                 if parts[-1] != self.zid:
                     theirs.append((parts, key))
+        # (a token is under its holder's name: with credentials, only that host's daemons can hold it)
         for parts, key in theirs:
-            if parts[:3] == ["alive", "hosts", self.host]:
+            if parts[1:3] == [self.host, "host"]:
                 raise AccessError(f"host name {self.host!r} is already used by another daemon on the network "
                                   f"({key}); start this one with another --host")
         for parts, key in theirs:
-            if len(parts) == 5 and parts[1] == "links" and parts[2] in mine:
-                raise AccessError(f"link {parts[2]} is already served by another daemon on the network ({key})")
+            if len(parts) == 5 and parts[2] == "link" and parts[3] in mine:
+                raise AccessError(f"link {parts[3]} is already served by another daemon on the network ({key})")
 
     def start(self, scene: Any) -> None:
         """Listen to the others and start telling them about this host (on the loop, clock running)."""
@@ -190,16 +203,24 @@ class Network:
         session, post = self.session, self.scheduler.post
         self.apply(scene)
         liveliness = session.liveliness()
+        put = zenoh.SampleKind.PUT
+        alive = Inbox(post, self._on_alives, INBOX_DEPTH)
         self._entities.append(liveliness.declare_subscriber(
-            f"{self.prefix}/alive/**", lambda s: post(self._on_alive, str(s.key_expr), "PUT" if s.kind == zenoh.SampleKind.PUT else "DELETE"), history=True))
-        transmissions = session.declare_subscriber(f"{self.prefix}/tx/*", zenoh.handlers.FifoChannel(FIFO_DEPTH))
+            f"{self.prefix}/alive/**", lambda s: alive.put((str(s.key_expr), "PUT" if s.kind == put else "DELETE")),
+            history=True))
+        transmissions = session.declare_subscriber(f"{self.prefix}/tx/**", zenoh.handlers.FifoChannel(FIFO_DEPTH))
         self._entities.append(transmissions)
         threading.Thread(target=self._drain, args=(transmissions.handler,), name="network-tx",
                          daemon=True).start()
-        self._entities.append(session.declare_subscriber(
-            f"{self.prefix}/pose/*", lambda s: post(self._on_pose, s.payload.to_bytes())))
-        self._entities.append(session.declare_queryable(
-            f"{self.prefix}/status/{self.host}", lambda q: q.reply(q.key_expr, self._status_cache)))
+        poses = Inbox(post, self._on_poses, INBOX_DEPTH)
+
+        def on_pose(sample: Any) -> None:
+            size = len(sample.payload)
+            poses.put((str(sample.key_expr), sample.payload.to_bytes() if size <= MAX_TRANSMISSION else size))
+
+        self._entities.append(session.declare_subscriber(f"{self.prefix}/pose/**", on_pose))
+        status_key = f"{self.prefix}/status/{self.host}"  # (the answer under this host's own key: the ACL's)
+        self._entities.append(session.declare_queryable(status_key, lambda q: q.reply(status_key, self._status_cache)))
         world = self.router.world
         world.medium.tap = self._on_air
         self._poses_every(1.0 / self.spec.pose_rate_hz)
@@ -217,7 +238,7 @@ class Network:
         for link_id in [key for key in self._tokens if key != "host" and key not in mine]:
             self._tokens.pop(link_id).undeclare()
         for link_id in mine - set(self._tokens):
-            self._tokens[link_id] = liveliness.declare_token(self._alive("links", link_id, self.host, self.zid))
+            self._tokens[link_id] = liveliness.declare_token(self._alive(self.host, "link", link_id, self.zid))
         world = self.router.world
         for name, pose in world.poses.items():
             if isinstance(pose, LiveVehicle) and not isinstance(pose, RemoteVehicle) and world.local(scene.vehicles[name]):
@@ -225,11 +246,18 @@ class Network:
 
     # -- liveliness ------------------------------------------------------------------------------
 
+    def _on_alives(self, changes: list[tuple[str, str]], dropped: int) -> None:
+        if dropped:
+            self.counters["inbox_full"] += dropped
+        for key, kind in changes:
+            self._on_alive(key, kind)
+        self._refresh_status()
+
     def _on_alive(self, key: str, kind: str) -> None:
         parts = key[len(self.prefix) + 1:].split("/")
-        if len(parts) == 4 and parts[:2] == ["alive", "hosts"]:
-            _, _, host, zid = parts
-            view = self.hosts.get(host)  # (only the hosts the scene names: a token is cheap to forge)
+        if len(parts) == 4 and parts[2] == "host":
+            _, host, _, zid = parts
+            view = self.hosts.get(host)  # (only the hosts the scene names)
             if view is None:
                 return
             (view.zids.add if kind == "PUT" else view.zids.discard)(zid)
@@ -237,18 +265,17 @@ class Network:
             if up != view.up:
                 view.up = up
                 if not up:
-                    view.expected = None  # a host that comes back starts its counter again
+                    view.window.resync = True  # its numbers went on for the hosts that still heard it
                 log.log(logging.INFO if up else logging.WARNING, "host %s is %s", host, "up" if up else "down")
                 self.recorder.event({"t": round(self.scheduler.now(), 9), "ev": "host", "host": host,
                                      "state": "up" if up else "down"})
-        elif len(parts) == 5 and parts[:2] == ["alive", "links"]:
-            _, _, link, host, zid = parts
+        elif len(parts) == 5 and parts[2] == "link":
+            _, host, _, link, zid = parts
             view = self.hosts.get(host)
             if view is None or self.remote_links.get(link) != host:
-                return
+                return  # (a host's token of a link the scene does not give it says nothing)
             zids = view.links.setdefault(link, set())
             (zids.add if kind == "PUT" else zids.discard)(zid)
-        self._refresh_status()
 
     def link_state(self, link_id: str) -> str:
         """``up``/``down`` of a link another host serves (its token is alive or not)."""
@@ -277,56 +304,72 @@ class Network:
             # Batched, not express: a put costs a sixth, and a lone message is sent at once anyway.
             # (only to other sessions: this host's own subscriber would decode each of its frames again)
             publisher = self._publishers[sender.tx_channel] = WatchedPublisher(self.session.declare_publisher(
-                f"{self.prefix}/tx/{sender.tx_channel}", congestion_control=zenoh.CongestionControl.DROP,
+                f"{self.prefix}/tx/{self.host}/{sender.tx_channel}", congestion_control=zenoh.CongestionControl.DROP,
                 allowed_destination=zenoh.Locality.REMOTE))
         self._remember(self.sent, (frame.src_link, frame.id), frame)
         if not publisher.matching:
             return
         self.number += 1
         publisher.put(encode_transmission(self.host, self.epoch_ns, self.number, frame, t, duration,
-                                          sender.pose.position(t)))
+                                          sender.pose.position(t), self.zid))
         self.counters["published"] += 1
 
     def _drain(self, handler: Any) -> None:
         """The others' transmissions, from Zenoh's queue to the loop in batches: one wake-up (and one
         hand-over of the GIL) for all that came meanwhile, not one per message, and in their order."""
         post = self.scheduler.post
+
+        def item(sample: Any) -> tuple[str, bytes | int]:
+            # (the size first: one too long is counted, never copied; Zenoh's filter refused longer ones)
+            size = len(sample.payload)
+            return str(sample.key_expr), sample.payload.to_bytes() if size <= MAX_TRANSMISSION else size
+
         while True:
             try:
                 sample = handler.recv()  # (waits with the GIL released)
             except Exception:  # the subscriber was undeclared: the daemon is stopping
                 return
-            batch = [sample.payload.to_bytes()]
+            batch = [item(sample)]
             while len(batch) < 256:
                 sample = handler.try_recv()
                 if sample is None:
                     break
-                batch.append(sample.payload.to_bytes())
+                batch.append(item(sample))
             post(self._on_transmissions, batch)
 
-    def _on_transmissions(self, batch: list[bytes]) -> None:
-        for data in batch:
-            self._on_transmission(data)
+    def _on_transmissions(self, batch: list[tuple[str, bytes | int]]) -> None:
+        for key, data in batch:
+            self._on_transmission(key, data)
 
-    def _on_transmission(self, data: bytes) -> None:
+    def _on_transmission(self, key: str, data: bytes | int) -> None:
+        if isinstance(data, int):
+            self.counters["bad_message"] += 1
+            log.debug("a transmission of %d bytes on %s: refused unread", data, key)
+            return
         try:
             message = decode_transmission(data)
         except NetError as exc:
-            self.counters["bad_message"] += 1
+            self.counters[exc.cause] += 1
             log.debug("unreadable transmission: %s", exc)
+            return
+        if message.host != self._key_host(key, "tx"):
+            self.counters["forged"] += 1  # a host speaking for another (possible only without credentials)
             return
         view = self.hosts.get(message.host)
         if view is None:  # this host, or one the scene does not name: nothing of it is judged here
             if message.host != self.host:
                 self.counters["foreign_sender"] += 1
             return
-        if view.epoch_ns != message.epoch_ns:
-            view.epoch_ns, view.expected = message.epoch_ns, None  # the host restarted
-        if view.expected is not None and message.number > view.expected:
-            view.gaps += message.number - view.expected
+        verdict = view.window.admit(message.session, message.epoch_ns, message.number)
+        if isinstance(verdict, str):
+            self.counters[verdict] += 1
             self.recorder.event({"t": round(self.scheduler.now(), 9), "ev": "drop", "link": "*",
-                                 "src": message.host, "cause": "net_gap", "n": message.number - view.expected})
-        view.expected = message.number + 1
+                                 "src": message.host, "cause": verdict})
+            return
+        if verdict:
+            view.gaps += verdict
+            self.recorder.event({"t": round(self.scheduler.now(), 9), "ev": "drop", "link": "*",
+                                 "src": message.host, "cause": "net_gap", "n": verdict})
         frame = message.frame
         world = self.router.world
         modem = world.modems.get(frame.src_link)
@@ -379,7 +422,7 @@ class Network:
             import zenoh
 
             publisher = self._pose_publishers[vehicle] = self.session.declare_publisher(
-                f"{self.prefix}/pose/{vehicle}", allowed_destination=zenoh.Locality.REMOTE)
+                f"{self.prefix}/pose/{self.host}/{vehicle}", allowed_destination=zenoh.Locality.REMOTE)
         return publisher
 
     def _live_update(self, name: str, pose: LiveVehicle) -> Callable[[], None]:
@@ -416,7 +459,16 @@ class Network:
 
         self.scheduler.after_wall(interval, publish)
 
-    def _on_pose(self, data: bytes) -> None:
+    def _on_poses(self, poses: list[tuple[str, bytes | int]], dropped: int) -> None:
+        if dropped:
+            self.counters["inbox_full"] += dropped
+        for key, data in poses:
+            self._on_pose(key, data)
+
+    def _on_pose(self, key: str, data: bytes | int) -> None:
+        if isinstance(data, int):
+            self.counters["bad_message"] += 1
+            return
         try:
             message = decode_pose(data)
         except NetError:
@@ -424,14 +476,22 @@ class Network:
             return
         if message["host"] == self.host:
             return
+        if message["host"] != self._key_host(key, "pose"):
+            self.counters["forged"] += 1
+            return
         pose = self.router.world.poses.get(message["vehicle"])
         vehicle = self.scene.vehicles.get(message["vehicle"])
-        if vehicle is None or vehicle.host != message["host"] or message["position"] is None:
+        view = self.hosts.get(message["host"])
+        if vehicle is None or view is None or vehicle.host != message["host"] or message["position"] is None:
             return
         t = to_local(message["t"], message["epoch_ns"], self.epoch_ns)
         if abs(self.scheduler.now() - t) > TIME_WINDOW_S:
             self.counters["out_of_time"] += 1
             return
+        if t < view.pose_t.get(message["vehicle"], -math.inf):
+            self.counters["replay"] += 1  # older than one already applied: a replay, or overtaken
+            return
+        view.pose_t[message["vehicle"]] = t
         if isinstance(pose, RemoteVehicle):
             pose.update_from(t, message["position"], message["velocity"])
             self.router.world.medium.topology_changed()

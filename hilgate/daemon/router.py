@@ -242,9 +242,12 @@ class RoutedLink:
         backend.send(frame)
         self.state_changed()
 
-    def lost(self, cause: str, size: int, src: str = "medium", ev: str = "drop", **fields: Any) -> None:
-        """A frame the GLI lost (or that nobody will take): counted by cause and traced."""
-        self.gli_drops[cause] += 1
+    def lost(self, cause: str, size: int, src: str = "medium", ev: str = "drop", n: int = 1, **fields: Any) -> None:
+        """A frame the GLI lost (or that nobody will take): counted by cause and traced; ``n`` frames
+        lost alike at once (a flood's excess) are one trace line with ``n``."""
+        self.gli_drops[cause] += n
+        if n != 1:
+            fields["n"] = n
         self.router.recorder.event({"t": round(self.router.scheduler.now(), 9), "ev": ev, "link": self.id,
                                     "src": src, **fields, "size": size, "cause": cause})
 

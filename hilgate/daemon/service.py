@@ -26,6 +26,7 @@ from ..core.realtime import RealtimeScheduler
 from ..sim.recorder import Recorder
 from .router import Router
 from .network import Network
+from ..gli.zenoh_auth import CredentialError, Identity, load_identity
 from ..scene import Scene, SceneError, load_scene
 from ..scene.hosts import HOST_NAME, ZenohSpec
 from ..scene.links import require_narrow_addresses
@@ -60,9 +61,12 @@ class Daemon:
                  max_link_clients: int = 32, plugins: list[str] | tuple[str, ...] = (),
                  preset_dirs: list[str] | tuple[str, ...] = (), host: str | None = None,
                  zenoh_connect: list[str] | tuple[str, ...] = (), zenoh_listen: list[str] | tuple[str, ...] = (),
-                 clock_offset_s: float = 0.0, tcp_token: str | None = None):
+                 clock_offset_s: float = 0.0, tcp_token: str | None = None,
+                 zenoh_credentials: str | None = None, zenoh_insecure: bool = False):
         self.tcp_token = tcp_token
         self.host = host
+        self.zenoh_credentials = zenoh_credentials
+        self.zenoh_insecure = zenoh_insecure
         self.zenoh_connect = list(zenoh_connect)
         self.zenoh_listen = list(zenoh_listen)
         self.clock_offset_s = clock_offset_s
@@ -134,8 +138,9 @@ class Daemon:
         self.live = LiveSources(scheduler)
         try:
             if host is not None:
-                self.network = Network(scheduler, self.router, self.recorder, host, scene.zenoh or ZenohSpec(),
-                                       self.zenoh_connect, self.zenoh_listen, self.clock_offset_s)
+                spec = scene.zenoh or ZenohSpec()
+                self.network = Network(scheduler, self.router, self.recorder, host, spec, self.zenoh_connect,
+                                       self.zenoh_listen, self.clock_offset_s, self._identity(spec, host))
                 self.router.doors.append(self.network.open())
                 self.network.claim(scene)  # before anything opens: a refused daemon touches nothing
                 self.router.network = self.network
@@ -198,6 +203,28 @@ class Daemon:
             raise SceneError(self.scene_path, 0, "", f"this daemon is host {host!r} but the scene's hosts are "
                                                       f"{', '.join(scene.hosts)}: give --host")
         return host
+
+    def _identity(self, spec: ZenohSpec, host: str) -> Identity | None:
+        """This host's credentials, or None when the network is insecure, asked for in so many words."""
+        path = self.zenoh_credentials or spec.credentials
+        if path is None:
+            if not (spec.insecure or self.zenoh_insecure):
+                raise SceneError(self.scene_path, 0, "", "a scene of several hosts says where the lab's credentials "
+                                 "are (zenoh: {credentials: DIR}, from: hilgate network init DIR --hosts ...) or "
+                                 "that the network is open to anyone who reaches it (zenoh: {insecure: true})")
+            log.warning("INSECURE network: Zenoh without credentials (zenoh.insecure): anyone who reaches %s "
+                        "can send frames, forge hosts and read everything",
+                        ", ".join(self.zenoh_listen or spec.listen))
+            return None
+        try:
+            identity = load_identity(path, host, "host")
+        except CredentialError as exc:
+            raise SceneError(self.scene_path, 0, "", str(exc)) from None
+        missing = [name for name in (self.scene.hosts if self.scene else ()) if name not in identity.hosts]
+        if missing:
+            log.warning("the credentials in %s do not list host(s) %s of the scene: their daemons will not be "
+                        "heard (run hilgate network init again with every host)", identity.directory, ", ".join(missing))
+        return identity
 
     def _network_status(self, request: dict, reply: Callable[[dict], Any]) -> None:
         if self.network is None:

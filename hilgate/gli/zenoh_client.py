@@ -8,7 +8,11 @@
         print(link.recv(timeout=5.0))
 
 ``zenoh`` is an endpoint, a list of them, or a dict ``{"connect": [...], "prefix": "hilgate",
-"config": "zenoh.json5"}``.  Zenoh delivers on its own threads; received frames wait in a queue.
+"credentials": "DIR", "config": "zenoh.json5"}``.  ``credentials`` is an application's directory from
+``hilgate network init`` (``DIR/apps/app-1``): the session is then TLS with that certificate, and lets
+in only what the lab's hosts say about their links (:mod:`hilgate.gli.zenoh_auth`); without it, plain
+TCP (a network of daemons started ``insecure``).  Zenoh delivers on its own threads; received frames
+wait in a queue.
 """
 
 from __future__ import annotations
@@ -22,12 +26,13 @@ import uuid
 from typing import Any
 
 from ..core.packets import BROADCAST
+from .zenoh_auth import Identity, load_identity, session_config
 from .zenoh_door import link_key
 
 _RECV = struct.Struct(">BBd")
 
 
-def _session(zenoh_option: Any) -> tuple[Any, str]:
+def _session(zenoh_option: Any) -> tuple[Any, str, Identity | None]:
     import zenoh
 
     if isinstance(zenoh_option, str):
@@ -36,59 +41,77 @@ def _session(zenoh_option: Any) -> tuple[Any, str]:
         zenoh_option = {"connect": list(zenoh_option)}
     options = dict(zenoh_option or {})
     prefix = str(options.get("prefix", "hilgate"))
-    config = zenoh.Config.from_file(options["config"]) if options.get("config") else zenoh.Config()
-    if not options.get("config"):
-        config.insert_json5("mode", '"peer"')
-    config.insert_json5("scouting/multicast/enabled", json.dumps(bool(options.get("multicast_scouting", False))))
-    config.insert_json5("listen/endpoints", json.dumps(list(options.get("listen", ["tcp/127.0.0.1:0"]))))
-    if options.get("connect"):
-        config.insert_json5("connect/endpoints", json.dumps(list(options["connect"])))
-    session = zenoh.open(config)
+    identity = load_identity(str(options["credentials"]), role="app") if options.get("credentials") else None
+    # (an application listens nowhere unless told: it connects to daemons, and learns of the others from them)
+    config = session_config(listen=list(options.get("listen", [])), connect=list(options.get("connect", [])),
+                            identity=identity, prefix=prefix,
+                            multicast_scouting=bool(options.get("multicast_scouting", False)),
+                            config_file=options.get("config"))
+    try:
+        session = zenoh.open(config)
+    except zenoh.ZError as exc:
+        from .client import GliError
+
+        raise GliError(f"cannot open a Zenoh session: {str(exc).splitlines()[0] if str(exc) else exc}") from None
     deadline = time.monotonic() + 2.0
     while options.get("connect") and time.monotonic() < deadline and not list(session.info.peers_zid()):
         time.sleep(0.02)
-    return session, prefix
+    return session, prefix, identity
 
 
 class ZenohLink:
     """One link of the network, reached over Zenoh (see :class:`hilgate.gli.client.Link`)."""
 
-    def __init__(self, session: Any, prefix: str, link_id: str, info: dict[str, Any]):
+    def __init__(self, session: Any, prefix: str, link_id: str, info: dict[str, Any], host: str,
+                 client: str | None = None):
         from .client import GliError, Message
 
         self._GliError, self._Message = GliError, Message
         self.session = session
         self.prefix = prefix
         self.id = link_id
+        self.host = host
         self.info = info
-        self.client = uuid.uuid4().hex[:16]
+        self.client = client or uuid.uuid4().hex[:16]
         self.ready = bool(info.get("ready"))
         self.inbox: queue.Queue = queue.Queue()
         self.errors: queue.Queue = queue.Queue()
         self._lock = threading.Lock()
-        self.publisher = session.declare_publisher(link_key(prefix, link_id, "send"))
+        self.publisher = session.declare_publisher(self._key(f"send/{self.client}"))
         self.subscribers = [
-            session.declare_subscriber(link_key(prefix, link_id, "recv"), self._on_recv),
-            session.declare_subscriber(link_key(prefix, link_id, "state"), self._on_state),
-            session.declare_subscriber(link_key(prefix, link_id, f"error/{self.client}"), self._on_error),
+            session.declare_subscriber(self._key("recv"), self._on_recv),
+            session.declare_subscriber(self._key("state"), self._on_state),
+            session.declare_subscriber(self._key(f"error/{self.client}"), self._on_error),
         ]
+
+    def _key(self, leaf: str) -> str:
+        return link_key(self.prefix, self.host, self.id, leaf)
 
     @classmethod
     def open(cls, link_id: str, zenoh_option: Any, timeout: float = 5.0) -> "ZenohLink":
         from .client import GliError
 
-        session, prefix = _session(zenoh_option)
+        session, prefix, identity = _session(zenoh_option)
         try:
-            info = None
+            answers: dict[str, dict[str, Any]] = {}
             deadline = time.monotonic() + timeout
-            while info is None and time.monotonic() < deadline:
-                for reply in session.get(link_key(prefix, link_id, "info"), timeout=min(1.0, timeout)):
-                    if reply.ok is not None:
+            while not answers and time.monotonic() < deadline:
+                for reply in session.get(link_key(prefix, "*", link_id, "info"), timeout=min(1.0, timeout)):
+                    if reply.ok is None:
+                        continue
+                    host = str(reply.ok.key_expr)[len(prefix) + 6:].partition("/")[0]
+                    try:
                         info = json.loads(reply.ok.payload.to_bytes())
-                        break
-            if info is None:
+                    except ValueError:
+                        continue
+                    if isinstance(info, dict) and info.get("link") == link_id:
+                        answers[host] = info
+            if not answers:
                 raise GliError(f"no daemon on the network serves link {link_id!r}")
-            link = cls(session, prefix, link_id, info)
+            if len(answers) > 1:  # (with credentials each answers under its own name: both are hosts of the lab)
+                raise GliError(f"link {link_id!r} is served by several hosts ({', '.join(sorted(answers))})")
+            host, info = next(iter(answers.items()))
+            link = cls(session, prefix, link_id, info, host, identity.name if identity else None)
             time.sleep(0.05)  # let the daemon learn of our subscriptions before the first frame for us
             return link
         except BaseException:
@@ -143,7 +166,7 @@ class ZenohLink:
             return None
 
     def command(self, request: dict[str, Any], timeout: float = 5.0) -> Any:
-        for reply in self.session.get(link_key(self.prefix, self.id, "command"), payload=json.dumps(request).encode(),
+        for reply in self.session.get(self._key(f"command/{self.client}"), payload=json.dumps(request).encode(),
                                       timeout=timeout):
             if reply.ok is not None:
                 answer = json.loads(reply.ok.payload.to_bytes())

@@ -1,32 +1,45 @@
 """The GLI over Zenoh: an application anywhere on the network reaches a link by id.
 
-The serving daemon declares, for each of its links, under ``<prefix>/link/<id>/``:
+The serving daemon (host ``<host>``) declares, for each of its links, under ``<prefix>/link/<host>/<id>/``:
 
-=================  ==============  ===================================================================
-key                who puts        payload
-=================  ==============  ===================================================================
-``send``           application     ``u8 dst`` (255 broadcast) then the payload; optional attachment:
-                                   the application's client id (UTF-8), for its errors
-``recv``           daemon          ``u8 src | u8 dst | f64 model time (big-endian)`` then the payload
-``state``          daemon          ``u8``: 1 READY, 0 BUSY (when it changes)
-``error/<client>`` daemon          UTF-8 JSON ``{"error": "..."}`` for a frame that client sent
-``info``           queryable       UTF-8 JSON ``{"link", "address", "packet", "max_payload", "version",
-                                   "ready", "host"}`` (the socket GLI's WELCOME, plus READY and host)
-``command``        queryable       query payload: a JSON request as the socket GLI's COMMAND; reply:
-                                   its answer
-=================  ==============  ===================================================================
+==================  ==============  ==================================================================
+key                 who puts        payload
+==================  ==============  ==================================================================
+``send/<client>``   application     ``u8 dst`` (255 broadcast) then the payload
+``recv``            daemon          ``u8 src | u8 dst | f64 model time (big-endian)`` then the payload
+``state``           daemon          ``u8``: 1 READY, 0 BUSY (when it changes)
+``error/<client>``  daemon          UTF-8 JSON ``{"error": "..."}`` for a frame that client sent
+``info``            queryable       UTF-8 JSON ``{"link", "address", "packet", "max_payload", "version",
+                                    "ready", "host"}`` (the socket GLI's WELCOME, plus READY and host)
+``command/<client>`` queryable      query payload: a JSON request as the socket GLI's COMMAND; reply:
+                                    its answer
+==================  ==============  ==================================================================
 
 These are the bodies of the socket GLI's SEND, RECV and STATE messages (:mod:`hilgate.gli.wire`),
 so an application in C, C++ or Rust needs a Zenoh session and ``struct`` packing, nothing of hilgate.
-Zenoh calls back on its own threads; everything that touches the link is posted to the loop.
+``<client>`` is the application's name: with the lab's credentials, the name its certificate proves
+(Zenoh's access control lets it put only under that name, :mod:`hilgate.gli.zenoh_auth`); without,
+whatever it says.  An application finds the host of a link by asking ``<prefix>/link/*/<id>/info``.
+
+**Bounded per client.** Zenoh calls back on its own threads; nothing there waits for the loop.  Each
+client has its own queue of SENDs at the door (:data:`CLIENT_QUEUE`) filled at most at
+:data:`CLIENT_RATE_HZ` on average (a token bucket of :data:`CLIENT_BURST`); the loop takes them in turn,
+one per client per round, whenever the link is READY, so one client's flood fills only its own queue:
+its excess is dropped and counted (``rate``, ``client_queue``) while the others' frames go through.
+A command query is answered from the loop, at most :data:`QUERY_PENDING` of a client at a time and
+:data:`QUERY_RATE_HZ` on average; one beyond is dropped unanswered (counted ``query_refused``).  What
+the door holds in all is bounded: :data:`MAX_CLIENTS` per link, :data:`DOOR_BYTES` of SENDs.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import re
 import struct
 import threading
+import time
+from collections import deque
 from typing import Any
 
 from ..core import safejson
@@ -37,14 +50,24 @@ from . import wire
 
 log = logging.getLogger(__name__)
 
-__all__ = ["WatchedPublisher", "ZenohDoor", "ZenohEndpoint", "link_key"]
+__all__ = ["WatchedPublisher", "ZenohDoor", "ZenohEndpoint", "link_key", "CLIENT_NAME"]
 
 _RECV = struct.Struct(">BBd")
-COMMAND_WAIT_S = 2.0
+CLIENT_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}")
+CLIENT_QUEUE = 64          # SENDs of one client waiting at the door for the link to be READY
+CLIENT_RATE_HZ = 1000.0    # SENDs per second a client may make on average …
+CLIENT_BURST = 200         # … and at once
+MAX_SEND = 1 + 65536       # a SEND longer than this is refused unread (no packet class carries more)
+MAX_CLIENTS = 32           # clients a link's door keeps queues for; SENDs of more are refused
+DOOR_BYTES = 16 << 20      # bytes of SENDs all links' doors hold in all
+QUERY_PENDING = 4          # command queries of one client waiting for the loop
+QUERY_RATE_HZ = 50.0       # command and info queries per second a client (info: a link) may make …
+QUERY_BURST = 20           # … and at once
+MAX_REQUEST = 65536        # bytes of a command's JSON
 
 
-def link_key(prefix: str, link_id: str, leaf: str) -> str:
-    return f"{prefix}/link/{link_id}/{leaf}"
+def link_key(prefix: str, host: str, link_id: str, leaf: str) -> str:
+    return f"{prefix}/link/{host}/{link_id}/{leaf}"
 
 
 class WatchedPublisher:
@@ -74,6 +97,42 @@ class WatchedPublisher:
                 pass
 
 
+class Bucket:
+    """A token bucket: ``take`` is True while the average rate stays under ``rate`` (``burst`` at once)."""
+
+    __slots__ = ("rate", "burst", "tokens", "stamp")
+
+    def __init__(self, rate: float, burst: int):
+        self.rate, self.burst, self.tokens, self.stamp = rate, float(burst), float(burst), time.monotonic()
+
+    def full(self) -> bool:
+        """As if unused: nothing is lost by forgetting it."""
+        return self.tokens + (time.monotonic() - self.stamp) * self.rate >= self.burst
+
+    def take(self) -> bool:
+        now = time.monotonic()
+        self.tokens = min(self.burst, self.tokens + (now - self.stamp) * self.rate)
+        self.stamp = now
+        if self.tokens < 1.0:
+            return False
+        self.tokens -= 1.0
+        return True
+
+
+class Client:
+    """What the door holds for one client of a link."""
+
+    __slots__ = ("name", "queue", "sends", "queries", "pending", "drops")
+
+    def __init__(self, name: str):
+        self.name = name
+        self.queue: deque[bytes] = deque()
+        self.sends = Bucket(CLIENT_RATE_HZ, CLIENT_BURST)
+        self.queries = Bucket(QUERY_RATE_HZ, QUERY_BURST)
+        self.pending = 0
+        self.drops: dict[str, int] = {}
+
+
 class ZenohEndpoint:
     kind = "zenoh"
     busy = False
@@ -83,13 +142,19 @@ class ZenohEndpoint:
         self.port = port
         self.info: dict[str, Any] = {}
         self.ready: bool | None = None
-        session, prefix = door.session, door.prefix
-        self.recv_pub = WatchedPublisher(session.declare_publisher(link_key(prefix, port.id, "recv")))
-        self.state_pub = session.declare_publisher(link_key(prefix, port.id, "state"))
+        self.clients: dict[str, Client] = {}
+        self.refused: dict[str, int] = {}  # SENDs and queries of no client the door could keep
+        self.lock = door.lock  # (one for the door: its byte count is shared)
+        self.posted = False
+        self.info_bucket = Bucket(QUERY_RATE_HZ * 4, QUERY_BURST * 4)
+        session = door.session
+        self.base = base = link_key(door.prefix, door.host, port.id, "")
+        self.recv_pub = WatchedPublisher(session.declare_publisher(base + "recv"))
+        self.state_pub = session.declare_publisher(base + "state")
         self.refresh()
-        self.subscriber = session.declare_subscriber(link_key(prefix, port.id, "send"), self._on_send)
-        self.info_queryable = session.declare_queryable(link_key(prefix, port.id, "info"), self._on_info)
-        self.command_queryable = session.declare_queryable(link_key(prefix, port.id, "command"), self._on_command)
+        self.subscriber = session.declare_subscriber(base + "send/*", self._on_send)
+        self.info_queryable = session.declare_queryable(base + "info", self._on_info)
+        self.command_queryable = session.declare_queryable(base + "command/*", self._on_command)
         port.attach(self)
 
     def refresh(self) -> None:
@@ -110,13 +175,80 @@ class ZenohEndpoint:
         if ready != self.ready:
             self.ready = ready
             self.state_pub.put(b"\x01" if ready else b"\x00")
+        if ready:
+            self._pump()
 
-    # -- applications → link (Zenoh's threads, posted to the loop) ------------------------------------
+    # -- applications → link (on Zenoh's threads: counted and queued, never waiting) ------------------
+
+    def _client(self, key: str, leaf: str) -> Client | None:
+        """The client a key names (under the lock); None, counted, when it cannot be kept."""
+        name = key[len(self.base) + len(leaf) + 1:]
+        client = self.clients.get(name)
+        if client is None:
+            if not CLIENT_NAME.fullmatch(name):
+                cause = "bad_client"
+            elif len(self.clients) >= MAX_CLIENTS:
+                cause = "clients"
+            else:
+                client = self.clients[name] = Client(name)
+                return client
+            self.refused[cause] = self.refused.get(cause, 0) + 1
+        return client
 
     def _on_send(self, sample: Any) -> None:
-        data = sample.payload.to_bytes()
-        client = sample.attachment.to_bytes().decode("utf-8", "replace")[:64] if sample.attachment else ""
-        self.door.post(self._send, data, client)
+        size = len(sample.payload)
+        door = self.door
+        with self.lock:
+            client = self._client(str(sample.key_expr), "send")
+            if client is not None:
+                cause = None
+                if size > MAX_SEND:
+                    cause = "bad_frame"
+                elif not client.sends.take():
+                    cause = "rate"
+                elif len(client.queue) >= CLIENT_QUEUE or door.queued + size > DOOR_BYTES:
+                    cause = "client_queue"
+                if cause is None:
+                    client.queue.append(sample.payload.to_bytes())
+                    door.queued += size
+                else:
+                    client.drops[cause] = client.drops.get(cause, 0) + 1
+            wake, self.posted = not self.posted, True
+        if wake:
+            door.post(self._pump)
+
+    def _pump(self) -> None:
+        """On the loop: report what was dropped, then the clients' SENDs in turn while the link is READY."""
+        door, port = self.door, self.port
+        with self.lock:
+            self.posted = False
+            drops = [(client.name, client.drops) for client in self.clients.values() if client.drops]
+            for client in self.clients.values():
+                client.drops = {}
+            refused, self.refused = self.refused, {}
+        for name, counts in drops:
+            for cause, n in counts.items():
+                port.lost(cause, 0, src=f"zenoh:{name}", n=n)
+        for cause, n in refused.items():
+            port.lost(cause, 0, src="zenoh", n=n)
+        while port.ready:
+            sent = False
+            for client in list(self.clients.values()):
+                with self.lock:
+                    if not client.queue:
+                        continue
+                    data = client.queue.popleft()
+                    door.queued -= len(data)
+                self._send(data, client.name)
+                sent = True
+                if not port.ready:
+                    break
+            if not sent:
+                break
+        with self.lock:  # clients with nothing queued, sending and asking nothing, are forgotten
+            for name in [n for n, c in self.clients.items() if not c.queue and not c.pending
+                         and c.sends.full() and c.queries.full()]:
+                del self.clients[name]
 
     def _send(self, data: bytes, client: str) -> None:
         if not data:
@@ -130,34 +262,52 @@ class ZenohEndpoint:
             self._error(client, str(exc))
 
     def _error(self, client: str, message: str) -> None:
-        if client and all(c.isalnum() or c in "_-." for c in client):
-            self.door.session.put(link_key(self.door.prefix, self.port.id, f"error/{client}"),
-                                  json.dumps({"error": message}).encode())
+        self.door.session.put(self.base + f"error/{client}", json.dumps({"error": message}).encode())
 
     def _on_info(self, query: Any) -> None:
-        info = dict(self.info, ready=bool(self.ready))
-        query.reply(query.key_expr, json.dumps(info).encode())
+        with self.lock:
+            allowed = self.info_bucket.take()
+        if allowed:
+            query.reply(self.base + "info", json.dumps(dict(self.info, ready=bool(self.ready))).encode())
+        else:
+            with self.lock:
+                self.refused["query_refused"] = self.refused.get("query_refused", 0) + 1
 
     def _on_command(self, query: Any) -> None:
+        key = str(query.key_expr)
+        size = len(query.payload) if query.payload is not None else 0
+        with self.lock:
+            client = self._client(key, "command")
+            if client is not None and (client.pending >= QUERY_PENDING or size > MAX_REQUEST
+                                       or not client.queries.take()):
+                client.drops["query_refused"] = client.drops.get("query_refused", 0) + 1
+                client = None
+            if client is not None:
+                client.pending += 1
+            wake, self.posted = not self.posted, True
+        if wake:
+            self.door.post(self._pump)
+        if client is None:
+            query.drop()  # unanswered: the client's get ends at its timeout
+            return
+        self.door.post(self._command, query, client, key)
+
+    def _command(self, query: Any, client: Client, key: str) -> None:
+        """On the loop: answer a command query (the reply goes out from here; Zenoh never waits)."""
         try:
-            request = safejson.loads(query.payload.to_bytes()) if query.payload is not None else None
-        except ValueError as exc:  # (bounded: a deep or huge request is refused before parsing)
-            query.reply(query.key_expr, json.dumps({"class": "ERROR", "error": f"a request is JSON: {exc}"}).encode())
-            return
-        done = threading.Event()
-        answer: list[Any] = []
-
-        def ask() -> None:
             try:
-                answer.append(self.port.command(request))
-            finally:
-                done.set()
-
-        self.door.post(ask)
-        if not done.wait(COMMAND_WAIT_S) or not answer:
-            query.reply(query.key_expr, json.dumps({"class": "ERROR", "error": "the daemon did not answer"}).encode())
-            return
-        query.reply(query.key_expr, json.dumps(answer[0]).encode())
+                request = safejson.loads(query.payload.to_bytes(), max_bytes=MAX_REQUEST) if query.payload is not None else None
+            except ValueError as exc:  # (bounded: a deep or huge request is refused before parsing)
+                answer: Any = {"class": "ERROR", "error": f"a request is JSON: {exc}"}
+            else:
+                answer = self.port.command(request)
+            query.reply(key, json.dumps(answer, default=str).encode())
+        except Exception as exc:  # the client went away, the session is closing
+            log.debug("command reply on %s: %s", key, exc)
+        finally:
+            query.drop()
+            with self.lock:
+                client.pending -= 1
 
     def close(self) -> None:
         self.port.detach(self)
@@ -166,6 +316,10 @@ class ZenohEndpoint:
                 entity.undeclare()
             except Exception:  # the session is closing already
                 pass
+        with self.lock:
+            for client in self.clients.values():
+                self.door.queued -= sum(len(data) for data in client.queue)
+                client.queue.clear()
 
 
 class ZenohDoor:
@@ -176,6 +330,8 @@ class ZenohDoor:
         self.prefix = prefix
         self.host = host
         self.post = post
+        self.queued = 0  # bytes of SENDs the endpoints hold
+        self.lock = threading.Lock()
 
     def open(self, port: LinkPort) -> ZenohEndpoint:
         return ZenohEndpoint(self, port)

@@ -27,7 +27,8 @@ __all__ = ["ZenohSpec", "HOST_NAME", "host_name", "zenoh_spec", "resolve_hosts"]
 HOST_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}")
 ENDPOINT = re.compile(r"(tcp|udp|tls|quic|unixsock-stream|ws)/[^\s]{1,200}")
 PREFIX = re.compile(r"[A-Za-z0-9_.-]{1,64}(/[A-Za-z0-9_.-]{1,64}){0,3}")
-ZENOH_KEYS = ("connect", "listen", "multicast_scouting", "prefix", "lease_s", "pose_rate_hz", "config")
+ZENOH_KEYS = ("connect", "listen", "multicast_scouting", "prefix", "lease_s", "pose_rate_hz", "config", "credentials",
+              "insecure")
 LOOPBACK = ("tcp/127.0.0.1:0",)
 
 
@@ -43,7 +44,9 @@ class ZenohSpec:
     prefix: str = "hilgate"
     lease_s: float = 1.0
     pose_rate_hz: float = 10.0
-    config: str | None = None  # a Zenoh JSON5 configuration file (TLS, access control), read first
+    config: str | None = None  # a Zenoh JSON5 configuration file, read first
+    credentials: str | None = None  # the lab's credentials (hilgate network init): TLS and access control
+    insecure: bool = False  # no credentials, asked for in so many words: plain TCP, anyone may say anything
 
 
 def host_name(node: Node, path: str) -> str:
@@ -73,6 +76,8 @@ def _prefix(node: Node, path: str) -> str:
 
 def zenoh_spec(node: Node) -> ZenohSpec:
     f = Fields(node, "zenoh", ZENOH_KEYS)
+    if "credentials" in f and f.get("insecure", boolean, False):
+        raise node.error("zenoh.insecure", "give either credentials (TLS and access control) or insecure: true, not both")
     return ZenohSpec(
         connect=f.get("connect", _endpoints, ()),
         listen=f.get("listen", _endpoints, LOOPBACK) or LOOPBACK,
@@ -81,6 +86,8 @@ def zenoh_spec(node: Node) -> ZenohSpec:
         lease_s=f.get("lease_s", number(0.1, 60), 1.0),
         pose_rate_hz=f.get("pose_rate_hz", number(above=0, maximum=1000), 10.0),
         config=f.get("config", path_value, None),
+        credentials=f.get("credentials", path_value, None),
+        insecure=f.get("insecure", boolean, False),
     )
 
 

@@ -122,7 +122,9 @@ class Recorder:
     def _name(self, name: str) -> str:
         encoded = self._json.get(name)
         if encoded is None:
-            encoded = self._json[name] = json.dumps(name)
+            encoded = json.dumps(name)
+            if len(self._json) < 65536:  # (names come from the scene, and checked ones from other hosts)
+                self._json[name] = encoded
         return encoded
 
     def _line(self, t: float, ev: str, modem: Any, frame: Any, cause: str | None = None, extra: str = "") -> None:
@@ -130,7 +132,7 @@ class Recorder:
         line = (f'{{"t": {round(t, 9)!r}, "ev": "{ev}", "link": {modem.json_id}, "pkt": {frame.id}, '
                 f'"src": {name(frame.src_link)}, "dst": {name(frame.dst_link)}, "size": {frame.size}')
         if frame.kind != DATA:
-            line += f', "kind": "{frame.kind}"'
+            line += f', "kind": {name(frame.kind)}'
         if cause is not None:
             line += f', "cause": "{cause}"'
         self._write(f'{line}{extra}, "fifo_bytes": {modem.queued_bytes}}}\n')
@@ -140,7 +142,12 @@ class Recorder:
     def event(self, record: dict[str, Any]) -> None:
         """A free-form trace line (drivers and the GLI use it for what is not a modem event)."""
         if self._write is not None:
-            self._write(json.dumps(record) + "\n")
+            try:
+                line = json.dumps(record, allow_nan=False, default=str)
+            except ValueError:  # a NaN or infinity: not JSON; written as text
+                line = json.dumps({k: (v if not isinstance(v, float) or math.isfinite(v) else str(v))
+                                   for k, v in record.items()}, default=str)
+            self._write(line + "\n")
             if self._flush is not None:
                 self._flush()
 
