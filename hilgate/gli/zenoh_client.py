@@ -21,6 +21,7 @@ import time
 import uuid
 from typing import Any
 
+from ..core.names import zenoh_prefix_problem
 from ..core.packets import BROADCAST
 from .zenoh_door import link_key
 
@@ -36,6 +37,8 @@ def _session(zenoh_option: Any) -> tuple[Any, str]:
         zenoh_option = {"connect": list(zenoh_option)}
     options = dict(zenoh_option or {})
     prefix = str(options.get("prefix", "hilgate"))
+    if zenoh_prefix_problem(prefix):
+        raise ValueError(f"Zenoh prefix {prefix!r}: {zenoh_prefix_problem(prefix)}")
     config = zenoh.Config.from_file(options["config"]) if options.get("config") else zenoh.Config()
     if not options.get("config"):
         config.insert_json5("mode", '"peer"')
@@ -48,6 +51,25 @@ def _session(zenoh_option: Any) -> tuple[Any, str]:
     while options.get("connect") and time.monotonic() < deadline and not list(session.info.peers_zid()):
         time.sleep(0.02)
     return session, prefix
+
+
+def _prefix_hint(session: Any, link_id: str, prefix: str) -> str:
+    """Where the link is served instead, if a daemon holds its liveliness token under another prefix
+    (``<prefix>/alive/links/<link>/<host>/<zid>``): the usual cause is a scene's ``zenoh: prefix:``."""
+    found = set()
+    try:
+        for reply in session.liveliness().get(f"**/alive/links/{link_id}/**", timeout=1.0):
+            if reply.ok is not None:
+                key = str(reply.ok.key_expr)
+                found.add(key[:key.rfind(f"/alive/links/{link_id}/")])
+    except Exception:  # a hint only: the error it decorates says what matters
+        pass
+    found.discard(prefix)
+    if found:
+        return (f"; it is served under {', '.join(repr(p) for p in sorted(found))}: give that prefix "
+                f"(Link.open(..., prefix=...), --zenoh-prefix)")
+    return ("; a network whose scene sets zenoh: prefix: needs the same prefix here (Link.open(..., prefix=...), "
+            "--zenoh-prefix)")
 
 
 class ZenohLink:
@@ -87,7 +109,8 @@ class ZenohLink:
                         info = json.loads(reply.ok.payload.to_bytes())
                         break
             if info is None:
-                raise GliError(f"no daemon on the network serves link {link_id!r}")
+                raise GliError(f"no daemon on the network serves link {link_id!r} under the Zenoh prefix "
+                               f"{prefix!r}{_prefix_hint(session, link_id, prefix)}")
             link = cls(session, prefix, link_id, info)
             time.sleep(0.05)  # let the daemon learn of our subscriptions before the first frame for us
             return link

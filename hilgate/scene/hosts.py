@@ -19,6 +19,7 @@ import re
 from dataclasses import dataclass, replace
 from typing import Any
 
+from ..core.names import zenoh_prefix_problem
 from .checks import Fields, boolean, describe, items, number, path_value, text
 from .yaml_nodes import Node
 
@@ -65,8 +66,9 @@ def _endpoints(node: Node, path: str) -> tuple[str, ...]:
 
 def _prefix(node: Node, path: str) -> str:
     value = text(node, path)
-    if not re.fullmatch(r"[A-Za-z0-9_.-]{1,64}(/[A-Za-z0-9_.-]{1,64}){0,3}", value):
-        raise node.error(path, "a key prefix is one to four words of letters, digits, '_', '.' or '-' joined by '/'")
+    problem = zenoh_prefix_problem(value)
+    if problem:
+        raise node.error(path, problem)
     return value
 
 
