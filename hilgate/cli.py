@@ -154,6 +154,32 @@ def cmd_status(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_reload(args: argparse.Namespace) -> int:
+    """SIGHUP without knowing the daemon's PID: the RELOAD request, answered once the scene file is
+    applied or refused (the daemon then keeps the scene it had)."""
+    sock, _, request, _ = _control(args)
+    try:
+        sock.settimeout(args.timeout)
+        answer = request({"class": "RELOAD"})
+    finally:
+        sock.close()
+    if not answer.get("ok"):
+        print(f"hilgate: reload refused, the daemon keeps its scene: {answer.get('error')}", file=sys.stderr)
+        return EXIT_SCENE
+    links = _control_request(args, {"class": "STATUS"}).get("links", [])
+    listed = ", ".join(f"{link['id']}={link['backend']}" for link in links)
+    print(f"reloaded: {len(links)} links ({listed})")
+    return 0
+
+
+def _control_request(args: argparse.Namespace, request_obj: dict) -> dict:
+    sock, _, request, _ = _control(args)
+    try:
+        return request(request_obj)
+    finally:
+        sock.close()
+
+
 def _link_note(link: dict) -> str:
     """Why a link is down, else what it lost by cause (the table has one line per link)."""
     if link.get("reason"):
@@ -305,8 +331,8 @@ def _destination(dst: int, answer: dict) -> str:
         return "255 (broadcast)"
     reach = (answer.get("link") or {}).get("app_dst")
     if reach == "everyone in range":
-        return (f"{dst}, which the model reads as everyone in range (addressing: auto, and the link's packet "
-                f"class carries no address on air; addressing: strict or a MAC makes it {dst} only)")
+        return (f"{dst}, which reaches everyone in range (addressing: auto, and the link's packet class "
+                f"carries no address on air)")
     return str(dst)
 
 
@@ -485,6 +511,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "sim": cmd_sim,
     "run": cmd_run,
     "status": cmd_status,
+    "reload": cmd_reload,
     "pose": lambda args: cmd_pose(args),
     "send": cmd_send,
     "listen": cmd_listen,
@@ -605,6 +632,12 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--network", action="store_true",
                        help="every host of the network: its links, and how the others hear it (over Zenoh)")
         p.add_argument("--runtime-dir")
+
+    p = sub.add_parser("reload", help="make the running daemon read its scene file again (as SIGHUP); links whose "
+                                      "keys changed are reconfigured in place, applications stay connected")
+    p.add_argument("--timeout", type=float, default=60.0, metavar="S",
+                   help="wait at most S seconds for the daemon's answer (default 60)")
+    p.add_argument("--runtime-dir")
 
     p = sub.add_parser("pose", help="follow the vehicles' poses live")
     p.add_argument("vehicle", nargs="*", help="only these vehicles")

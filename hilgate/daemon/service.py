@@ -50,16 +50,20 @@ def _link_list(scene: Scene, host: str | None, limit: int = 12) -> str:
     return ", ".join(parts)
 
 
+def _links(n: int) -> str:
+    return f"{n} link" if n == 1 else f"{n} links"
+
+
 def _endpoint_list(scene: Scene, host: str | None, runtime_dir: str, tcp: str | None) -> str:
     """The endpoints this daemon opened, for its start line: only the kinds its links use."""
     served = [link for link in scene.links.values() if host is None or link.host == host]
     parts = []
     queues = sum("mq" in link.gli for link in served)
     if queues:
-        parts.append(f"POSIX queues /ID_{{tx,rx}}_dlnk_phy ({queues} links)")
+        parts.append(f"POSIX queues /ID_{{tx,rx}}_dlnk_phy ({_links(queues)})")
     sockets = sum("socket" in link.gli for link in served)
     if sockets:
-        parts.append(f"sockets {runtime_dir}/gli/ID.sock ({sockets} links)")
+        parts.append(f"sockets {runtime_dir}/gli/ID.sock ({_links(sockets)})")
     if tcp:
         parts.append(f"TCP {tcp}")
     for link in served:
@@ -163,8 +167,8 @@ class Daemon:
             self._periodic()
             gc.collect()
             gc.freeze()  # everything built so far is long-lived: keep it out of the collector's walks
-            log.info("hilgate %s started: scene %r (%s), %d links (%s), endpoints: %s; run %s",
-                     __version__, scene.name, os.path.abspath(self.scene_path), len(self.router.links),
+            log.info("hilgate %s started: scene %r (%s), %s (%s), endpoints: %s; run %s",
+                     __version__, scene.name, os.path.abspath(self.scene_path), _links(len(self.router.links)),
                      _link_list(scene, host), _endpoint_list(scene, host, self.runtime_dir, self.tcp), self.run_id)
         except BaseException:
             removed = unlink_created()  # it never said READY: its queues would only cost the user's budget
