@@ -309,6 +309,10 @@ class RoutedLink:
             # what the link's applications are told (READY/BUSY): false while a frame is still in the
             # modem's hands, e.g. a real modem's IM until its DELIVEREDIM or FAILEDIM
             "ready": self.ready,
+            # whom a frame from an application reaches: its destination, or everyone in range where the
+            # packet class carries no address on air and no MAC needs one (addressing: auto)
+            "app_dst": ("everyone in range" if isinstance(backend, SimBackend) and backend.everyone_in_range
+                        else "as addressed"),
         }
         if figures.get("reason"):
             status["reason"] = figures["reason"]

@@ -75,8 +75,9 @@ def plan_message_size(links: int) -> bool:
     soft = resource.getrlimit(resource.RLIMIT_MSGQUEUE)[0]
     if soft == resource.RLIM_INFINITY:
         return True
-    _note_compact(soft, f"{links} links would need {2 * links * queue_cost(MAX_MESSAGE_SIZE)} bytes of POSIX "
-                        f"queues at dccomms' 10 × {MAX_MESSAGE_SIZE} bytes")
+    full = 2 * links * queue_cost(MAX_MESSAGE_SIZE)
+    if full > soft:  # said only where it matters: dccomms' size would not even fit an empty budget
+        _note_compact(soft, f"{links} links at dccomms' 10 × {MAX_MESSAGE_SIZE} bytes would need {full}")
     return False
 
 
@@ -84,9 +85,8 @@ def _note_compact(limit: int, why: str) -> None:
     global _warned
     if not _warned:
         _warned = True
-        log.info("%s and this user's queue budget is %d bytes (ulimit -q), shared by all its processes: queues "
-                 "are created just large enough for each link's packet class (dccomms uses an existing queue as "
-                 "it is). LimitMSGQUEUE=infinity (the systemd unit) gives dccomms' default size.", why, limit)
+        log.info("POSIX queues are sized for each link's packet class: %s of this user's %d-byte queue budget "
+                 "(ulimit -q; LimitMSGQUEUE=infinity, as in the systemd unit, gives dccomms' size)", why, limit)
 
 
 def open_queue(name: str, needed_size: int = MAX_MESSAGE_SIZE, full_size: bool = True,
@@ -140,7 +140,8 @@ def _create_queue(name: str, needed_size: int, full_size: bool) -> posix_ipc.Mes
                 error = exc
                 if size != needed_size and is_user_budget(exc):
                     _note_compact(resource.getrlimit(resource.RLIMIT_MSGQUEUE)[0],
-                                  "the POSIX queue budget is exhausted")
+                                  f"a queue at dccomms' 10 × {MAX_MESSAGE_SIZE} bytes no longer fits in what "
+                                  f"is left")
     finally:
         os.umask(old)
     raise QueueError(open_failure(name, error))

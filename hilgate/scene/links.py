@@ -173,6 +173,17 @@ def _wide_problem(backend: str, emulate: tuple, packet: str) -> str:
     return ""
 
 
+def _no_free_address(link: LinkSpec) -> str:
+    """Automatic addresses stop at 254; say how to go on, as far as this link allows."""
+    text = ("no free address left (1..254 are taken); give links an address: of their own (it need only differ "
+            "among the links of one channel)")
+    problem = _wide_problem(link.backend, link.emulate, link.packet)
+    if problem:
+        return f"{text}; this link cannot take one above {NARROW_MAX}: {problem}"
+    return (f"{text}, up to {WIDE_MAX} under hilgate sim (this link's packet class keeps addresses off the air; "
+            f"hilgate run takes 0..{NARROW_MAX} only)")
+
+
 def require_narrow_addresses(links: Any) -> None:
     """``hilgate run`` attaches dccomms applications (POSIX queues) and the socket GLI, whose ``u8 dst``
     carries 8 bits, to every link: a wide address is refused there, naming its file, line and key."""
@@ -236,7 +247,7 @@ def assign_addresses(links: dict[str, LinkSpec], nodes: dict[str, Node]) -> dict
             while next_free in used:
                 next_free += 1
             if next_free >= BROADCAST:
-                raise nodes[link_id].error(f"links.{link_id}", "no free address left (0..254)")
+                raise nodes[link_id].error(f"links.{link_id}", _no_free_address(link))
             used.add(next_free)
             link = _replace_params(link, address=next_free)
         key = (link.params.rx_channel, link.params.address)
