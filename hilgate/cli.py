@@ -544,7 +544,7 @@ def cmd_network(args: argparse.Namespace) -> int:
     except NetworkInitError as exc:
         print(f"hilgate: network init: {exc}", file=sys.stderr)
         return EXIT_SCENE
-    where = result["directory"]
+    where = args.directory.rstrip("/") or "/"  # as the user wrote it: the paths to copy, in their words
     print(f"credentials in {where}: made {', '.join(result['made']) or 'nothing'}"
           f"{'; kept ' + ', '.join(result['kept']) if result['kept'] else ''}")
     print(f"  hosts: {', '.join(f'{where}/hosts/{h}' for h in result['hosts'])}")

@@ -301,7 +301,7 @@ def free_port() -> int:
 def test_applications_name_the_networks_zenoh_prefix(tmp_path):
     link, prefix, port = unique("zp"), unique("lab"), free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
-    daemon = Daemon(tmp_path, scene({link: ""}, f"zenoh: {{prefix: {prefix}, lease_s: 5}}\n"), [link],
+    daemon = Daemon(tmp_path, scene({link: ""}, f"zenoh: {{prefix: {prefix}, lease_s: 5, insecure: true}}\n"), [link],
                     "--host", "h1", "--zenoh-listen", endpoint)
     try:
         daemon.wait_for("READY=1")

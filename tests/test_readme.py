@@ -304,10 +304,11 @@ def test_every_quick_start_command_prints_what_the_readme_shows(walk):
     assert (walk.dir / "demo-report" / "index.html").is_file()
 
     # (d) two PCs, one network of modems (here, two daemons on this one)
-    tank = walk.start("hilgate run scenes/two-hosts.yaml --host tank-pc --zenoh-listen tcp/127.0.0.1:7447 "
-                      "--runtime-dir /tmp/tank-pc", ready="joined the network")
-    pier = walk.start("hilgate run scenes/two-hosts.yaml --host pier-pc --zenoh-connect tcp/127.0.0.1:7447 "
-                      "--runtime-dir /tmp/pier-pc", ready="joined the network")
+    walk.run("hilgate network init lab-creds --hosts tank-pc,pier-pc --apps 2")
+    tank = walk.start("hilgate run scenes/two-hosts.yaml --host tank-pc --zenoh-credentials lab-creds "
+                      "--zenoh-listen tcp/127.0.0.1:7447 --runtime-dir /tmp/tank-pc", ready="joined the network")
+    pier = walk.start("hilgate run scenes/two-hosts.yaml --host pier-pc --zenoh-credentials lab-creds "
+                      "--zenoh-connect tcp/127.0.0.1:7447 --runtime-dir /tmp/pier-pc", ready="joined the network")
     tank.wait_for("host pier-pc is up")
     listener = walk.start("hilgate listen rov_ac --runtime-dir /tmp/tank-pc", ready="listening on")
     walk.run("hilgate send boat_ac --to 1 hello from the pier --runtime-dir /tmp/pier-pc")
