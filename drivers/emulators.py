@@ -428,9 +428,13 @@ class EvologicsEmulator:
             frame.meta["pc"] = self.packet_counter
         if dst != BROADCAST and (ack or kind == "burst"):
             # the receiving modem answers on the channel (hilgate.models.acoustic_ack); an IM retries !RI
-            # times (255: for ever), a burst !RC times; the model's outcome is the report
-            retries = int(self.settings["RI" if ack else "RC"])
-            frame.ack_retries = FOREVER if ack and retries == 255 else retries
+            # times (255: for ever), a burst !RC times (a burst is acknowledged whatever ``ack`` says);
+            # the model's outcome is the report
+            if kind == "burst":
+                frame.ack_retries = int(self.settings["RC"])
+            else:
+                retries = int(self.settings["RI"])
+                frame.ack_retries = FOREVER if retries == 255 else retries
             frame.on_acknowledged = self._acknowledged
             if kind == "burst":
                 self.bursts[frame.meta["pc"]] = frame
