@@ -301,7 +301,9 @@ class SimModem:
         self.medium.detach(self.radio)
 
     def _on_air(self, frame: "Frame") -> None:
-        if self.closed:
+        if self.closed:  # closed during its tx delay: it never went on air, and says so
+            self.stats.fifo_drops += 1
+            self.observer.drop(self.clock.now(), self, frame, "closed")
             return
         t = self.clock.now()
         duration = frame.size * 8.0 / self.bitrate
@@ -326,10 +328,12 @@ class SimModem:
 
     def heard(self, frame: "Frame", cause: str | None) -> None:
         """An arrival the radio judged has ended, good (``cause`` None) or lost."""
-        if self.closed:
-            return
         address = self.radio.address
         addressed = frame.dst_addr == address or frame.dst_addr == BROADCAST or self.promiscuous
+        if self.closed:  # the link went (removed, or given a real modem) while the frame was arriving
+            if addressed and frame.kind == DATA:
+                self.observer.err(self.clock.now(), self, frame, "closed")
+            return
         if cause is not None and addressed:
             self.observer.err(self.clock.now(), self, frame, cause)
         if addressed and self.on_phy is not None and frame.kind != MODEM_ACK:  # (an ACK: no RECVEND)
@@ -349,9 +353,10 @@ class SimModem:
         if not self.closed and self.on_phy is not None:
             self.on_phy("rx_start", frame, start, end, None)
 
-    def unreachable(self, frame: "Frame") -> None:
-        """A frame for this modem was sent while it was out of the sender's range (or had no pose)."""
-        self.observer.err(self.clock.now(), self, frame, "range")
+    def unreachable(self, frame: "Frame", cause: str = "range") -> None:
+        """A frame for this modem that it cannot judge (``range``: out of the sender's range; ``no_pose``:
+        the sender or this modem had no position): traced and counted with that cause, never silent."""
+        self.observer.err(self.clock.now(), self, frame, cause)
 
     def _deliver_now(self, frame: "Frame") -> None:
         self.stats.rx_packets += 1

@@ -47,8 +47,10 @@ class RadioHost(Protocol):
     def heard(self, frame: "Frame", cause: str | None) -> None:
         """An arrival this radio judged has ended: ``cause`` is None (good), ``prop``, ``col`` or ``mult``."""
 
-    def unreachable(self, frame: "Frame") -> None:
-        """A frame for this radio was sent while it was out of the sender's range (or had no pose)."""
+    def unreachable(self, frame: "Frame", cause: str) -> None:
+        """A frame for this radio that it cannot judge: sent while it was out of the sender's range
+        (``range``), or while the sender or this radio had no pose (``no_pose``: a live vehicle whose
+        first pose has not come, or a stale one dropped)."""
 
 
 class LossModel(Protocol):
@@ -267,9 +269,10 @@ class Radio:
                 arrival.error = True
         self._arrival_over(arrival)
 
-    def unreachable(self, frame: "Frame") -> None:
-        """A frame for this radio that cannot reach it (out of the sender's range, or no pose)."""
-        self.host.unreachable(frame)
+    def unreachable(self, frame: "Frame", cause: str = "range") -> None:
+        """A frame for this radio that cannot reach it (``range``: out of the sender's range;
+        ``no_pose``: the sender or this radio has no position)."""
+        self.host.unreachable(frame, cause)
 
     def _arrival_over(self, arrival: Arrival) -> None:
         if arrival.error:

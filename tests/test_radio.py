@@ -23,8 +23,8 @@ class Host:
     def heard(self, frame, cause):
         self.outcomes.append((self.clock.now(), frame.id, cause))
 
-    def unreachable(self, frame):
-        self.unreachable_frames.append(frame.id)
+    def unreachable(self, frame, cause):
+        self.unreachable_frames.append((frame.id, cause))
 
 
 class Loss:
@@ -146,7 +146,8 @@ def test_carrier_sense():
 def test_unreachable_goes_to_the_host():
     radio, host, clock = make()
     radio.unreachable(frame(7))
-    assert host.unreachable_frames == [7]
+    radio.unreachable(frame(8), "no_pose")
+    assert host.unreachable_frames == [(7, "range"), (8, "no_pose")]
 
 
 def test_interference_kept_stays_as_short_as_what_is_on_air():
