@@ -58,6 +58,7 @@ class LinkStats:
     rx_packets: int = 0
     fifo_drops: int = 0
     fifo_peak_bytes: int = 0
+    lost: dict[str, int] = field(default_factory=dict)  # arrivals for this modem lost, by cause (prop, no_pose…)
 
 
 class SimModem:
@@ -332,10 +333,10 @@ class SimModem:
         addressed = frame.dst_addr == address or frame.dst_addr == BROADCAST or self.promiscuous
         if self.closed:  # the link went (removed, or given a real modem) while the frame was arriving
             if addressed and frame.kind == DATA:
-                self.observer.err(self.clock.now(), self, frame, "closed")
+                self._lost(frame, "closed")
             return
         if cause is not None and addressed:
-            self.observer.err(self.clock.now(), self, frame, cause)
+            self._lost(frame, cause)
         if addressed and self.on_phy is not None and frame.kind != MODEM_ACK:  # (an ACK: no RECVEND)
             self.on_phy("rx_end", frame, None, self.clock.now(), cause)
         if frame.kind == MODEM_ACK:  # the modem's own: never a MAC's business
@@ -356,6 +357,11 @@ class SimModem:
     def unreachable(self, frame: "Frame", cause: str = "range") -> None:
         """A frame for this modem that it cannot judge (``range``: out of the sender's range; ``no_pose``:
         the sender or this modem had no position): traced and counted with that cause, never silent."""
+        self._lost(frame, cause)
+
+    def _lost(self, frame: "Frame", cause: str) -> None:
+        lost = self.stats.lost
+        lost[cause] = lost.get(cause, 0) + 1
         self.observer.err(self.clock.now(), self, frame, cause)
 
     def _deliver_now(self, frame: "Frame") -> None:

@@ -204,6 +204,9 @@ def test_a_frame_that_cannot_be_judged_for_want_of_a_pose_is_traced_at_each_radi
     assert errors == [(0, "rov", "no_pose"), (1, "rov", "no_pose"), (2, "top", "no_pose"), (2, "buoy", "no_pose"),
                       (3, "buoy", "no_pose")]
     assert [(round(t), link) for t, _, link, *_ in net.of("rx")] == [(1, "buoy"), (5, "rov")]
+    # and counted, per link and cause
+    assert {name: modem.stats.lost for name, modem in net.modems.items()} == \
+        {"top": {"no_pose": 1}, "rov": {"no_pose": 2}, "buoy": {"no_pose": 2}}
 
 
 def test_range_is_the_senders():
