@@ -3,6 +3,10 @@ modem refuses, with the words of hilgate's driver in front of an emulated modem,
 sends; a frame at the limit crosses both.  Real parts: the driver opens the emulator's pty, the
 applications speak the socket GLI."""
 
+import io
+import json
+import subprocess
+import sys
 import time
 
 import pytest
@@ -10,8 +14,11 @@ import pytest
 from at_pty_client import AtClient
 from daemon_kit import Daemon, unique
 from hilgate.client import GliError, Link
+from hilgate.core.packets import PacketError
 from hilgate.drivers.table import EVOLOGICS_LIMITS
 from hilgate.scene import load_scene_text
+from hilgate.sim.apps import _VirtualLink
+from hilgate.sim.simulate import Simulation
 
 VL2B = 5  # preamble, two length bytes, CRC-16: the bytes vl2b adds to a payload on air
 
@@ -123,9 +130,6 @@ links:
     assert scene.links["a"].limits == EVOLOGICS_LIMITS
     assert scene.links["b"].limits.piece_bytes == 45 and scene.links["b"].limits.flow_control == "rtscts"
     assert scene.links["c"].limits is None  # a simulated link without a preset refuses nothing by size
-    import subprocess
-    import sys
-
     (tmp_path / "scene.yaml").write_text("""\
 channels: {ac: {speed_mps: 1500}}
 vehicles: {v: {pose: {static: [0, 0, 0]}}}
@@ -140,3 +144,22 @@ links:
             "GLI frames go as burst (send_as), larger ones are refused; transmit FIFO 16384 B") in result.stdout
     assert ("    limits (the evologics driver's own): im 64 B, ims 64 B, pbm 64 B, burst 1024 B; serial 19200 baud; "
             "GLI frames go as burst (im: false); the driver queues 50 frames") in result.stdout
+
+
+def test_hilgate_sims_applications_are_refused_alike():
+    """In virtual time (``hilgate sim``) an application's link refuses the same frame with the same words."""
+    trace = io.StringIO()
+    simulation = Simulation(load_scene_text("""\
+channels: {ac: {speed_mps: 1500}}
+vehicles: {v: {pose: {static: [0, 0, 0]}}, w: {pose: {static: [100, 0, 0]}}}
+links:
+  a: {vehicle: v, model: evologics-s2cr-7-17, address: 1}
+  b: {vehicle: w, model: evologics-s2cr-7-17, address: 2}
+"""), trace=trace)
+    link = _VirtualLink(simulation.world, "a")
+    with pytest.raises(PacketError) as refused:
+        link.send(b"x" * 60, dst=2)
+    assert str(refused.value) == ("size: 65 bytes on air do not fit an instant message of the EvoLogics modem "
+                                  "(at most 64); use a smaller packet class or bursts (at most 1024)")
+    link.send(b"x" * 59, dst=2)  # 64 bytes on air: taken
+    assert [(e["ev"], e["size"]) for e in map(json.loads, trace.getvalue().splitlines())] == [("enq", 64)]
