@@ -38,7 +38,8 @@ def modem_limits(node: Node, path: str, backend: str, emulated: str | None) -> M
             f"these are the limits of the {DRIVERS[modem].title} but this link's {what}; give the link a "
             f"preset of its own modem")
     base = DRIVERS[modem].limits
-    assert base is not None
+    if base is None:
+        raise f.error(f"the {DRIVERS[modem].title} has no limits to state (whose limits: {', '.join(named)})")
     modes = dict(base.modes)
     if "modes" in f:
         if not modes:
