@@ -21,6 +21,7 @@ from ..models.usbl import UsblParams
 from .backends import SIM, backend_names, driver_keys, driver_options, emulated_device
 from .hosts import host_name
 from .checks import Fields, boolean, choice, describe, integer, join_path, number, text
+from .limits import modem_limits
 from .mac import mac_spec
 from .physics import ERROR_KEYS, acoustic_params, error_kind, physical_environment
 from .plugins import Plugin
@@ -126,6 +127,8 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
             emulate += (("firmware", firmware),)
     elif "firmware" in f:
         f.get("firmware", _firmware)  # checked (a preset gives it to every link), used only when emulating
+    protocol = dict(emulate).get("protocol")
+    limits = f.get("limits", lambda n, p: modem_limits(n, p, backend, protocol), None)
     addressing = f.get("addressing", choice(*ADDRESSING), "auto")
     usbl = f.get("usbl", _usbl, None)
     if usbl is not None and dict(emulate).get("protocol") != "evologics":
@@ -141,7 +144,7 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
             raise child.error(f.sub("address"), f"{params.address} is wider than 8 bits (0..{NARROW_MAX}): {problem}")
     gli = f.get("gli", _gli_endpoints, GLI_ENDPOINTS)
     return LinkSpec(link_id, vehicle, backend, model, params, mac, packet, node.file, node.line, options, emulate,
-                    addressing, host=host, usbl=usbl, address_line=address_line, gli=gli)
+                    addressing, host=host, usbl=usbl, address_line=address_line, gli=gli, limits=limits)
 
 
 NARROW_MAX = BROADCAST - 1

@@ -20,6 +20,7 @@ from .checks import Fields, base_dir, integer, items, join_path, mapping, number
 from .apps import app_specs
 from .flows import flow_spec
 from .hosts import resolve_hosts, zenoh_spec
+from .limits import describe_limits
 from .links import Context, assign_addresses, link_spec
 from .overrides import apply_override
 from .plugins import Plugin, PluginError, load_plugin
@@ -169,4 +170,7 @@ def scene_summary(scene: Scene) -> str:
         if link.host:
             line += f", host {link.host}"
         lines.append(line)
+        limits = describe_limits(link)
+        if limits is not None:
+            lines.append(f"    {limits}")
     return "\n".join(lines)
