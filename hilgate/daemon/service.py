@@ -102,10 +102,10 @@ class Daemon:
         raise_descriptor_limit()
         trace_path = self.trace_path or scene.trace_file
         self.trace = open(trace_path, "a", encoding="utf-8", buffering=1 << 16) if trace_path else None
+        self.started = time.monotonic()  # the summary's wall_time_s (before model time 0)
         self.scheduler = scheduler = RealtimeScheduler(self.speed)
         self.recorder = Recorder(self.trace)
         self.run_id = uuid.uuid4().hex[:12]
-        self.started = time.monotonic()  # the summary's wall_time_s
         view = scene_view(scene)  # the scene as it is now: the trace must not depend on the file later
         self.recorder.event({"t": 0.0, "ev": "run", "run": self.run_id,
                              "start": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="milliseconds"),
