@@ -414,10 +414,13 @@ def cmd_fit(args: argparse.Namespace) -> int:
     from .fitcmd import plot_fit, print_fit, run_fit
     from .report.tracefile import TraceError
 
+    import numpy as np
+
     try:
-        result = run_fit(args.trace, args.scene, args.model, args.link, args.simulated, args.run, args.pose_gap,
-                         args.window, tuple(args.overrides))
-        print_fit(result, sys.stdout, args.bins)
+        with np.errstate(all="ignore"):  # degenerate data give infinite intervals, printed as such
+            result = run_fit(args.trace, args.scene, args.model, args.link, args.simulated, args.run, args.pose_gap,
+                             args.window, tuple(args.overrides))
+            print_fit(result, sys.stdout, args.bins)
         if args.plot:
             plot_fit(result, args.plot, args.bins)
             print(f"\nplot: {args.plot}")

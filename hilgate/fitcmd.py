@@ -17,7 +17,7 @@ import numpy as np
 
 from .report.fit import Z95, Fit, bins, fit_function, fit_logistic, fit_power, fit_rssi, power_parameters
 from .report.observations import FitError, LinkInfo, Observations, links_of_view, observations, read_events
-from .report.tracefile import TraceError
+from .report.tracefile import TraceError, printable
 
 __all__ = ["run_fit", "FitError", "FitResult"]
 
@@ -163,7 +163,7 @@ def run_fit(trace: str, scene_path: str | None = None, model: str = "power", lin
 
 
 def _excluded(data: Observations) -> str:
-    return ", ".join(f"{cause} {n}" for cause, n in sorted(data.excluded.items()))
+    return ", ".join(f"{printable(cause, 40)} {n}" for cause, n in sorted(data.excluded.items()))
 
 
 FORMS = {
@@ -177,7 +177,7 @@ def print_fit(result: FitResult, out: TextIO, bin_count: int = 10) -> None:
     data, fit = result.data, result.fit
     receivers = sorted({o.dst for o in data.frames})
     lost = sum(1 for o in data.frames if not o.delivered)
-    print(f"{len(data.frames)} frames ({lost} lost) heard or missed by {', '.join(receivers)}; "
+    print(f"{len(data.frames)} frames ({lost} lost) heard or missed by {', '.join(map(printable, receivers))}; "
           f"left out: {_excluded(data) or 'none'}", file=out)
     print(f"model {result.model}: {FORMS[result.model]}", file=out)
     for name, (value, low, high) in result.params.items():

@@ -35,7 +35,7 @@ from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Iterator
 
-from .tracefile import TraceError, count, describe, number, optional_number, position, read_lines, text
+from .tracefile import TraceError, count, describe, number, position, printable, read_lines, text
 
 __all__ = ["LinkInfo", "Observation", "Observations", "FitError", "read_events", "observations", "links_of_view"]
 
@@ -212,7 +212,8 @@ def observations(events: Iterable[Any], links: dict[str, LinkInfo] | None = None
     if receivers is not None:
         unknown = sorted(name for name in receivers if name not in out.links)
         if unknown:
-            raise FitError(f"no link {unknown[0]!r} in the trace's scene; links: {', '.join(out.links) or 'none'}")
+            names = ", ".join(printable(name) for name in list(out.links)[:20]) or "none"
+            raise FitError(f"no link {printable(unknown[0])!r} in the trace's scene; links: {names}")
     if not poses:
         raise FitError("the trace has no pose samples, so no distances (the scene's trace: {poses_s} is on by "
                        "default; real vehicles need a pose source)")

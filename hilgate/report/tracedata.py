@@ -14,7 +14,7 @@ from collections import defaultdict
 from dataclasses import dataclass, field
 from typing import Any
 
-from .tracefile import (MAX_LINE_BYTES, TraceError, count, describe, number, position, read_lines, text)
+from .tracefile import MAX_LINE_BYTES, TraceError, count, describe, number, position, printable, read_lines, text
 
 __all__ = ["ReportError", "Packet", "Trace", "Run", "trace_runs", "pick_run", "load_trace", "load_summary",
            "MAX_SUMMARY_BYTES"]
@@ -98,7 +98,9 @@ def trace_runs(path: str) -> list[Run]:
                 continue
             try:
                 event = _parse(raw)
-            except _Refused:
+            except _Refused as exc:
+                if raw.endswith(b"\n") or handle.peek(1):  # (not the last line, cut short by a SIGKILL)
+                    raise ReportError(f"{path}:{number_}: {exc}") from None
                 before = before or not runs
                 continue
             if not isinstance(event, dict) or event.get("ev") != "run":
@@ -111,7 +113,7 @@ def trace_runs(path: str) -> list[Run]:
             scene_path = event.get("path")
             runs.append(Run(len(runs) + 1, _label(event.get("run")), _label(event.get("start")),
                             _label(event.get("scene")), number_, path=scene_path if isinstance(scene_path, str) else "",
-                            has_view=isinstance(event.get("scene_view"), dict)))
+                            has_view="scene_view" in event))
     if not runs:
         return [Run(1, "", "", "", 1, number_)]
     runs[-1].last_line = number_
@@ -119,7 +121,7 @@ def trace_runs(path: str) -> list[Run]:
 
 
 def _label(value: Any) -> str:
-    return value[:80] if isinstance(value, str) else "?" if value is None else describe(value)
+    return printable(value) if isinstance(value, str) else "?" if value is None else describe(value)
 
 
 def pick_run(runs: list[Run], wanted: str | None) -> Run:

@@ -22,7 +22,7 @@ import math
 from typing import Any, Iterator
 
 __all__ = ["TraceError", "MAX_LINE_BYTES", "MAX_NUMBER", "read_lines", "number", "count", "text", "key",
-           "position", "optional_number", "describe"]
+           "position", "optional_number", "describe", "printable"]
 
 MAX_LINE_BYTES = 32 << 20
 """A daemon's longest lines are its ``run``/``reload`` lines (about 0.5 KB per link)."""
@@ -50,6 +50,12 @@ def _constant(literal: str) -> float:
     raise _Refused(f"{literal} is not a number a trace may hold")
 
 
+def printable(name: str, limit: int = 80) -> str:
+    """A name from a trace, safe to print on a terminal (control characters escaped) and short."""
+    out = "".join(c if c.isprintable() else repr(c)[1:-1] for c in name[:limit])
+    return out + ("…" if len(name) > limit else "")
+
+
 def describe(value: Any) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
@@ -57,7 +63,7 @@ def describe(value: Any) -> str:
         return "null"
     if isinstance(value, (dict, list)):
         return "an object" if isinstance(value, dict) else "a list"
-    text_ = json.dumps(value) if isinstance(value, str) else repr(value)
+    text_ = json.dumps(value, ensure_ascii=False) if isinstance(value, str) else repr(value)
     return text_ if len(text_) <= 40 else text_[:37] + "..."
 
 
@@ -108,9 +114,10 @@ def _parse(raw: bytes) -> Any:
         raise
     except RecursionError:
         raise _Refused("nested too deeply") from None
-    except ValueError as exc:  # JSONDecodeError, and an integer of thousands of digits
-        reason = exc.msg if isinstance(exc, json.JSONDecodeError) else str(exc).split(";")[0]
-        raise _Refused(f"not a JSON line ({reason[:80]})") from None
+    except json.JSONDecodeError as exc:
+        raise _Refused(f"not a JSON line ({exc.msg})") from None
+    except ValueError:  # an integer of more digits than Python converts (4300)
+        raise _Refused("a number of thousands of digits is not a number a trace may hold") from None
 
 
 # -- the fields a tool uses ------------------------------------------------------------------------
