@@ -575,9 +575,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--window", type=float, nargs=2, metavar=("START", "END"), help="only these seconds of the trace")
     p.add_argument("--format", dest="formats", action="append", choices=["svg", "pdf"],
                    help="also write each figure as SVG or PDF (vector, for a paper; repeatable)")
-    p.add_argument("--width", type=float, default=9.0, metavar="INCHES",
-                   help="draw the figures this wide, e.g. 3.5 for one column of a paper (default 9; text keeps "
-                        "its size, tick labels are thinned where they would overlap)")
+    p.add_argument("--width", type=float, metavar="INCHES",
+                   help="draw the figures this wide, e.g. 3.5 for one column of a paper (default 9, the bars of "
+                        "many flows wider; text keeps its size, tick labels are thinned where they would overlap)")
     p.add_argument("--run", metavar="ID|N", help="a trace the daemon appended to across restarts holds several runs: "
                                                  "this one (its id, or 1 for the first, -1 the last; default the last)")
 

@@ -34,6 +34,7 @@ import json
 import math
 import os
 import textwrap
+import warnings
 from collections import defaultdict
 from typing import Any
 
@@ -194,6 +195,52 @@ def _span(times: list[float]) -> tuple[float, float]:
     return low - pad, high + pad
 
 
+LEGEND_PT = 7.0
+
+
+def _legend(ax, width_in: float, handles: list | None = None, labels: list[str] | None = None,
+            columns: int | None = None, chars: int | None = None) -> None:
+    """The legend above the axes, in as many columns as fit the figure's width, labels shortened to
+    fit (the full names are in the CSV tables): inside the axes it would hide data, beside them it
+    would squeeze a narrow figure.  :func:`_fit_legends` narrows it further once laid out."""
+    if handles is None or labels is None:
+        handles, labels = ax.get_legend_handles_labels()
+    if not handles:
+        return
+    char_pt = LEGEND_PT * 0.62
+    room_pt = width_in * 72 * 0.82
+    chars = chars or max(10, int((room_pt - 28) / char_pt))
+    shown = [_short(label, chars) for label in labels]
+    column_pt = max(len(label) for label in shown) * char_pt + 28
+    if columns is None:
+        columns = max(1, min(len(shown), int(room_pt // column_pt)))
+    ax.legend(handles, shown, loc="lower left", bbox_to_anchor=(0.0, 1.01), ncol=columns, fontsize=LEGEND_PT,
+              frameon=False, borderaxespad=0.0, handlelength=1.6, columnspacing=1.0)
+    ax._hilgate_legend = (width_in, handles, labels, columns, chars)
+
+
+def _fit_legends(fig) -> bool:
+    """A legend that runs off the figure takes fewer columns (more rows), then shorter labels, until it
+    fits."""
+    changed = False
+    fig.canvas.draw()
+    for ax in fig.axes:
+        made = getattr(ax, "_hilgate_legend", None)
+        while made is not None and ax.get_legend() is not None and not _inside(fig, ax.get_legend()):
+            width_in, handles, labels, columns, chars = made
+            if columns > 1:
+                columns -= 1
+            elif chars > 8:
+                chars = max(8, chars - 4)
+            else:
+                break
+            _legend(ax, width_in, handles, labels, columns, chars)
+            made = ax._hilgate_legend
+            changed = True
+            fig.canvas.draw()
+    return changed
+
+
 def _overlapping(boxes: list) -> bool:
     for a, b in zip(boxes, boxes[1:]):
         if a.x0 < b.x1 - 1 and b.x0 < a.x1 - 1 and a.y0 < b.y1 - 1 and b.y0 < a.y1 - 1:
@@ -201,18 +248,38 @@ def _overlapping(boxes: list) -> bool:
     return False
 
 
+def _shown_labels(axis) -> list:
+    """The tick labels drawn: visible, with text, and at a tick inside the axis' view (matplotlib
+    keeps labels for ticks just outside it, which are not drawn)."""
+    low, high = sorted(axis.get_view_interval())
+    slack = (high - low) * 1e-9
+    return [label for loc, label in zip(axis.get_majorticklocs(), axis.get_majorticklabels())
+            if label.get_visible() and label.get_text() and low - slack <= loc <= high + slack]
+
+
 def _tick_boxes(axis, renderer) -> list:
-    labels = [label for label in axis.get_ticklabels() if label.get_visible() and label.get_text()]
-    boxes = [label.get_window_extent(renderer) for label in labels]
+    boxes = [label.get_window_extent(renderer) for label in _shown_labels(axis)]
     return sorted(boxes, key=lambda b: (b.x0, b.y0))
 
 
-def _legible(fig) -> int:
-    """Thin or turn the tick labels of every axis until none overlaps another; returns how many axes
-    still have overlapping labels (0, unless a figure is absurdly small)."""
+def _clear_corners(ax, renderer) -> bool:
+    """An x tick label at the axes' edge may run into the y tick labels beside it: it is hidden."""
+    ys = _tick_boxes(ax.yaxis, renderer)
+    hidden = False
+    for label in _shown_labels(ax.xaxis):
+        box = label.get_window_extent(renderer)
+        if any(box.x0 < y.x1 - 1 and y.x0 < box.x1 - 1 and box.y0 < y.y1 - 1 and y.y0 < box.y1 - 1 for y in ys):
+            label.set_visible(False)
+            hidden = True
+    return hidden
+
+
+def _legible(fig) -> tuple[bool, int]:
+    """Thin or turn the tick labels of every axis until none overlaps another; returns whether it
+    changed any, and how many axes still have overlapping labels (0, unless a figure is absurdly small)."""
     from matplotlib.ticker import FixedLocator, MaxNLocator
 
-    still = 0
+    changed, still = False, 0
     fig.canvas.draw()
     renderer = fig.canvas.get_renderer()
     for ax in fig.axes:
@@ -223,23 +290,59 @@ def _legible(fig) -> int:
             tries = 0
             while _overlapping(_tick_boxes(axis, renderer)) and tries < 12:
                 tries += 1
+                changed = True
                 locator = axis.get_major_locator()
                 if isinstance(locator, FixedLocator) or axis.get_scale() == "log":
-                    labels = axis.get_ticklabels()
+                    labels = _shown_labels(axis)
                     if axis is ax.xaxis and tries == 1:
                         for label in labels:  # named categories: upright first
                             label.set_rotation(90)
                             label.set_horizontalalignment("center")
                     else:
-                        shown = [label for label in labels if label.get_visible() and label.get_text()]
-                        for label in shown[1::2]:  # then every other one
+                        for label in labels[1::2]:  # then every other one
                             label.set_visible(False)
                 else:
                     count = max(2, len([t for t in axis.get_ticklabels() if t.get_text()]) // 2)
                     axis.set_major_locator(MaxNLocator(nbins=count, min_n_ticks=1))
                 fig.canvas.draw()
             still += _overlapping(_tick_boxes(axis, renderer))
-    return still
+        if _clear_corners(ax, renderer):
+            changed = True
+            fig.canvas.draw()
+    return changed, still
+
+
+def _collisions(fig, caption) -> int:
+    """Pairs of texts of different kinds that overlap: tick labels of one axis, axis labels, legends,
+    the caption."""
+    renderer = fig.canvas.get_renderer()
+    groups: list[list] = [[caption.get_window_extent(renderer)]]
+    for ax in fig.axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            groups.append(_tick_boxes(axis, renderer))
+            if axis.label.get_text():
+                groups.append([axis.label.get_window_extent(renderer)])
+        legend = ax.get_legend()
+        if legend is not None:
+            groups.append([legend.get_window_extent(renderer)])
+    hits = 0
+    for i, first in enumerate(groups):
+        for second in groups[i + 1:]:
+            hits += any(a.x0 < b.x1 - 1 and b.x0 < a.x1 - 1 and a.y0 < b.y1 - 1 and b.y0 < a.y1 - 1
+                        for a in first for b in second)
+    return hits
+
+
+def _outside(fig) -> int:
+    """Texts (tick labels, axis labels, legends) that run off the figure."""
+    renderer = fig.canvas.get_renderer()
+    count = 0
+    for ax in fig.axes:
+        texts = _shown_labels(ax.xaxis) + _shown_labels(ax.yaxis) + [ax.xaxis.label, ax.yaxis.label]
+        legend = ax.get_legend()
+        count += sum(1 for t in texts if t.get_text() and not _inside(fig, t))
+        count += legend is not None and not _inside(fig, legend)
+    return count
 
 
 def _caption_lines(caption: str, width_in: float) -> list[str]:
@@ -272,11 +375,17 @@ class _Writer:
         fig.set_figheight(height)
         text = fig.text(0.012, 4 / 72 / height, "\n".join(lines), fontsize=CAPTION_PT, ha="left", va="bottom",
                         gid="caption")
-        fig.tight_layout(rect=(0, extra / height, 1, 1))
-        overlaps = _legible(fig)
-        self.inspect.setdefault(stem, {}).update({"overlaps": overlaps, "caption": caption,
-                                                  "caption_inside": _inside(fig, text),
-                                                  "width_in": fig.get_figwidth()})
+        with warnings.catch_warnings(record=True) as complaints:
+            warnings.simplefilter("always")
+            fig.tight_layout(rect=(0, extra / height, 1, 1))
+            if _fit_legends(fig) | _legible(fig)[0]:  # what moved takes other room: lay out again, check again
+                fig.tight_layout(rect=(0, extra / height, 1, 1))
+                _fit_legends(fig)
+        overlaps = _legible(fig)[1]
+        self.inspect.setdefault(stem, {}).update({
+            "overlaps": overlaps, "collisions": _collisions(fig, text), "outside": _outside(fig), "caption": caption,
+            "caption_inside": _inside(fig, text), "width_in": fig.get_figwidth(),
+            "layout": not any("tight" in str(w.message).lower() for w in complaints)})
         for fmt in self.formats:
             metadata = ({"Title": f"{self.title}: {stem}", "Subject": caption} if fmt == "pdf"
                         else {"Title": f"{self.title}: {stem}", "Description": caption})
@@ -290,11 +399,13 @@ class _Writer:
 
 def figures(trace: Trace, summaries: dict[str, dict], vehicles: list[str], out: str,
             title: str = "", formats: tuple[str, ...] = ("png",), subtitle: str = "",
-            inspect: dict[str, dict] | None = None, width: float = WIDTH_IN) -> list[tuple[str, str]]:
-    """Write the figures (PNG, and SVG/PDF when asked), ``width`` inches wide; returns (file name,
-    caption) pairs.  ``inspect`` collects what was drawn, figure by figure (scales, series and their
-    styles, what was left out, whether tick labels overlap), for tests that check a figure from its
-    data."""
+            inspect: dict[str, dict] | None = None, width: float | None = None) -> list[tuple[str, str]]:
+    """Write the figures (PNG, and SVG/PDF when asked), ``width`` inches wide (default ``WIDTH_IN``,
+    and the bars of many flows wider); returns (file name, caption) pairs.  ``inspect`` collects what
+    was drawn, figure by figure (scales, series and their styles, what was left out, whether texts
+    overlap), for tests that check a figure from its data."""
+    width_given = width is not None
+    width = WIDTH_IN if width is None else width
     if not (math.isfinite(width) and 2.0 <= width <= 40.0):
         raise ReportError(f"--width {width:g}: give the figures' width in inches, from 2 to 40")
     plt = _pyplot()
@@ -308,7 +419,7 @@ def figures(trace: Trace, summaries: dict[str, dict], vehicles: list[str], out: 
     if trace.fifo:
         _fifo_figure(plt, writer, trace, width)
     if summaries:
-        _compare_figure(plt, writer, summaries, width)
+        _compare_figure(plt, writer, summaries, width, width_given)
     return writer.written
 
 
@@ -328,7 +439,7 @@ def _distance_figure(plt, writer: _Writer, trace: Trace, vehicles: list[str], wi
     ax.set_xlabel("time (s)")
     ax.set_ylabel("distance (m)")
     _plain(ax)
-    ax.legend(loc="best", fontsize="small")
+    _legend(ax, width)
     ax.grid(alpha=0.3)
     writer.inspect["distance"] = {"styles": styles, "coinciding": together}
     note = "".join(f"; {' and '.join(group)} coincide" for group in together)
@@ -404,13 +515,12 @@ def _timeline_figure(plt, writer: _Writer, trace: Trace, flows: dict[tuple[str, 
             shaded[f"{flow[0]} → {flow[1]}"] = periods
         ax.set_xlim(low, high)
         _plain(ax)
-        ax.text(0.005, 0.97, f"{flow[0]} → {flow[1]}", transform=ax.transAxes, fontsize="small", va="top",
-                ha="left", bbox={"facecolor": "white", "alpha": 0.8, "lw": 0, "pad": 1})
+        ax.text(0.005, 0.97, _short(f"{flow[0]} → {flow[1]}", max(16, int(width * 72 * 0.8 / (8.3 * 0.62)))),
+                transform=ax.transAxes, fontsize="small", va="top", ha="left",
+                bbox={"facecolor": "white", "alpha": 0.8, "lw": 0, "pad": 1})
         ax.grid(axis="x", alpha=0.3)
     axes[-1, 0].set_xlabel("time (s)")
-    columns = max(1, min(len(handles), int(width / 1.7)))
-    axes[0, 0].legend(list(handles.values()), list(handles), loc="lower left", bbox_to_anchor=(0.0, 1.01),
-                      ncol=columns, fontsize="x-small", frameon=False, borderaxespad=0.0)
+    _legend(axes[0, 0], width, list(handles.values()), list(handles))
     writer.inspect["timeline"] = {"aggregated": aggregated, "xlim": spans, "real_periods": shaded,
                                   "panels": [f"{a} → {b}" for a, b in chosen]}
     note = f"; counted per window for {', '.join(aggregated)}" if aggregated else ""
@@ -448,8 +558,7 @@ def _delay_figure(plt, writer: _Writer, trace: Trace, flows: dict[tuple[str, str
     ax.set_xlabel("time of delivery (s)")
     ax.set_ylabel(f"end-to-end delay ({unit}{', log scale' if logarithmic else ''})")
     _plain(ax)
-    if ax.get_legend_handles_labels()[0]:
-        ax.legend(loc="best", fontsize="small")
+    _legend(ax, width)
     ax.grid(alpha=0.3)
     together = coinciding(series)
     writer.inspect["delay"] = {"yscale": ax.get_yscale(), "unit": unit, "not_drawn": left_out,
@@ -477,8 +586,7 @@ def _fifo_figure(plt, writer: _Writer, trace: Trace, width: float) -> None:
                 marker=style[1] or None, markevery=max(1, len(points) // 10), fillstyle="none", label=link)
     ax.set_xlabel("time (s)")
     ax.set_ylabel("transmit FIFO (bytes)")
-    if series:
-        ax.legend(loc="best", fontsize="small")
+    _legend(ax, width)
     ax.grid(alpha=0.3)
     _plain(ax)
     together = coinciding(series)
@@ -491,15 +599,16 @@ def _fifo_figure(plt, writer: _Writer, trace: Trace, width: float) -> None:
     writer.save(fig, "fifo", "Transmit FIFO occupancy of each link" + note)
 
 
-def _compare_figure(plt, writer: _Writer, summaries: dict[str, dict], width: float) -> None:
+def _compare_figure(plt, writer: _Writer, summaries: dict[str, dict], width: float, width_given: bool) -> None:
     metrics = [("throughput_Bps", "throughput (B/s)", 0.0), ("efficiency", "efficiency", 0.0),
                ("delay_mean_s", "mean delay (s)", RESIDUE_S), ("jitter_s", "jitter (s)", RESIDUE_S)]
     names = list(summaries)
     flow_keys = list(dict.fromkeys(f"{f['from']} → {f['to']}" for s in summaries.values() for f in s["flows"]))
     if not flow_keys:
         return
-    wide = min(24.0, max(width, 0.35 * len(flow_keys) * len(names)))
-    fig, axes = plt.subplots(len(metrics), 1, figsize=(wide, 2.6 * len(metrics)), squeeze=False)
+    # a width given is kept (a paper's column); the default grows with the bars, up to 24 inches
+    wide = width if width_given else min(24.0, max(width, 0.35 * len(flow_keys) * len(names)))
+    fig, axes = plt.subplots(len(metrics), 1, figsize=(wide, 2.6 * len(metrics)), squeeze=False, sharex=True)
     bar = 0.8 / len(names)
     scales, not_drawn = {}, {}
     for ax, (key, label, residue) in zip(axes[:, 0], metrics):
@@ -526,10 +635,10 @@ def _compare_figure(plt, writer: _Writer, summaries: dict[str, dict], width: flo
         scales[key] = ax.get_yscale()
         _plain(ax)
         ax.set_ylabel(label)
-        ax.set_xticks([j + bar * (len(names) - 1) / 2 for j in range(len(flow_keys))],
-                      [_short(k) for k in flow_keys], fontsize="x-small")
         ax.grid(axis="y", alpha=0.3)
-    axes[0, 0].legend(loc="best", fontsize="small")
+    axes[-1, 0].set_xticks([j + bar * (len(names) - 1) / 2 for j in range(len(flow_keys))],
+                           [_short(k) for k in flow_keys], fontsize="x-small")  # (the panels share them)
+    _legend(axes[0, 0], wide)
     writer.inspect["compare"] = {"yscale": scales, "not_drawn": not_drawn}
     note = "".join(f"; {key}: {n} values of zero or below 1 ns (or missing) not drawn on the log axis"
                    for key, n in not_drawn.items() if n)
@@ -572,11 +681,11 @@ def write_index(out: str, written: list[tuple[str, str]], tables: list[str], tit
 def report(trace_path: str, summary_paths: list[str], out: str, vehicles: list[str] | None = None,
            csv_tables: bool = False, title: str | None = None,
            window: tuple[float, float] | None = None, run: Run | None = None,
-           formats: tuple[str, ...] = ("png",), width: float = WIDTH_IN) -> list[str]:
+           formats: tuple[str, ...] = ("png",), width: float | None = None) -> list[str]:
     """Everything ``hilgate report`` writes; returns the paths."""
     if window is not None and not window[0] < window[1]:
         raise ReportError(f"--window {window[0]:g} {window[1]:g} is empty: give START < END in seconds")
-    if not (math.isfinite(width) and 2.0 <= width <= 40.0):
+    if width is not None and not (math.isfinite(width) and 2.0 <= width <= 40.0):
         raise ReportError(f"--width {width:g}: give the figures' width in inches, from 2 to 40")
     trace = load_trace(trace_path, window, run)
     summaries = {os.path.splitext(os.path.basename(p))[0]: load_summary(p) for p in summary_paths}
