@@ -7,8 +7,8 @@ BIN    := $(VENV)/bin
 SCENE  ?= scenes/demo.yaml
 FUZZ   ?= 1
 
-# `sudo make install` / `sudo make uninstall`: hilgate as a systemd service (systemd/install.sh; README,
-# "Operations"). DESTDIR=DIR writes every file under DIR instead and skips the root-only steps (the
+# `sudo make install` / `sudo make uninstall`: hilgate as a systemd service (systemd/install.sh;
+# docs/operations.md). DESTDIR=DIR writes every file under DIR instead and skips the root-only steps (the
 # hilgate user, systemctl); PURGE=1 also removes changed configuration, the user, state and traces.
 DESTDIR      ?=
 PREFIX       ?= /opt/hilgate
@@ -59,13 +59,13 @@ install uninstall:
 	sh systemd/install.sh $@
 
 # Every benchmark once (a few minutes each on a loaded 2-core machine); their output goes to bench.out
-# and from there into the README's performance section. NS3_PYTHON=PATH (a Python with the ns3 wheel)
+# and from there into docs/performance.md. NS3_PYTHON=PATH (a Python with the ns3 wheel)
 # runs ns-3 UAN alongside the ALOHA ring; without it ns-3 is "not run".
 NS3_PYTHON ?=
 
 bench: $(VENV)/.installed
 	NS3_PYTHON='$(NS3_PYTHON)' $(BIN)/python benchmarks/run_all.py --out bench.out
-	$(BIN)/python benchmarks/readme_bench.py bench.out README.md
+	$(BIN)/python benchmarks/readme_bench.py bench.out docs/performance.md
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache

@@ -1,13 +1,13 @@
 #!/usr/bin/env python3
-"""Write ``make bench``'s output (``bench.out``, from run_all.py) into the README's performance section.
+"""Write ``make bench``'s output (``bench.out``, from run_all.py) into docs/performance.md's performance section.
 
-The section lies between the lines ``<!-- bench:begin -->`` and ``<!-- bench:end -->`` of the README;
+The section lies between the lines ``<!-- bench:begin -->`` and ``<!-- bench:end -->`` of the page;
 everything between them is replaced by the run's header and each benchmark's output verbatim, in a
 code block under its command line.  Nothing is typed by hand, so every figure and ratio in the section
 was measured in that one run.  Refuses (exit 2, one line) an output file without the run header or
-without any benchmark, and a README without the markers.
+without any benchmark, and a page without the markers.
 
-    python benchmarks/readme_bench.py [bench.out] [README.md]
+    python benchmarks/readme_bench.py [bench.out] [docs/performance.md]
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ BEGIN, END = "<!-- bench:begin -->", "<!-- bench:end -->"
 
 
 def section(output: str) -> str:
-    """The README text for one ``bench.out``."""
+    """The performance section's text for one ``bench.out``."""
     lines = output.splitlines()
     if not lines or not lines[0].startswith("# make bench"):
         raise ValueError("not the output of `make bench` (no '# make bench' header on its first line)")
@@ -44,13 +44,13 @@ def section(output: str) -> str:
 def replace(readme: str, text: str) -> str:
     start, end = readme.find(BEGIN), readme.find(END)
     if start < 0 or end < start:
-        raise ValueError(f"no {BEGIN} ... {END} lines in the README")
+        raise ValueError(f"no {BEGIN} ... {END} lines in the page")
     return readme[:start + len(BEGIN)] + "\n" + text + "\n" + readme[end:]
 
 
 def main(argv: list[str]) -> int:
     output_path = argv[0] if argv else "bench.out"
-    readme_path = argv[1] if len(argv) > 1 else "README.md"
+    readme_path = argv[1] if len(argv) > 1 else "docs/performance.md"
     try:
         with open(output_path) as handle:
             text = section(handle.read())

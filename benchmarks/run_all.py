@@ -4,7 +4,7 @@
 Each benchmark's standard output is shown as it comes and written to ``--out`` (default
 ``bench.out``) under a header line ``== <command line> ==``, after a first block saying when, on which
 host (cores, load average) and with which peers.  ``benchmarks/readme_bench.py`` turns that file into
-the README's performance section, so no figure there is typed by hand.  A benchmark that fails stops
+docs/performance.md, so no figure there is typed by hand.  A benchmark that fails stops
 the run (exit 1) and the file is left incomplete on purpose.
 
     python benchmarks/run_all.py [--ns3-python PATH] [--out bench.out]

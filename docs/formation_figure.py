@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The README's formation figure (docs/figures/exp3-formation.png) from the virtual-time run of UWSim-NET's
+"""docs/paper.md's formation figure (docs/figures/exp3-formation.png) from the virtual-time run of UWSim-NET's
 third experiment: ``scenes/paper-exp3-formation-virtual.yaml`` (examples/formation/apps.py in ``hilgate
 sim``) under CS-ALOHA and S-FAMA, 60 simulated seconds, the scene's seed.  Deterministic: running it again
 draws the same curves.  Nothing in it is typed by hand:

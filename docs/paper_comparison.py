@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Every result UWSim-NET's paper (Centelles et al. 2019, sections 3.1–3.3) states beside hilgate's, with
 the command that gives hilgate's, and, where they differ, the experiments that find why: writes
-docs/paper-comparison.md (the README links it).  Nothing in it is typed by hand; run it again after a
+docs/paper-comparison.md (docs/paper.md links it).  Nothing in it is typed by hand; run it again after a
 change to the model:
 
     python docs/paper_comparison.py          # about a minute (some 170 virtual-time runs); `make paper`
@@ -345,7 +345,7 @@ def markdown(r: dict) -> str:
     ratio3 = e3["s-fama"]["mean"] / e3["cs-aloha"]["mean"]
     add(f"| Comparable performance with CS-ALOHA and S-FAMA | mean {e3['cs-aloha']['mean']:.3f} / "
         f"{e3['s-fama']['mean']:.3f} m, max {e3['cs-aloha']['max']:.3f} / {e3['s-fama']['max']:.3f} m (virtual time, "
-        f"seed 3; the real-time spread over 5 runs is in the README) | `python docs/formation_figure.py` | "
+        f"seed 3; the real-time spread over 5 runs is in docs/paper.md) | `python docs/formation_figure.py` | "
         f"{'yes' if ratio3 < 2 else 'no'} (S-FAMA's mean {ratio3:.1f}×) |")
     add("| The leader's error (commanded to actual position) jumps at each new command | not measured: hilgate's "
         "leader application steers to each waypoint it hears, and the error from the commanded position is not "

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """UWSim-NET's second experiment as the paper ran it (Table 1's rates per protocol), and the paper's
-findings beside hilgate's: writes docs/paper-exp2.md (the README links it).  Nothing in it is typed by
+findings beside hilgate's: writes docs/paper-exp2.md (docs/paper.md links it).  Nothing in it is typed by
 hand; run it again after a change to the model:
 
     python docs/paper_exp2.py            # about ten seconds

@@ -90,7 +90,7 @@ class Radio:
 
     What the medium reads (the radio's identity on the channels, from the modem's configuration):
     ``address``, ``tx_channel``, ``rx_channel``, ``range_m`` (as a sender), ``pose`` (where its vehicle
-    is), ``error`` (the receiving side's error model, as the README decides), ``host`` (to find a
+    is), ``error`` (the receiving side's error model, as docs/channel-models.md decides), ``host`` (to find a
     modem by address) and ``listens`` (False for a modem another host serves: it only sends here).  What the medium calls: :meth:`arrive` for every arrival, :meth:`unreachable`
     for a frame addressed to it that cannot arrive.  What the modem calls: :meth:`configure`,
     :meth:`transmit` and :meth:`busy`; it sets ``pose`` and ``judges_all``.

@@ -2,7 +2,7 @@
 # hilgate as a systemd service: `sudo make install` and `sudo make uninstall` run this script.
 #
 #   install     PREFIX (/opt/hilgate): a venv with hilgate installed into it (not editable: it does not
-#               use this checkout once installed) and the README in share/doc/hilgate;
+#               use this checkout once installed) and the README with its docs/ pages in share/doc/hilgate;
 #               UNITDIR/hilgate.service (/etc/systemd/system), SYSCONFDIR/hilgate/hilgate.env and
 #               scene.yaml (from the demo scene; an existing one is never replaced),
 #               LOGROTATEDIR/hilgate (/etc/logrotate.d), BINDIR/hilgate (/usr/local/bin) a symbolic
@@ -142,6 +142,9 @@ do_install() {
     "$D$PREFIX/bin/python" -m pip install --quiet --disable-pip-version-check --no-warn-script-location \
         $compile $PIP_ARGS "$WORK/src"
     install -D -m 0644 "$SRC/README.md" "$D$PREFIX/share/doc/hilgate/README.md"
+    for page in "$SRC"/docs/*.md "$SRC"/docs/figures/*.png; do # the README's links, relative as in the checkout
+        install -D -m 0644 "$page" "$D$PREFIX/share/doc/hilgate/${page#"$SRC"/}"
+    done
     if [ -n "$D" ]; then # staged: scripts and byte code must name the paths they will have on the target
         grep -rlF -- "$D$PREFIX" "$D$PREFIX/bin" "$D$PREFIX/pyvenv.cfg" 2>/dev/null | while read -r file; do
             if ! [ -L "$file" ]; then sed -i "s#$D$PREFIX#$PREFIX#g" "$file"; fi

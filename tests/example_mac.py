@@ -1,4 +1,4 @@
-"""The README's example of a user-defined MAC: TDMA, each node sends only in its own time slot.
+"""The example of a user-defined MAC in docs/channel-models.md: TDMA, each node sends only in its own time slot.
 
 List it in a scene (``plugins: [example_mac.py]``, relative to the scene's file) or give
 ``--plugin example_mac.py``, then name it by its ``name``, ``mac: {protocol: tdma, slot_s: 0.5, slots: 4}``,

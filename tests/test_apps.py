@@ -1,5 +1,5 @@
 """One application class, two worlds: in-process on the model's clock (``hilgate sim``) and as its own
-process against the daemon (``hilgate app``).  The example of the README, examples/apps/pingpong.py."""
+process against the daemon (``hilgate app``).  The example of docs/applications.md, examples/apps/pingpong.py."""
 
 from __future__ import annotations
 
@@ -119,7 +119,7 @@ def test_hilgate_app_refuses_what_is_not_an_application_in_one_line(tmp_path):
                                                ("s-fama", "0.194", ["0.688", "0.688", "0.689"])])
 def test_the_formation_in_virtual_time_gives_the_readmes_figures(tmp_path, mac, mean, largest):
     """UWSim-NET's third experiment with the applications of examples/formation/apps.py, in virtual time
-    (scenes/paper-exp3-formation-virtual.yaml): the follower errors the README prints, to the digit
+    (scenes/paper-exp3-formation-virtual.yaml): the follower errors docs/paper.md prints, to the digit
     (deterministic: no host load in them)."""
     formation = os.path.join(os.path.dirname(HERE), "examples", "formation")
     result = subprocess.run([sys.executable, os.path.join(formation, "run.py"), "--virtual", "--mac", mac,

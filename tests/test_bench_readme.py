@@ -1,4 +1,4 @@
-"""The README's performance section is made from `make bench`'s output only (benchmarks/readme_bench.py):
+"""The performance section (docs/performance.md) is made from `make bench`'s output only (benchmarks/readme_bench.py):
 every benchmark's lines verbatim under its command line, replaced in place on the next run."""
 
 import os

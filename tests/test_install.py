@@ -103,14 +103,12 @@ def test_unit_closes_the_daemon_to_other_users_and_keeps_its_limits(installed):
 
 
 def test_service_pty_links_agree_with_private_tmp():
-    """PrivateTmp hides the daemon's /tmp from every other program: the README must tell service users
+    """PrivateTmp hides the daemon's /tmp from every other program: docs/operations.md must tell service users
     to put emulated modems' pty links in /run/hilgate, and the unit must say why."""
     unit = unit_settings(REPO / "systemd" / "hilgate.service")
     assert unit["PrivateTmp"] == ["yes"] and unit["ProtectSystem"] == ["strict"]
     assert "pty: /run/hilgate/" in (REPO / "systemd" / "hilgate.service").read_text()
-    readme = (REPO / "README.md").read_text()
-    operations = readme[readme.index("\n## Operations\n"):]
-    operations = operations[:operations.find("\n## ", 1)]
+    operations = (REPO / "docs" / "operations.md").read_text()
     assert "pty: /run/hilgate/" in operations
     for words in ("journalctl -u hilgate", "copytruncate", "systemctl reload hilgate", "SIGKILL", "make install"):
         assert words in operations, words

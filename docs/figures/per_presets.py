@@ -1,4 +1,4 @@
-"""Draws docs/figures/per-presets.png, the README's "Choosing an error model" figure: PER(d) of a
+"""Draws docs/figures/per-presets.png, docs/channel-models.md's "Choosing an error model" figure: PER(d) of a
 64-byte frame for the EvoLogics presets with `error: {kind: physical}` (the model's defaults: Thorp,
 k = 1.5, shipping 0.5, no wind) at AT!L0 and AT!L3, and for the S100 preset's expression.
 

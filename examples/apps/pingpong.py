@@ -1,4 +1,4 @@
-"""Ping and pong: the application API's complete example (README, "Applications").
+"""Ping and pong: the application API's complete example (docs/applications.md).
 
 ``Ping`` sends a numbered ping every ``period_s`` to ``peer`` and logs each pong's round trip;
 ``Pong`` answers every ping.  The same classes run in virtual time (``hilgate sim

@@ -32,7 +32,7 @@ LOOPBACK = ("tcp/127.0.0.1:0",)
 
 @dataclass(frozen=True)
 class ZenohSpec:
-    """How this daemon joins the others (README, "Several hosts").  ``listen`` is loopback unless the
+    """How this daemon joins the others (docs/several-hosts.md).  ``listen`` is loopback unless the
     scene or ``--zenoh-listen`` says otherwise; multicast scouting is off unless asked, so a daemon
     never announces itself on a vehicle's network by surprise."""
 
