@@ -191,3 +191,42 @@ def test_a_swap_to_an_emulated_modem_and_back_keeps_one_account_per_link(tmp_pat
                          capture_output=True, text=True, timeout=120)
     assert cli.returncode == 0, cli.stderr
     assert "timeline.png" in os.listdir(out)
+
+
+def test_a_link_removed_and_added_again_keeps_its_account(tmp_path):
+    a, b = unique("ra"), unique("rb")
+    scene = f"""\
+channels: {{ac: {{speed_mps: 1500}}}}
+vehicles: {{va: {{pose: {{static: [0, 0, 0]}}}}, vb: {{pose: {{static: [150, 0, 0]}}}}}}
+links:
+  {a}: {{vehicle: va, address: 1, bitrate_bps: 2000, gli: [socket]}}
+  {b}: {{vehicle: vb, address: 2, bitrate_bps: 2000, gli: [socket]}}
+"""
+    daemon = Daemon(tmp_path, scene, [a, b])
+    try:
+        daemon.wait_for("READY=1")
+        with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
+            la.send(b"one", dst=2)
+            assert lb.recv(timeout=30).data == b"one"
+        daemon.reload(scene.replace(f"  {b}: {{vehicle: vb, address: 2, bitrate_bps: 2000, gli: [socket]}}\n", ""))
+        assert [link["id"] for link in daemon.status()["links"]] == [a]
+        daemon.reload(scene)
+        with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
+            la.send(b"two", dst=2)
+            assert lb.recv(timeout=30).data == b"two"
+        status = {link["id"]: link for link in daemon.status()["links"]}
+        assert status[b]["rx_packets"] == 2 and status[a]["since_s"] == 0.0 < status[b]["since_s"]
+        table = subprocess.run([sys.executable, "-m", "hilgate", "status", "--runtime-dir", daemon.runtime],
+                               capture_output=True, text=True, timeout=60)
+        assert "since s" in table.stdout.splitlines()[1]
+        daemon.stop()
+    finally:
+        daemon.close()
+    events = daemon.trace_events()
+    first, second = (e for e in events if e["ev"] == "reload")
+    assert first["changes"] == {b: {"removed": True}} and second["changes"] == {b: {"added": True}}
+    summary = json.loads(daemon.summary.read_text())
+    [entry] = [link for link in summary["links"] if link["id"] == b]
+    assert entry["rx_packets"] == 2 and [s["rx_packets"] for s in entry["segments"]] == [1, 1]
+    assert [(s["start_s"], s["end_s"]) for s in entry["segments"]] == [(0.0, first["t"]),
+                                                                       (second["t"], summary["sim_time_s"])]
