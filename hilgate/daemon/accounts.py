@@ -26,6 +26,9 @@ Counters = dict[str, Any]
 link's GLI losses by cause) and ``fifo_peak_bytes`` (a simulated modem's, else None)."""
 
 
+ZERO: Counters = {**dict.fromkeys(COUNTS, 0), "drop_causes": {}, "fifo_peak_bytes": None}
+
+
 def _utc_now() -> str:
     return datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="milliseconds")
 
@@ -35,13 +38,13 @@ class Segment:
 
     __slots__ = ("backend", "start", "since", "end", "_base", "_read", "_final")
 
-    def __init__(self, backend: str, start: float, read: Callable[[], Counters]):
+    def __init__(self, backend: str, start: float, read: Callable[[], Counters], base: Counters | None = None):
         self.backend = backend
         self.start = start
         self.since = _utc_now()  # the wall clock, for people reading hilgate status
         self.end: float | None = None
         self._read = read
-        self._base = read()
+        self._base = base if base is not None else read()
         self._final: Counters | None = None
 
     def close(self, t: float) -> None:
@@ -85,10 +88,12 @@ class LinkAccount:
         last = self.segments[-1] if self.segments else None
         return last if last is not None and last.end is None else None
 
-    def open(self, t: float, backend: str, read: Callable[[], Counters]) -> Segment:
-        """A new backend period from ``t`` (closing the one before at ``t``)."""
+    def open(self, t: float, backend: str, read: Callable[[], Counters], from_zero: bool = False) -> Segment:
+        """A new backend period from ``t`` (closing the one before at ``t``).  ``from_zero``: everything
+        the counters hold is this period's (a link just built: what its doors counted while opening,
+        frames left in its queues by an earlier run, belongs to it)."""
         self.close(t)
-        segment = Segment(backend, t, read)
+        segment = Segment(backend, t, read, ZERO if from_zero else None)
         self.segments.append(segment)
         return segment
 

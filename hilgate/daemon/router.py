@@ -68,12 +68,13 @@ class RoutedLink:
         """Put ``backend`` (of ``kind``, the scene's name for it) behind the endpoints: the old one is
         closed first, and its period of the link's account ends with what it counted."""
         now = self.router.scheduler.now()
+        first = self.backend is None
         if self.backend is not None and self.backend is not backend:
             self.backend.close()
             self.account.close(now)
         self.backend = backend
         if self.account.current is None:
-            self.account.open(now, kind or self.spec.backend, self.counters)
+            self.account.open(now, kind or self.spec.backend, self.counters, from_zero=first)
         backend.on_receive = self.deliver
         backend.on_idle = self.state_changed
         backend.on_state = lambda state: self.state_changed()
