@@ -5,7 +5,8 @@ A MAC sits between the modem's transmit FIFO and its PHY.  It is *told*:
 - ``on_enqueue()``: the application (or a flow) put a frame in the FIFO;
 - ``on_tx_done(frame)``: the PHY finished putting ``frame`` on air;
 - ``on_frame(frame, cause, addressed)``: an arrival ended at this modem; ``cause`` is None for a good
-  frame, else ``"prop"``, ``"col"`` or ``"mult"``; ``addressed`` says whether it was meant for this
+  frame, else ``"prop"``, ``"col"``, ``"mult"`` or ``"modulation"`` (a modulation this modem does not
+  decode: it heard the frame, as interference, but cannot read it); ``addressed`` says whether it was meant for this
   modem (its address, broadcast, or the modem is promiscuous).  Only frames for this modem are
   reported unless the MAC sets ``hears_all`` (to overhear RTS/CTS, for example).
 - timers it set itself fire (plain callbacks through ``modem.clock``).

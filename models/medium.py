@@ -14,6 +14,11 @@ and a sender with many moving neighbours finds them through a grid of where they
 widened by how far their top speed can have taken them since.  Both keep the list order, so traces
 are the same as with a full scan; the work per transmission no longer grows with the number of modems.
 
+Each pair's loss model is bound once, when the pair is listed (``path.py``: the receiver's error model
+with the sender's front end and bit rate).  A receiver that refuses a sender (bands that do not overlap:
+it hears nothing; a modulation it does not decode: interference only) leaves that pair off the fast path,
+so only such pairs pay for the check.
+
 The arithmetic is DESIGN.md's "timing and loss model", step 3 (and the PER of step 5).
 """
 
@@ -25,6 +30,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Iterable
 
 from .frame import BROADCAST
+from .path import bind_path
 from .radio import OVERLAP_EPS, Arrival  # noqa: F401  (their home was here; kept importable)
 
 if TYPE_CHECKING:
@@ -48,11 +54,13 @@ class Channel:
 class _Neighbour:
     """A (sender, receiver) pair on the sender's transmit channel, with what can be precomputed.
 
-    It is also the loss model handed with each arrival on this path: the receiver's error model at
-    the distance, cached per frame size when neither vehicle moves."""
+    It is also the loss model handed with each arrival on this path: the receiver's error model bound
+    to the sender (``path.py``) at the distance, cached per frame size when neither vehicle moves.  A
+    pair whose receiver refuses the sender (``refused``: another band, a modulation it does not decode)
+    never takes the fast path (``reach`` is False)."""
 
     __slots__ = ("radio", "static", "reach", "d", "tau", "in_range", "rmin", "rmax", "min_delay", "speed",
-                 "per_cache", "model", "power")
+                 "per_cache", "model", "power", "refused", "interferes")
 
     def __init__(self, sender: "Radio", receiver: "Radio", channel: Channel):
         self.radio = receiver
@@ -60,9 +68,7 @@ class _Neighbour:
         self.min_delay = channel.min_delay_s
         self.speed = channel.speed_mps
         self.per_cache: dict[int, float] | None = None  # made at the first loss drawn: a million pairs, few draw
-        error = receiver.error
-        path_from = getattr(error, "path_from", None)  # a physical model takes the sender's source level
-        self.model = path_from(sender.error) if path_from is not None else error
+        self.model, self.refused, self.interferes = bind_path(sender, receiver)
         self.power = -1.0  # received power on a static path, once asked (collisions: sinr)
         self.static = bool(sender.pose.static and receiver.pose.static)
         self.d = self.tau = 0.0
@@ -76,7 +82,7 @@ class _Neighbour:
                 self.d = math.dist(a, b)
                 self.tau = channel.delay(self.d)
                 self.in_range = self.rmin <= self.d <= self.rmax
-        self.reach = self.static and self.in_range  # the common case, tested first: d and tau are known
+        self.reach = self.static and self.in_range and self.refused is None  # the common case, tested first
 
     def per(self, d: float, size: int) -> float:
         """Probability that a frame of ``size`` bytes is lost on this path at distance ``d``."""
@@ -343,6 +349,9 @@ class Medium:
             if nb.reach:
                 d = nb.d
                 start = t + nb.tau
+            elif nb.static:  # a listed static pair is in range: this receiver refuses the sender
+                d = nb.d
+                start = t + nb.tau
             else:
                 if sender_position is None:
                     sender_position = sender.pose.position(t)
@@ -366,6 +375,14 @@ class Medium:
                     missed += 1
                     continue
                 start = t + nb.min_delay + d / nb.speed
+            if nb.refused is not None:
+                if not nb.interferes:  # outside its band: it hears nothing
+                    if radio.address == dst:
+                        radio.unreachable(frame, nb.refused)
+                    missed += 1
+                    continue
+                radio.arrive_refused(frame, t, start, start + duration, d, nb, nb.refused)
+                continue
             radio.arrive(frame, t, start, start + duration, d, nb)
         self.arrivals += len(neighbours) - missed
 

@@ -50,6 +50,7 @@ class ModemParams:
     promiscuous: bool = False
     ack_bytes: int = 6  # the modem's own ACK frame (acoustic_ack.py), for frames that ask for one
     ack_turnaround_s: float = 0.0  # end of a reception to its ACK on air
+    acoustic: Any = None  # the acoustic front end (physical.Acoustic), whatever ``error`` is: path.py binds it
 
 
 @dataclass
@@ -112,7 +113,7 @@ class SimModem:
         self.fifo_bytes = params.fifo_bytes
         self.promiscuous = params.promiscuous
         self.radio.configure(params.address, params.tx_channel, params.rx_channel, params.range_m, params.error,
-                             params.duplex == "half")
+                             params.duplex == "half", params.acoustic, self.bitrate)
         if hasattr(self, "mac"):
             self.radio.judges_all = self.promiscuous or self.mac.hears_all
             self.medium.topology_changed()
@@ -349,9 +350,10 @@ class SimModem:
         if not self.closed and self.on_phy is not None:
             self.on_phy("rx_start", frame, start, end, None)
 
-    def unreachable(self, frame: "Frame") -> None:
-        """A frame for this modem was sent while it was out of the sender's range (or had no pose)."""
-        self.observer.err(self.clock.now(), self, frame, "range")
+    def unreachable(self, frame: "Frame", cause: str = "range") -> None:
+        """A frame for this modem was sent while it was out of the sender's range (or had no pose:
+        ``range``), or outside its band (``band``)."""
+        self.observer.err(self.clock.now(), self, frame, cause)
 
     def _deliver_now(self, frame: "Frame") -> None:
         self.stats.rx_packets += 1

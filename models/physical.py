@@ -9,6 +9,11 @@ preset) gives, for a frame of L bytes heard at distance d:
     Eb/N0   = SNR + 10·log10(B / R) + G       B bandwidth, R bit rate, G coding gain
     PER     = 1 − (1 − BER(Eb/N0))^(8L)
 
+On a path the sender gives the transmit side (SL with its AT!L step, R, the modulation of the BER,
+G, its band) and the receiver the receive side (its water, its band's noise NL, B); where the two
+bands differ, SL keeps the share of the sender's band inside the receiver's and fc is the centre of
+that overlap (:class:`PhysicalErrorModel`).
+
 the way ns-3's UAN module (``UanPropModelThorp``, ``UanNoiseModelDefault``, ``UanPhyGen``) and
 DESERT's physical layers chain them.  The object has the error model's interface (``per(d, size)``)
 so the medium and the radio use it as they use an expression; everything that depends only on the
@@ -22,19 +27,25 @@ noise (:meth:`per_sinr`) and drops an arrival whose signal-to-interference ratio
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, replace
 
 from .acoustics import (MODULATIONS, band_noise_db, ber, db_to_linear, francois_garrison_db_per_km,
                         thorp_db_per_km, transmission_loss_db)
 
-__all__ = ["Environment", "Acoustic", "PhysicalErrorModel", "LEVEL_DB", "ABSORPTION", "NOISE_BAND", "COLLISIONS"]
+__all__ = ["Environment", "Acoustic", "PhysicalErrorModel", "LEVEL_DB", "ABSORPTION", "NOISE_BAND", "COLLISIONS",
+           "BAND", "MODULATION"]
 
 LEVEL_DB = (0.0, -6.0, -12.0, -20.0)
 """EvoLogics ``AT!L`` source level steps: 0 is the maximum, then −6, −12 and −20 dB."""
 ABSORPTION = ("thorp", "francois-garrison")
 NOISE_BAND = ("integral", "centre")
 COLLISIONS = ("overlap", "sinr")
+BAND = "band"
+"""Why a receiver takes nothing from a sender whose band does not overlap its own (the trace's cause)."""
+MODULATION = "modulation"
+"""Why a receiver cannot decode a sender in its band that uses a modulation it does not decode."""
 
 
 @dataclass(frozen=True)
@@ -57,13 +68,17 @@ class Environment:
 
 @dataclass(frozen=True)
 class Acoustic:
-    """The modem's acoustic front end (a link's ``acoustic:`` key; presets give it)."""
+    """A modem's acoustic front end (a link's ``acoustic:`` key; presets give it).  As a sender it is
+    the transmit side of every path from the modem (level, band, modulation, coding); as a receiver
+    its band sets the noise and which senders it hears at all, and its modulation (with ``decodes``)
+    which it can decode."""
 
     band_khz: tuple[float, float]
     source_level_db: float           # dB re 1 µPa @ 1 m at AT!L0 (maximum)
     level: int = 0                   # AT!L 0..3
     modulation: str = "bpsk"
     coding_gain_db: float = 0.0
+    decodes: tuple[str, ...] = ()    # modulations it decodes besides its own (a multi-mode receiver)
 
     @property
     def centre_khz(self) -> float:
@@ -78,38 +93,79 @@ class Acoustic:
         """The source level this modem transmits at, its ``AT!L`` step applied."""
         return self.source_level_db + LEVEL_DB[self.level]
 
+    def overlap_khz(self, sender: "Acoustic") -> tuple[float, float] | None:
+        """The part of ``sender``'s band inside this receiver's band (None when they do not overlap;
+        bands that only touch do not overlap)."""
+        low = max(self.band_khz[0], sender.band_khz[0])
+        high = min(self.band_khz[1], sender.band_khz[1])
+        return (low, high) if low < high else None
+
+    def refuses(self, sender: "Acoustic") -> str | None:
+        """Why this receiver cannot take a frame from ``sender``: ``"band"`` (no overlap: it does not
+        hear it at all), ``"modulation"`` (it hears it, as interference, but cannot decode it), or None."""
+        if self.overlap_khz(sender) is None:
+            return BAND
+        if sender.modulation != self.modulation and sender.modulation not in self.decodes:
+            return MODULATION
+        return None
+
 
 class PhysicalErrorModel:
-    """The receiving modem's loss model, from physics (see the module's docstring).
+    """The receiving modem's loss model, from physics (see the module's docstring), on the path from
+    one sender.
 
-    ``source_db`` is what the sender emits: by default the receiver's own ``acoustic`` (modems of a
-    scene usually share a preset); the medium binds each path to its real sender with
-    :meth:`path_from`."""
+    ``acoustic`` and ``env`` are the receiving side (its band's noise, its water); ``sender`` and
+    ``sender_bitrate_bps`` the transmitting side (source level with its ``AT!L`` step, band,
+    modulation, coding, bit rate).  Without a sender the receiver's own front end and ``bitrate_bps``
+    stand in (a sender set alike); the medium binds each path to its real sender with
+    :meth:`path_from`, once per pair.
 
-    __slots__ = ("env", "acoustic", "bitrate_bps", "source_db", "alpha_db_per_km", "noise_db", "noise_power",
-                 "ebn0_offset_db", "capture", "unit", "constant_zero", "sinr")
+    A sender whose band only partly overlaps the receiver's is heard with the in-band fraction of its
+    power (its power spread evenly over its band), absorbed at the centre of the overlap; the noise is
+    the receiver's over its whole band, so Eb/N0 = SNR + 10·log10(B_receiver / R_sender) + G_sender."""
 
-    def __init__(self, env: Environment, acoustic: Acoustic, bitrate_bps: float, source_db: float | None = None):
-        if acoustic.modulation not in MODULATIONS:
-            raise ValueError(f"modulation must be one of {', '.join(MODULATIONS)}, not {acoustic.modulation!r}")
+    __slots__ = ("env", "acoustic", "bitrate_bps", "sender", "sender_bitrate_bps", "source_db", "in_band_db",
+                 "signal_db", "alpha_db_per_km", "noise_db", "noise_power", "ebn0_offset_db", "modulation",
+                 "capture", "unit", "constant_zero", "sinr")
+
+    def __init__(self, env: Environment, acoustic: Acoustic, bitrate_bps: float, sender: Acoustic | None = None,
+                 sender_bitrate_bps: float | None = None):
+        sender = acoustic if sender is None else sender
+        for front in (acoustic, sender):
+            if front.modulation not in MODULATIONS:
+                raise ValueError(f"modulation must be one of {', '.join(MODULATIONS)}, not {front.modulation!r}")
+            low, high = front.band_khz
+            if not 0 < low < high:
+                raise ValueError(f"band_khz must be [low, high] with 0 < low < high, not [{low:g}, {high:g}]")
         if env.absorption not in ABSORPTION:
             raise ValueError(f"absorption must be one of {', '.join(ABSORPTION)}, not {env.absorption!r}")
-        low, high = acoustic.band_khz
-        if not 0 < low < high:
-            raise ValueError(f"band_khz must be [low, high] with 0 < low < high, not [{low:g}, {high:g}]")
+        overlap = acoustic.overlap_khz(sender)
+        if overlap is None:
+            raise ValueError(f"the sender's band {sender.band_khz[0]:g}-{sender.band_khz[1]:g} kHz is outside the "
+                             f"receiver's {acoustic.band_khz[0]:g}-{acoustic.band_khz[1]:g} kHz")
         self.env = env
         self.acoustic = acoustic
         self.bitrate_bps = float(bitrate_bps)
-        self.source_db = acoustic.emitted_db if source_db is None else source_db
-        fc = acoustic.centre_khz
+        self.sender = sender
+        self.sender_bitrate_bps = self.bitrate_bps if sender_bitrate_bps is None else float(sender_bitrate_bps)
+        self.source_db = sender.emitted_db
+        if overlap == sender.band_khz:
+            self.in_band_db = 0.0
+        else:
+            self.in_band_db = 10.0 * math.log10((overlap[1] - overlap[0]) * 1000.0 / sender.bandwidth_hz)
+        self.signal_db = self.source_db + self.in_band_db
+        fc = (overlap[0] + overlap[1]) / 2.0
         if env.absorption == "thorp":
             self.alpha_db_per_km = thorp_db_per_km(fc)
         else:
             self.alpha_db_per_km = francois_garrison_db_per_km(fc, env.temperature_c, env.salinity_ppt, env.depth_m,
                                                                env.ph)
+        low, high = acoustic.band_khz
         self.noise_db = band_noise_db(low, high, env.shipping, env.wind_mps, env.noise_floor_db, env.noise_band)
         self.noise_power = db_to_linear(self.noise_db)
-        self.ebn0_offset_db = 10.0 * math.log10(acoustic.bandwidth_hz / self.bitrate_bps) + acoustic.coding_gain_db
+        self.ebn0_offset_db = (10.0 * math.log10(acoustic.bandwidth_hz / self.sender_bitrate_bps)
+                               + sender.coding_gain_db)
+        self.modulation = sender.modulation
         self.capture = db_to_linear(env.capture_db)
         self.sinr = env.collisions == "sinr"
         self.unit = "physical"
@@ -121,8 +177,8 @@ class PhysicalErrorModel:
         return transmission_loss_db(d, self.alpha_db_per_km, self.env.spreading)
 
     def received_db(self, d: float) -> float:
-        """Received level in dB re 1 µPa² at ``d`` metres."""
-        return self.source_db - transmission_loss_db(d, self.alpha_db_per_km, self.env.spreading)
+        """Received level in the receiver's band, in dB re 1 µPa², at ``d`` metres."""
+        return self.signal_db - transmission_loss_db(d, self.alpha_db_per_km, self.env.spreading)
 
     def rx_power(self, d: float) -> float:
         """Received power (µPa², linear) at ``d``: what an overlapping arrival adds to the noise."""
@@ -132,7 +188,7 @@ class PhysicalErrorModel:
         return self.received_db(d) - self.noise_db
 
     def ber_at_snr(self, snr_db: float) -> float:
-        return ber(self.acoustic.modulation, snr_db + self.ebn0_offset_db)
+        return ber(self.modulation, snr_db + self.ebn0_offset_db)
 
     def per_at_snr(self, snr_db: float, size: int) -> float:
         b = self.ber_at_snr(snr_db)
@@ -153,21 +209,25 @@ class PhysicalErrorModel:
         sinr = self.received_db(d) - 10.0 * math.log10(self.noise_power + interference)
         return self.per_at_snr(sinr, size)
 
-    def path_from(self, sender_error: object) -> "PhysicalErrorModel":
-        """This receiver's model on the path from a sender whose error model is ``sender_error``: a
-        physical sender's own source level (with its AT!L step) replaces the assumed one."""
-        if isinstance(sender_error, PhysicalErrorModel) and sender_error.acoustic.emitted_db != self.source_db:
-            return PhysicalErrorModel(self.env, self.acoustic, self.bitrate_bps, sender_error.acoustic.emitted_db)
-        return self
+    def path_from(self, sender: Acoustic | None, bitrate_bps: float | None = None) -> "PhysicalErrorModel":
+        """This receiver's model on the path from a sender with front end ``sender`` (None: the scene
+        gives it none, and this receiver's own stands in) sending at ``bitrate_bps`` (None: this
+        link's own).  The bands must overlap (:meth:`Acoustic.refuses` says so first)."""
+        sender = self.acoustic if sender is None else sender
+        rate = self.bitrate_bps if bitrate_bps is None else float(bitrate_bps)
+        if sender == self.sender and rate == self.sender_bitrate_bps:
+            return self
+        return _bound(self.env, self.acoustic, self.bitrate_bps, sender, rate)
 
     def with_env(self, **changes: object) -> "PhysicalErrorModel":
         """A copy with other environment values (``hilgate fit`` varies spreading and the floor)."""
-        return PhysicalErrorModel(replace(self.env, **changes), self.acoustic, self.bitrate_bps, self.source_db)
+        return PhysicalErrorModel(replace(self.env, **changes), self.acoustic, self.bitrate_bps, self.sender,
+                                  self.sender_bitrate_bps)
 
     # -- value semantics (a reload compares specs by value; a worker pickles them) --------------
 
     def _key(self) -> tuple:
-        return (self.env, self.acoustic, self.bitrate_bps, self.source_db)
+        return (self.env, self.acoustic, self.bitrate_bps, self.sender, self.sender_bitrate_bps)
 
     def __reduce__(self):
         return (PhysicalErrorModel, self._key())
@@ -181,6 +241,16 @@ class PhysicalErrorModel:
         return hash(self._key())
 
     def __repr__(self) -> str:
-        a = self.acoustic
-        return (f"PhysicalErrorModel({a.band_khz[0]:g}-{a.band_khz[1]:g} kHz, SL {self.source_db:g} dB, "
-                f"{a.modulation}, {self.env.absorption}, k={self.env.spreading:g})")
+        a, s = self.acoustic, self.sender
+        heard = "" if s == a else f" from {s.band_khz[0]:g}-{s.band_khz[1]:g} kHz"
+        return (f"PhysicalErrorModel({a.band_khz[0]:g}-{a.band_khz[1]:g} kHz{heard}, SL {self.source_db:g} dB, "
+                f"{self.modulation}, {self.sender_bitrate_bps:g} bit/s, {self.env.absorption}, "
+                f"k={self.env.spreading:g})")
+
+
+@functools.lru_cache(maxsize=4096)
+def _bound(env: Environment, acoustic: Acoustic, bitrate_bps: float, sender: Acoustic,
+           sender_bitrate_bps: float) -> PhysicalErrorModel:
+    """One model per distinct (receiver, sender) configuration: a scene of a thousand links in two
+    groups binds a million pairs from a handful of models (each costs a noise integral)."""
+    return PhysicalErrorModel(env, acoustic, bitrate_bps, sender, sender_bitrate_bps)

@@ -45,10 +45,12 @@ class RadioHost(Protocol):
     """What a radio tells the modem above it (the modem's side of the radio)."""
 
     def heard(self, frame: "Frame", cause: str | None) -> None:
-        """An arrival this radio judged has ended: ``cause`` is None (good), ``prop``, ``col`` or ``mult``."""
+        """An arrival this radio judged has ended: ``cause`` is None (good), ``prop``, ``col``, ``mult``,
+        or ``modulation`` (a modulation this radio does not decode)."""
 
-    def unreachable(self, frame: "Frame") -> None:
-        """A frame for this radio was sent while it was out of the sender's range (or had no pose)."""
+    def unreachable(self, frame: "Frame", cause: str = "range") -> None:
+        """A frame for this radio was sent while it was out of the sender's range (or had no pose:
+        ``range``), or outside this radio's band (``band``)."""
 
 
 class LossModel(Protocol):
@@ -68,7 +70,7 @@ class SinrLossModel(LossModel, Protocol):
 class Arrival:
     """One frame reaching one radio over ``[start, end]``; flags set as the radio learns more."""
 
-    __slots__ = ("frame", "start", "end", "d", "error", "collided", "power", "interference", "loss")
+    __slots__ = ("frame", "start", "end", "d", "error", "collided", "power", "interference", "loss", "refused")
 
     def __init__(self, frame: "Frame", start: float, end: float, d: float):
         self.frame = frame
@@ -80,6 +82,7 @@ class Arrival:
         self.power = 0.0  # collisions: sinr: received power, and the summed power of what overlaps it
         self.interference = 0.0
         self.loss: "SinrLossModel | None" = None
+        self.refused: str | None = None  # the receiver cannot decode it (e.g. ``modulation``): lost with this cause
 
     def __repr__(self) -> str:
         return f"Arrival({self.frame!r} [{self.start:.6f}, {self.end:.6f}] d={self.d:.3f})"
@@ -90,16 +93,19 @@ class Radio:
 
     What the medium reads (the radio's identity on the channels, from the modem's configuration):
     ``address``, ``tx_channel``, ``rx_channel``, ``range_m`` (as a sender), ``pose`` (where its vehicle
-    is), ``error`` (the receiving side's error model, as docs/channel-models.md decides), ``host`` (to find a
-    modem by address) and ``listens`` (False for a modem another host serves: it only sends here).  What the medium calls: :meth:`arrive` for every arrival, :meth:`unreachable`
-    for a frame addressed to it that cannot arrive.  What the modem calls: :meth:`configure`,
+    is), ``error`` (the receiving side's error model, as docs/channel-models.md decides), ``acoustic``
+    and ``bitrate_bps`` (the modem's front end and bit rate: the transmit side of its paths, and its
+    band as a receiver; ``path.py`` binds them), ``host`` (to find a modem by address) and ``listens``
+    (False for a modem another host serves: it only sends here).  What the medium calls: :meth:`arrive`
+    for every arrival, :meth:`arrive_refused` for one it cannot decode, :meth:`unreachable` for a frame
+    addressed to it that cannot arrive.  What the modem calls: :meth:`configure`,
     :meth:`transmit` and :meth:`busy`; it sets ``pose`` and ``judges_all``.
     """
 
     __slots__ = (
         "host", "medium", "clock", "rng",
         "address", "tx_channel", "rx_channel", "range_m", "pose", "error", "error_free", "half_duplex", "judges_all",
-        "listens",
+        "listens", "acoustic", "bitrate_bps",
         "tx_start", "tx_end", "pending", "noise", "_noise_cap", "capture",
     )
 
@@ -117,6 +123,8 @@ class Radio:
         self.half_duplex = True
         self.judges_all = False
         self.listens = True  # False: the modem is served by another host, whose own medium judges its arrivals
+        self.acoustic: Any = None  # the modem's acoustic front end (physical.Acoustic), if it declares one
+        self.bitrate_bps = 1000.0
         self.tx_start = float("-inf")
         self.tx_end = float("-inf")
         self.pending: list[Arrival] = []  # judged arrivals that may still be on air
@@ -127,8 +135,10 @@ class Radio:
     # -- the modem's side ----------------------------------------------------------------------
 
     def configure(self, address: int, tx_channel: str, rx_channel: str, range_m: tuple[float, float],
-                  error: "ErrorModel", half_duplex: bool) -> None:
+                  error: "ErrorModel", half_duplex: bool, acoustic: Any = None, bitrate_bps: float = 1000.0) -> None:
         """Take the modem's (new) parameters; the modem tells the medium that they changed."""
+        self.acoustic = acoustic
+        self.bitrate_bps = bitrate_bps
         self.address = address
         self.tx_channel = tx_channel
         self.rx_channel = rx_channel
@@ -163,19 +173,19 @@ class Radio:
 
     # -- the medium's side ---------------------------------------------------------------------
 
-    def arrive(self, frame: "Frame", t: float, start: float, end: float, d: float, loss: LossModel) -> None:
+    def arrive(self, frame: "Frame", t: float, start: float, end: float, d: float,
+               loss: LossModel) -> Arrival | None:
         """``frame``, sent at ``t`` from ``d`` metres away, reaches this radio over ``[start, end]``;
         ``loss`` gives its loss probability on that path.
 
-        An arrival this radio judges goes to :meth:`_judge`; any other is only interference, kept
-        as a span that may spoil what it judges (the common case, so it is handled right here)."""
+        An arrival this radio judges goes to :meth:`_judge` (and is returned); any other is only
+        interference, kept as a span that may spoil what it judges (the common case, so it is handled
+        right here)."""
         dst = frame.dst_addr
         if self.capture:
-            self._arrive_sinr(frame, t, start, end, d, loss)  # type: ignore[arg-type]
-            return
+            return self._arrive_sinr(frame, t, start, end, d, loss)  # type: ignore[arg-type]
         if self.judges_all or dst == self.address or dst == BROADCAST:
-            self._judge(frame, t, start, end, d, loss)
-            return
+            return self._judge(frame, t, start, end, d, loss)
         if self.pending:
             for other in self.pending:
                 if other.start < end - OVERLAP_EPS and start < other.end - OVERLAP_EPS:
@@ -185,8 +195,18 @@ class Radio:
         if len(noise) > self._noise_cap:
             noise = self.noise = [span for span in noise if span[1] > t]
             self._noise_cap = NOISE_MIN + 2 * len(noise)
+        return None
 
-    def _judge(self, frame: "Frame", t: float, start: float, end: float, d: float, loss: LossModel) -> None:
+    def arrive_refused(self, frame: "Frame", t: float, start: float, end: float, d: float, loss: LossModel,
+                       cause: str) -> None:
+        """An arrival this radio hears but cannot decode (``cause``: ``modulation``): it keeps the
+        channel busy and spoils what it overlaps as any arrival does; one it judges ends lost with
+        ``cause``, whatever else happened to it (``loss`` says PER 1, so nothing is drawn)."""
+        arrival = self.arrive(frame, t, start, end, d, loss)
+        if arrival is not None:
+            arrival.refused = cause
+
+    def _judge(self, frame: "Frame", t: float, start: float, end: float, d: float, loss: LossModel) -> Arrival:
         """Check the arrival against what this radio hears and its own transmission, draw its loss now
         (so draws follow the order of transmissions), and decide its outcome at its end."""
         arrival = Arrival(frame, start, end, d)
@@ -213,11 +233,12 @@ class Radio:
         if getattr(self.host, "on_phy", None) is not None:  # an emulated modem reports RECVSTART
             self.clock.at(start, self.host.arrival_started, frame, start, end)
         self.clock.at(end, self._arrival_over, arrival)
+        return arrival
 
     # -- collisions: sinr ------------------------------------------------------------------------
 
     def _arrive_sinr(self, frame: "Frame", t: float, start: float, end: float, d: float,
-                     loss: SinrLossModel) -> None:
+                     loss: SinrLossModel) -> Arrival | None:
         """An arrival under ``collisions: sinr``: instead of spoiling what it overlaps, it adds its
         received power to their interference (and theirs to its own, if judged).  The outcome is drawn
         at its end (:meth:`_sinr_over`), once every overlapping arrival is known.  The interference of
@@ -235,7 +256,7 @@ class Radio:
             if len(noise) > self._noise_cap:
                 noise = self.noise = [span for span in noise if span[1] > t]
                 self._noise_cap = NOISE_MIN + 2 * len(noise)
-            return
+            return None
         arrival = Arrival(frame, start, end, d)
         arrival.power = power
         arrival.loss = loss
@@ -254,6 +275,7 @@ class Radio:
         if self.half_duplex and self.tx_end - OVERLAP_EPS > start and self.tx_start < end - OVERLAP_EPS:
             arrival.collided = True
         self.clock.at(end, self._sinr_over, arrival)
+        return arrival
 
     def _sinr_over(self, arrival: Arrival) -> None:
         """Capture: the arrival survives the overlap if its power is at least ``capture`` times the
@@ -267,12 +289,15 @@ class Radio:
                 arrival.error = True
         self._arrival_over(arrival)
 
-    def unreachable(self, frame: "Frame") -> None:
-        """A frame for this radio that cannot reach it (out of the sender's range, or no pose)."""
-        self.host.unreachable(frame)
+    def unreachable(self, frame: "Frame", cause: str = "range") -> None:
+        """A frame for this radio that cannot reach it (out of the sender's range, or no pose: ``range``;
+        outside this radio's band: ``band``)."""
+        self.host.unreachable(frame, cause)
 
     def _arrival_over(self, arrival: Arrival) -> None:
-        if arrival.error:
+        if arrival.refused is not None:
+            cause = arrival.refused
+        elif arrival.error:
             cause = "mult" if arrival.collided else "prop"
         else:
             cause = "col" if arrival.collided else None

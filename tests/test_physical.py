@@ -190,9 +190,9 @@ def test_the_senders_source_level_applies_on_the_path():
     is heard 20 dB lower, whatever the receiver's own level."""
     loud = PhysicalErrorModel(Environment(), Acoustic((7.0, 17.0), 141.0), 1900.0)
     quiet = PhysicalErrorModel(Environment(), Acoustic((7.0, 17.0), 141.0, level=3), 1900.0)
-    assert loud.path_from(quiet).snr_db(1000) == pytest.approx(loud.snr_db(1000) - 20)
-    assert quiet.path_from(loud).snr_db(1000) == pytest.approx(loud.snr_db(1000))
-    assert loud.path_from(loud) is loud
+    assert loud.path_from(quiet.acoustic).snr_db(1000) == pytest.approx(loud.snr_db(1000) - 20)
+    assert quiet.path_from(loud.acoustic).snr_db(1000) == pytest.approx(loud.snr_db(1000))
+    assert loud.path_from(loud.acoustic) is loud and loud.path_from(None, 1900.0) is loud
 
 
 # -- SINR capture -------------------------------------------------------------------------------------

@@ -81,6 +81,13 @@ def test_preset_source_levels_put_per_near_0_1_at_the_datasheet_range(preset, ra
      "links.la.error.colisions", "did you mean 'collisions'"),
     ("acoustic: {band_khz: [7, 17], source_level_db: 150, levle: 2}", "links.la.acoustic.levle",
      "did you mean 'level'"),
+    ("acoustic: {band_khz: [7, 17], source_level_db: 150, decodes: [bfsk, ofdm]}", "links.la.acoustic.decodes[1]",
+     "must be one of"),
+    ("acoustic: {band_khz: [7, 17], source_level_db: 150, decodes: bfsk}", "links.la.acoustic.decodes",
+     "must be a list"),
+    ("acoustic: {band_khz: [7, 17], source_level_db: 150, decodes: [qpsk, qpsk]}", "links.la.acoustic.decodes[1]",
+     "given twice"),
+    ("model: evologics-s2cr-7-17, acoustic: {band_khz: [7]}", "links.la.acoustic.band_khz", "must be [low, high]"),
 ])
 def test_bad_physical_keys_are_one_line_errors(bad, where, message):
     error = error_of(f"""\
@@ -97,15 +104,20 @@ def test_bad_physical_keys_are_one_line_errors(bad, where, message):
 def test_budget_of_a_physical_pair():
     scene = load(SCENE)
     rows = {(r.src, r.dst): r for r in link_budget(scene)}
-    # lc is error-free: pairs into it are left out; from lc (not physical) the receiver assumes its own level
-    assert set(rows) == {("la", "lb"), ("lb", "la"), ("lc", "la"), ("lc", "lb")}
+    # lc (7-17 kHz) and la, lb (18-34 kHz) do not share a band: whatever their error models, none hears
+    # the other (PER 1, cause band); la <-> lb are the physical pairs
+    assert set(rows) == {("la", "lb"), ("lb", "la"), ("la", "lc"), ("lb", "lc"), ("lc", "la"), ("lc", "lb")}
+    for pair in (("la", "lc"), ("lb", "lc"), ("lc", "la"), ("lc", "lb")):
+        assert (rows[pair].refused, rows[pair].per, rows[pair].snr_db, rows[pair].d_per_01) == ("band", 1.0, None, None)
     ab = rows[("la", "lb")]
-    model = scene.links["lb"].params.error.path_from(scene.links["la"].params.error)
+    la, lb = scene.links["la"].params, scene.links["lb"].params
+    model = lb.error.path_from(la.acoustic, la.bitrate_bps)
+    assert model.source_db == 148 and ab.refused is None
     assert ab.size == 48 and ab.d == 1500.0
     assert ab.snr_db == pytest.approx(model.snr_db(1500.0)) and ab.per == pytest.approx(model.per(1500.0, 48))
     assert ab.d_per_01 is None and model.per(3500.0, 48) < 0.1  # la's range (3500 m) ends before PER 0.1
     ba = rows[("lb", "la")]  # lb sends 6 dB quieter (AT!L1): it crosses within la's range
-    back = scene.links["la"].params.error.path_from(scene.links["lb"].params.error)
+    back = la.error.path_from(lb.acoustic, lb.bitrate_bps)
     assert back.source_db == 142 and ba.size == 64
     assert back.per(ba.d_per_01, 64) == pytest.approx(0.1, abs=1e-6)
     assert back.per(ba.d_per_09, 64) == pytest.approx(0.9, abs=1e-6)
@@ -177,4 +189,4 @@ def test_sinr_in_a_scene_captures_the_near_sender(tmp_path):
 def test_budget_rows_are_limited():
     scene = load(SCENE)
     assert len(link_budget(scene, limit=1)) == 2  # one more than the limit: the caller says "more"
-    assert len(link_budget(scene, limit=10)) == 4
+    assert len(link_budget(scene, limit=10)) == 6

@@ -23,8 +23,8 @@ class Host:
     def heard(self, frame, cause):
         self.outcomes.append((self.clock.now(), frame.id, cause))
 
-    def unreachable(self, frame):
-        self.unreachable_frames.append(frame.id)
+    def unreachable(self, frame, cause):
+        self.unreachable_frames.append((frame.id, cause))
 
 
 class Loss:
@@ -146,7 +146,22 @@ def test_carrier_sense():
 def test_unreachable_goes_to_the_host():
     radio, host, clock = make()
     radio.unreachable(frame(7))
-    assert host.unreachable_frames == [7]
+    radio.unreachable(frame(8), "band")
+    assert host.unreachable_frames == [(7, "range"), (8, "band")]
+
+
+def test_an_arrival_it_cannot_decode_interferes_and_ends_lost_with_its_cause():
+    """A refused arrival (another modulation) spoils the good one it overlaps, keeps the channel busy,
+    and ends lost with its own cause even on an error-free radio, collided or not."""
+    radio, host, clock = make(error_free=True)
+    radio.arrive(frame(1), 0.0, 1.0, 2.0, 10.0, NO_LOSS)
+    radio.arrive_refused(frame(2), 0.0, 1.5, 2.5, 10.0, Loss(1.0), "modulation")
+    radio.arrive_refused(frame(3), 0.0, 3.0, 4.0, 10.0, Loss(1.0), "modulation")
+    radio.arrive_refused(frame(4, dst=OTHER), 0.0, 5.0, 6.0, 10.0, Loss(1.0), "modulation")  # for another radio
+    radio.arrive(frame(5), 0.0, 5.5, 6.5, 10.0, NO_LOSS)
+    assert radio.busy(3.5)
+    clock.run()
+    assert host.outcomes == [(2.0, 1, "col"), (2.5, 2, "modulation"), (4.0, 3, "modulation"), (6.5, 5, "col")]
 
 
 def test_interference_kept_stays_as_short_as_what_is_on_air():

@@ -42,7 +42,7 @@ from .tracedata import (Packet, ReportError, Run, Trace, load_summary, load_trac
                         trace_runs)
 
 CAUSE_COLOURS = {"prop": "#e69f00", "col": "#d62728", "mult": "#9467bd", "fifo": "#222222", "range": "#1f77b4",
-                 "closed": "#7f7f7f"}
+                 "closed": "#7f7f7f", "band": "#17becf", "modulation": "#bcbd22"}
 OTHER_LOSS = "#8c564b"
 REAL_SHADE = "#9ecae1"
 MISSING_MATPLOTLIB = ("hilgate report needs matplotlib, an optional extra: pip install 'hilgate[report]' "

@@ -24,14 +24,16 @@ def format_summary(summary: dict[str, Any]) -> str:
     parts = [f"scene {summary['scene']!r}  seed {summary['seed']}  {summary['sim_time_s']:g} s simulated "
              f"in {summary['wall_time_s']:.3f} s"]
     if summary["flows"]:
-        headers = ["flow", "offered", "fifo drop", "tx", "rx", "lost prop", "col", "mult", "range",
+        shown = ("prop", "col", "mult", "range")
+        others = sorted({cause for f in summary["flows"] for cause in f["lost"]} - set(shown))  # band, modulation
+        headers = ["flow", "offered", "fifo drop", "tx", "rx", "lost prop", "col", "mult", "range", *others,
                    "B/s", "effic.", "delay mean", "p95", "jitter"]
         rows = []
         for f in summary["flows"]:
             lost = f["lost"]
             rows.append([
                 f"{f['from']} -> {f['to']}", str(f["offered"]), str(f["fifo_drops"]), str(f["tx_packets"]),
-                str(f["rx_packets"]), str(lost["prop"]), str(lost["col"]), str(lost["mult"]), str(lost.get("range", 0)),
+                str(f["rx_packets"]), *(str(lost.get(cause, 0)) for cause in shown + tuple(others)),
                 _fmt(f["throughput_Bps"], digits=1), _fmt(f["efficiency"], digits=3),
                 _fmt(f["delay_mean_s"], " ms", 1e3, 1), _fmt(f["delay_p95_s"], " ms", 1e3, 1),
                 _fmt(f["jitter_s"], " ms", 1e3, 1),

@@ -15,7 +15,7 @@ from typing import Any
 from ..models.errormodel import UNITS, ErrorModel
 from ..models.expr import ExprError, compile_expression
 from ..models.frame import BROADCAST
-from ..models.physical import PhysicalErrorModel
+from ..models.physical import Acoustic, PhysicalErrorModel
 from ..models.modem import ModemParams
 from ..models.usbl import UsblParams
 from .backends import SIM, backend_names, driver_keys, driver_options, emulated_device
@@ -86,6 +86,8 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
     for key, value in (("channel", tx_channel), ("tx_channel", tx_channel), ("rx_channel", rx_channel)):
         if value not in channels and key in f:
             raise f.child(key).error(f.sub(key), f"no channel {value!r} in the scene; channels: {', '.join(channels)}")
+    acoustic_node = f.child("acoustic")
+    acoustic = None if acoustic_node is None else acoustic_params(acoustic_node, f.sub("acoustic"))
     params = ModemParams(
         address=f.get("address", _address, -1),
         tx_channel=tx_channel,
@@ -97,11 +99,12 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
         rx_jitter_s=f.get("rx_jitter_s", number(0), 0.0),
         fifo_bytes=f.get("fifo_bytes", integer(1), 500_000),
         range_m=f.get("range_m", _range_pair, (0.0, math.inf)),
-        error=_link_error(f),
+        error=_link_error(f, acoustic),
         duplex=f.get("duplex", choice("half", "full"), "half"),
         promiscuous=f.get("promiscuous", boolean, False),
         ack_bytes=f.get("ack_bytes", integer(1, 65535), 6),
         ack_turnaround_s=f.get("ack_turnaround_s", number(0), 0.0),
+        acoustic=acoustic,
     )
     mac = f.get("mac", lambda n, p: mac_spec(n, p, ctx.plugins), MacSpec("none"))
     try:
@@ -286,12 +289,12 @@ def _usbl(node: Node, path: str) -> UsblParams | None:
                       f.get("range_sigma_m", number(0), 0.0))
 
 
-def _link_error(link: Fields) -> ErrorModel | PhysicalErrorModel:
+def _link_error(link: Fields, acoustic: Acoustic | None) -> ErrorModel | PhysicalErrorModel:
     """The link's ``error:``: an expression of distance (kind ``expr``, the default), or the physical
-    model (kind ``physical``), which also reads the link's ``acoustic:`` front end and bit rate."""
+    model (kind ``physical``), which also takes the link's ``acoustic:`` front end and bit rate.  The
+    front end is the link's whatever its error (``ModemParams.acoustic``): as a sender it is what other
+    links hear (``models/path.py``)."""
     node = link.child("error")
-    acoustic_node = link.child("acoustic")
-    acoustic = None if acoustic_node is None else acoustic_params(acoustic_node, link.sub("acoustic"))
     if node is None:
         return ErrorModel("packet", "0")
     path = link.sub("error")

@@ -10,7 +10,7 @@ from __future__ import annotations
 from ..models.acoustics import MODULATIONS
 from ..models.errormodel import UNITS
 from ..models.physical import ABSORPTION, COLLISIONS, LEVEL_DB, NOISE_BAND, Acoustic, Environment
-from .checks import Fields, choice, integer, join_path, number, describe
+from .checks import Fields, choice, integer, items, join_path, number, describe
 from .yaml_nodes import Node
 
 __all__ = ["ERROR_KINDS", "ERROR_KEYS", "ACOUSTIC_KEYS", "error_kind", "physical_environment", "acoustic_params"]
@@ -19,7 +19,7 @@ ERROR_KINDS = ("expr", "physical")
 PHYSICAL_KEYS = ("absorption", "spreading", "shipping", "wind_mps", "noise_floor_db", "noise_band",
                  "temperature_c", "salinity_ppt", "depth_m", "ph", "collisions", "capture_db")
 ERROR_KEYS = ("kind", "unit", "expr") + PHYSICAL_KEYS
-ACOUSTIC_KEYS = ("band_khz", "source_level_db", "level", "modulation", "coding_gain_db")
+ACOUSTIC_KEYS = ("band_khz", "source_level_db", "level", "modulation", "coding_gain_db", "decodes")
 
 
 def error_kind(node: Node, path: str) -> str:
@@ -61,6 +61,18 @@ def _band(node: Node, path: str) -> tuple[float, float]:
     return (low, high)
 
 
+def _decodes(node: Node, path: str) -> tuple[str, ...]:
+    """``decodes: [bpsk, qpsk]``: modulations the modem decodes besides its own ``modulation``."""
+    check = choice(*MODULATIONS)
+    chosen: list[str] = []
+    for i, item in enumerate(items(node, path)):
+        value = check(item, join_path(path, i))
+        if value in chosen:
+            raise item.error(join_path(path, i), f"{value} is given twice")
+        chosen.append(value)
+    return tuple(chosen)
+
+
 def acoustic_params(node: Node, path: str) -> Acoustic:
     f = Fields(node, path, ACOUSTIC_KEYS)
     return Acoustic(
@@ -69,4 +81,5 @@ def acoustic_params(node: Node, path: str) -> Acoustic:
         level=f.get("level", integer(0, len(LEVEL_DB) - 1), 0),
         modulation=f.get("modulation", choice(*MODULATIONS), "bpsk"),
         coding_gain_db=f.get("coding_gain_db", number(0, 30), 0.0),
+        decodes=f.get("decodes", _decodes, ()),
     )

@@ -3,7 +3,7 @@ the distance now, the SNR (physical models), the PER of a frame there, and the d
 PER crosses 0.1 and 0.9.  ``hilgate check`` prints it.
 
 The crossings are found on the path's own model (the receiver's, bound to the sender as the medium
-binds it) by a scan over a logarithmic grid of distances and a bisection inside the first cell where
+binds it: ``models/path.py``) by a scan over a logarithmic grid of distances and a bisection inside the first cell where
 the PER reaches the level, so a curve that is not monotonic still reports where it *first* crosses.
 """
 
@@ -12,7 +12,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..scene.specs import LinkSpec, Scene
+from ..models.path import bind_path
+from ..scene.specs import Scene
 from .pose_sources import build_pose
 
 __all__ = ["PairBudget", "link_budget", "crossing", "format_budget"]
@@ -33,12 +34,7 @@ class PairBudget:
     d_per_01: float | None   # None: never crosses within the range
     d_per_09: float | None
     range_m: tuple[float, float]
-
-
-def _path_model(sender: LinkSpec, receiver: LinkSpec):
-    error = receiver.params.error
-    path_from = getattr(error, "path_from", None)
-    return path_from(sender.params.error) if path_from is not None else error
+    refused: str | None = None  # the receiver takes none of the sender's frames (band, modulation)
 
 
 def crossing(per, level: float, low: float, high: float) -> float | None:
@@ -85,12 +81,18 @@ def link_budget(scene: Scene, frame_bytes: int | None = None, limit: int | None 
         for receiver in sims:
             if receiver is sender or receiver.params.rx_channel != sender.params.tx_channel:
                 continue
-            model = _path_model(sender, receiver)
-            if getattr(model, "constant_zero", False):
-                continue
+            model, refused, _ = bind_path(sender.params, receiver.params)
             a = poses[sender.vehicle].position(0.0)
             b = poses[receiver.vehicle].position(0.0)
             d = None if a is None or b is None else math.dist(a, b)
+            if refused is not None:
+                per = None if d is None else 1.0
+                rows.append(PairBudget(sender.id, receiver.id, size, d, None, per, None, None, (rmin, rmax), refused))
+                if limit is not None and len(rows) > limit:
+                    return rows
+                continue
+            if model.constant_zero:
+                continue
             snr_of = getattr(model, "snr_db", None)
             snr = snr_of(d) if snr_of is not None and d is not None else None
             per = None if d is None else (model.per(d, size) if rmin <= d <= rmax else 1.0)
@@ -112,7 +114,8 @@ def _metres(d: float | None, beyond: float) -> str:
 
 
 def format_budget(rows: list[PairBudget]) -> str:
-    """One line per pair: ``src -> dst  size  d  SNR  PER  PER=0.1 at  PER=0.9 at``."""
+    """One line per pair: ``src -> dst  size  d  SNR  PER  PER=0.1 at  PER=0.9 at``; a pair whose
+    receiver refuses the sender says why in the PER column (``1 (band)``) and has no crossings."""
     header = ("pair", "bytes", "d m", "SNR dB", "PER", "PER 0.1 at m", "PER 0.9 at m")
     table = [header]
     for row in rows:
@@ -120,9 +123,9 @@ def format_budget(rows: list[PairBudget]) -> str:
             f"{row.src} -> {row.dst}", str(row.size),
             "-" if row.d is None else f"{row.d:.1f}",
             "-" if row.snr_db is None else f"{row.snr_db:.1f}",
-            "-" if row.per is None else f"{row.per:.3g}",
-            _metres(row.d_per_01, row.range_m[1]),
-            _metres(row.d_per_09, row.range_m[1]),
+            ("-" if row.per is None else f"{row.per:.3g}") + (f" ({row.refused})" if row.refused else ""),
+            "-" if row.refused else _metres(row.d_per_01, row.range_m[1]),
+            "-" if row.refused else _metres(row.d_per_09, row.range_m[1]),
         ))
     widths = [max(len(r[i]) for r in table) for i in range(len(header))]
     return "\n".join("  ".join(cell.ljust(w) for cell, w in zip(r, widths)).rstrip() for r in table)

@@ -17,6 +17,8 @@ from ..models.flows import FlowSpec
 from ..models.frame import BROADCAST, DATA
 
 LOSS_CAUSES = ("prop", "col", "mult", "range")
+"""Counted for every flow; other causes (``band``, ``modulation``: a receiver that refuses the sender)
+are added to a flow's ``lost`` when they happen."""
 
 
 class FlowStats:
@@ -183,7 +185,8 @@ class Recorder:
         if stats is not None and frame.kind == DATA and (
             frame.dst_addr == modem.address or frame.dst_addr == BROADCAST
         ):
-            stats.lost[cause] += 1
+            lost = stats.lost
+            lost[cause] = lost.get(cause, 0) + 1
         if self._write is not None:
             self._line(t, "err", modem, frame, cause)
 
