@@ -51,14 +51,21 @@ def _physical_model(view: Any) -> Any:
 
     if not isinstance(view, dict) or view.get("kind") != "physical":
         return None
+
+    def front(value: Any) -> Any:
+        fields = dict(value)
+        fields["band_khz"] = tuple(fields["band_khz"])
+        fields["decodes"] = tuple(fields.get("decodes") or ())
+        return Acoustic(**fields)
+
     try:
-        env, acoustic = dict(view["env"]), dict(view["acoustic"])
-        acoustic["band_khz"] = tuple(acoustic["band_khz"])
-        return PhysicalErrorModel(Environment(**env), Acoustic(**acoustic), float(view["bitrate_bps"]),
-                                  None if view.get("source_db") is None else float(view["source_db"]))
+        sender = view.get("sender")
+        rate = view.get("sender_bitrate_bps")
+        return PhysicalErrorModel(Environment(**dict(view["env"])), front(view["acoustic"]), float(view["bitrate_bps"]),
+                                  None if sender is None else front(sender), None if rate is None else float(rate))
     except (KeyError, TypeError, ValueError) as exc:
         raise FitError(f"the trace's physical error model is not one hilgate builds ({type(exc).__name__}: "
-                       f"{str(exc)[:80]})") from None
+                       f"{printable(str(exc))})") from None
 
 
 def _physical_fit(data: Observations) -> tuple[Fit, dict, str]:

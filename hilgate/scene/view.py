@@ -41,11 +41,13 @@ def _plain(value: Any) -> Any:
 
 def error_view(model: Any) -> dict[str, Any]:
     """A link's error model, complete enough to build it again: ``{"unit", "expr"}`` for an expression
-    of distance, ``{"kind": "physical", "env", "acoustic", "bitrate_bps", "source_db"}`` for the
-    physical model (the arguments of :class:`hilgate.models.physical.PhysicalErrorModel`)."""
+    of distance, ``{"kind": "physical", "env", "acoustic", "bitrate_bps", "sender", "sender_bitrate_bps"}``
+    for the physical model (the arguments of :class:`hilgate.models.physical.PhysicalErrorModel`; the
+    sender the receiver's model stands for until the medium binds a path to its real one)."""
     if getattr(model, "unit", None) == "physical":
         return {"kind": "physical", "env": _plain(model.env), "acoustic": _plain(model.acoustic),
-                "bitrate_bps": _plain(model.bitrate_bps), "source_db": _plain(model.source_db)}
+                "bitrate_bps": _plain(model.bitrate_bps), "sender": _plain(model.sender),
+                "sender_bitrate_bps": _plain(model.sender_bitrate_bps)}
     expression = getattr(model, "expression", None)
     return {"unit": str(getattr(model, "unit", "?")), "expr": str(getattr(expression, "text", model))}
 
