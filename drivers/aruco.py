@@ -148,6 +148,7 @@ def make_detector(dictionary: str) -> Any:
         raise CameraError(f"unknown ArUco dictionary {dictionary!r}")
     parameters = cv2.aruco.DetectorParameters()
     parameters.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    # by name: the dictionary the scene names, by its name
     return cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary)), parameters)
 
 

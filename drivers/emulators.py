@@ -596,7 +596,7 @@ class EvologicsEmulator:
     # -- medium → host ----------------------------------------------------------------------------------
 
     def deliver(self, frame: AppFrame, t: float) -> str:
-        meta = getattr(frame, "meta", None) or {}
+        meta = frame.meta or {}
         kind = meta.get("kind", "im")
         payload = frame.real
         heard = self.port.reception_from(frame.src, t)
@@ -708,6 +708,7 @@ class S100Emulator:
 
     kind = "emulator"
     busy = False
+    phy = None  # (no PHY reports: hilgate.core.endpoint.Endpoint.phy)
 
     def __init__(self, port: LinkPort, spec: dict, scheduler: Any):
         self.port = port
@@ -715,7 +716,7 @@ class S100Emulator:
         self.scheduler = scheduler
         self.baud = int(spec.get("baud", 9600))
         self.rtscts = bool(spec.get("rtscts", False))
-        self.speed = getattr(scheduler, "speed", 1.0)  # line times are wall-clock seconds
+        self.speed = scheduler.speed  # line times are wall-clock seconds
         self.piece = limits_for("s100", port.limits).piece_bytes or PIECE  # held without flow control (limits:)
         self.states: dict[Any, _S100Host] = {}
         self.hosts = _open_hosts(spec, scheduler, self._on_data, self._on_connect, port.id)

@@ -164,6 +164,7 @@ class MavlinkSource:
             return
         connection.mav.srcSystem, connection.mav.srcComponent = me.system_id, me.component_id
         for name, rate in self.message_rates.items():
+            # by name: the message the scene names, by its name
             message_id = getattr(mavutil.mavlink, f"MAVLINK_MSG_ID_{name.upper()}", None)
             if message_id is None:
                 log.warning("mavlink %s: unknown message %s in message_rates", self.name, name)

@@ -122,6 +122,7 @@ def _check_alt(url: str) -> str | None:
     parts = urlsplit(url)
     if not parts.netloc + parts.path:
         return "alt:// needs a device path after it (alt:///dev/ttyUSB0?class=PosixPollSerial)"
+    # by name: pyserial's classes differ by platform
     classes = [name for name in ("Serial", "PosixPollSerial", "VTIMESerial") if hasattr(serial, name)]
 
     def known_class(values: list[str]) -> str | None:

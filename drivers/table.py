@@ -274,7 +274,7 @@ def emulated_protocols() -> tuple[str, ...]:
 
 def _resolve(reference: str) -> Any:
     module, _, attr = reference.partition(":")
-    return getattr(importlib.import_module(module), attr)
+    return getattr(importlib.import_module(module), attr)  # (by name: the table names the opener as module:attribute)
 
 
 def open_backend(spec: Any, scheduler: Any, trace: Callable[[dict], Any]) -> Any:
@@ -286,8 +286,10 @@ def open_backend(spec: Any, scheduler: Any, trace: Callable[[dict], Any]) -> Any
     options = dict(spec.options)
     for f in fields(driver.options):
         if LINK in f.metadata:
+            # by name: the field's metadata names the spec's attribute
             options.setdefault(f.name, getattr(spec.params, f.metadata[LINK]))
         elif SPEC in f.metadata:
+            # by name: the field's metadata names the spec's attribute
             options.setdefault(f.name, limits_for(spec.backend, getattr(spec, f.metadata[SPEC], None)))
     return _resolve(driver.backend)(spec.id, spec.params.address, packet_class(spec.packet),
                                     driver.options(**options), scheduler, trace)

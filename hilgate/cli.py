@@ -373,7 +373,7 @@ def cmd_app(args: argparse.Namespace) -> int:
         plugin = load_plugin(entry, os.getcwd())
     except PluginError as exc:
         raise SceneError(entry, 0, "", f"cannot load the application's module: {exc}") from None
-    cls = getattr(plugin.module, class_name, None)
+    cls = getattr(plugin.module, class_name, None)  # (by name: the class the scene names, by its name)
     if not (isinstance(cls, type) and issubclass(cls, Application)):
         raise SceneError(entry, 0, "", f"{class_name!r} is not an application (a subclass of hilgate.app.Application)")
     params = {}

@@ -88,6 +88,7 @@ def setup_logging(verbosity: int, daemon: bool = False, stream: TextIO | None = 
         fmt = "%(levelname)s %(name)s: %(message)s"
         if daemon:  # a long run in a terminal or to a file: say when
             fmt = "%(asctime)s.%(msecs)03d " + fmt
+        # by name: any stream a caller gives
         tty = getattr(stream, "isatty", lambda: False)() and os.environ.get("TERM", "") != "dumb"
         formatter = (TerminalFormatter if tty else logging.Formatter)(fmt, "%Y-%m-%d %H:%M:%S")
 

@@ -11,6 +11,10 @@ from .trajectories import Vec3
 
 class Controlled:
     static = False
+    max_speed_mps = math.inf
+    """(Not its top speed: an application may steer it at any moment, and the medium's grid is not
+    told; every transmission computes its distances.)"""
+    attitude = None
 
     def __init__(self, start: Vec3, max_speed_mps: float):
         self.max_speed = float(max_speed_mps)

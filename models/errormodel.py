@@ -15,6 +15,9 @@ class ErrorModel:
     interest (UWSim-NET's 6e-13·d^13.7 at short range) vanish in plain ``1 - r``."""
 
     __slots__ = ("unit", "expression", "_bits_per_byte", "constant_zero")
+    sinr = False
+    """(An expression of distance has no received power: arrivals that overlap collide.)"""
+    capture = 0.0
 
     def __init__(self, unit: str, expression: Expression | str | float):
         if unit not in UNITS:

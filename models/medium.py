@@ -140,7 +140,7 @@ class Medium:
     def attach(self, radio: "Radio") -> None:
         for name in (radio.tx_channel, radio.rx_channel):
             if name not in self.channels:
-                raise ValueError(f"modem {getattr(radio.host, 'id', radio)}: no channel {name!r}")
+                raise ValueError(f"modem {radio.host.id}: no channel {name!r}")
         self.radios.append(radio)
         self._dirty = True
 
@@ -176,12 +176,12 @@ class Medium:
         radios = self.radios
         order = self._order = {radio: i for i, radio in enumerate(radios)}
         moving = [radio for radio in radios if not radio.pose.static]
-        unbounded = [radio for radio in radios if not math.isfinite(getattr(radio.pose, "max_speed_mps", math.inf))]
+        unbounded = [radio for radio in radios if not math.isfinite(radio.pose.max_speed_mps)]
         moving_unbounded = [radio for radio in unbounded if not radio.pose.static]
         pools: dict[str, set[Radio]] = {}  # per channel: listening radios with a top speed
         pooled_static: dict[str, int] = {}  # and how many of them are static
         for radio in radios:
-            if radio.listens and math.isfinite(getattr(radio.pose, "max_speed_mps", math.inf)):
+            if radio.listens and math.isfinite(radio.pose.max_speed_mps):
                 pools.setdefault(radio.rx_channel, set()).add(radio)
                 pooled_static[radio.rx_channel] = pooled_static.get(radio.rx_channel, 0) + bool(radio.pose.static)
         grids: dict[float, dict[tuple[int, int, int], list[Radio]]] = {}
@@ -267,7 +267,7 @@ class Medium:
         nowhere: list[Radio] = []
         speed = 0.0
         for radio in self.radios:
-            top = getattr(radio.pose, "max_speed_mps", math.inf)
+            top = radio.pose.max_speed_mps
             if not math.isfinite(top):
                 continue
             speed = max(speed, top)

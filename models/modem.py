@@ -96,6 +96,7 @@ class SimModem:
         self.queued_bytes = 0
         self.phy_busy = False
         self.closed = False
+        self.mac: Mac | None = None
         self.radio = Radio(self, medium, clock, rng)
         self.acks = Acknowledger(self)
         self.radio.pose = pose
@@ -115,7 +116,7 @@ class SimModem:
         self.promiscuous = params.promiscuous
         self.radio.configure(params.address, params.tx_channel, params.rx_channel, params.range_m, params.error,
                              params.duplex == "half", params.acoustic, self.bitrate)
-        if hasattr(self, "mac"):
+        if self.mac is not None:  # (None only while __init__ configures before set_mac)
             self.radio.judges_all = self.promiscuous or self.mac.hears_all
             self.medium.topology_changed()
 

@@ -24,6 +24,9 @@ class Observer(Protocol):
     def mac(self, t: float, modem: Any, frame: Any, ev: str, **fields: Any) -> None:
         """A MAC outcome: ``retx``, ``giveup``, ``backoff``, ``dup``…"""
 
+    def add_flow(self, spec: Any) -> Any:
+        """Where a scene's flow counts what it sends (``hilgate.sim.recorder.FlowStats``); None: nowhere."""
+
 
 class NullObserver:
     def enq(self, t, modem, frame):
@@ -43,6 +46,9 @@ class NullObserver:
 
     def mac(self, t, modem, frame, ev, **fields):
         pass
+
+    def add_flow(self, spec):
+        return None
 
 
 class EventList:
@@ -75,6 +81,9 @@ class EventList:
     def mac(self, t, modem, frame, ev, **fields):
         self._add(t, ev, modem, frame, fields.get("cause"))
         self.fields.append((t, ev, modem.id, fields))
+
+    def add_flow(self, spec):
+        return None
 
     def of(self, ev: str) -> list[tuple[float, str, str, int, str | None]]:
         return [e for e in self.events if e[1] == ev]

@@ -18,7 +18,7 @@ keeps an arrival O(1).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Callable, Protocol
 
 from .frame import BROADCAST
 
@@ -43,6 +43,14 @@ last pruning: pruning then costs O(1) per arrival however many frames are on air
 
 class RadioHost(Protocol):
     """What a radio tells the modem above it (the modem's side of the radio)."""
+
+    id: str
+    on_phy: Callable[..., Any] | None
+    """An optional capability: set (not None) while an emulated modem above wants the PHY's doings; the
+    radio then also calls :meth:`arrival_started` at each arrival's start (else nothing is scheduled)."""
+
+    def arrival_started(self, frame: "Frame", start: float, end: float) -> None:
+        """An arrival for this host begins at ``start`` (called only while :attr:`on_phy` is set)."""
 
     def heard(self, frame: "Frame", cause: str | None) -> None:
         """An arrival this radio judged has ended: ``cause`` is None (good), ``prop``, ``col``, ``mult``,
@@ -147,7 +155,7 @@ class Radio:
         self.error = error
         self.error_free = error.constant_zero
         self.half_duplex = half_duplex
-        self.capture = error.capture if getattr(error, "sinr", False) else 0.0
+        self.capture = error.capture if error.sinr else 0.0
 
     def transmit(self, frame: "Frame", t: float, duration: float) -> None:
         """Put ``frame`` on air from ``t`` for ``duration``: half duplex, it spoils what is arriving."""
@@ -231,7 +239,7 @@ class Radio:
             per = loss.per(d, frame.size)
             if per > 0.0 and (per >= 1.0 or self.rng.random() < per):
                 arrival.error = True
-        if getattr(self.host, "on_phy", None) is not None:  # an emulated modem reports RECVSTART
+        if self.host.on_phy is not None:  # an emulated modem reports RECVSTART
             self.clock.at(start, self.host.arrival_started, frame, start, end)
         self.clock.at(end, self._arrival_over, arrival)
         return arrival

@@ -21,22 +21,38 @@ __all__ = ["Vec3", "PoseSource", "Static", "Segment", "Piecewise", "path_segment
 
 class PoseSource(Protocol):
     """Where a vehicle is. ``position`` returns None when the pose is unknown (a stale live source
-    with the ``drop`` policy): the vehicle's modems then hear nothing and are heard by nobody."""
+    with the ``drop`` policy): the vehicle's modems then hear nothing and are heard by nobody.
+
+    Every source (scripted here, ``models.controlled``, the daemon's live vehicles, a new one such as a
+    ROS 2 subscriber) declares all of it; what it cannot tell has a stated "don't know" value."""
 
     static: bool
+    """It never moves: the medium computes its distances once."""
+    max_speed_mps: float
+    """No faster than this between two topology changes; ``math.inf`` when nothing is promised (the
+    medium's moving grid then never leaves it out)."""
+    attitude: tuple[float, float, float] | None
+    """Roll, pitch, yaw (rad) when the source knows them (sent back to an autopilot), else None."""
 
     def position(self, t: float) -> Vec3 | None: ...
+
+    def age(self, t: float) -> float | None:
+        """Seconds since the source last heard of the vehicle (0 for a scripted one; None: never)."""
 
 
 class Static:
     static = True
     max_speed_mps = 0.0
+    attitude = None
 
     def __init__(self, position: Sequence[float]):
         self._position: Vec3 = (float(position[0]), float(position[1]), float(position[2]))
 
     def position(self, t: float) -> Vec3:
         return self._position
+
+    def age(self, t: float) -> float:
+        return 0.0
 
     def __repr__(self) -> str:
         return f"Static({self._position})"
@@ -66,6 +82,7 @@ class Piecewise:
     last at the last point, unless ``loop`` repeats the whole sequence with its period."""
 
     static = False
+    attitude = None
 
     def __init__(self, segments: Sequence[Segment], loop: bool = False):
         if not segments:
@@ -89,6 +106,9 @@ class Piecewise:
             return self.segments[-1].p1
         index = bisect_right(self._starts, t) - 1
         return self.segments[index].at(t)
+
+    def age(self, t: float) -> float:
+        return 0.0
 
     def __repr__(self) -> str:
         return f"Piecewise({len(self.segments)} segments, loop={self.loop})"

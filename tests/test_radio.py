@@ -15,6 +15,11 @@ ME, OTHER = 1, 2
 
 
 class Host:
+    """A RadioHost that records what it is told (and wants no PHY reports)."""
+
+    id = "me"
+    on_phy = None
+
     def __init__(self, clock):
         self.clock = clock
         self.outcomes: list[tuple[float, int, str | None]] = []
@@ -25,6 +30,9 @@ class Host:
 
     def unreachable(self, frame, cause):
         self.unreachable_frames.append((frame.id, cause))
+
+    def arrival_started(self, frame, start, end):
+        raise AssertionError("not asked while on_phy is None")
 
 
 class Loss:

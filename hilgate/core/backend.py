@@ -55,6 +55,10 @@ class PhyEvent:
 
 
 class Backend(ABC):
+    """What the router asks of every backend.  The optional capabilities (a simulated modem has them, a
+    real modem's driver not yet) are declared here with the answer of a backend that lacks them, so the
+    router asks every backend the same way and never looks a method up by name."""
+
     kind = "?"
 
     def __init__(self) -> None:
@@ -87,6 +91,24 @@ class Backend(ABC):
 
     def close(self) -> None:
         """Release the modem; queued frames are reported dropped."""
+
+    # -- optional capabilities: the defaults are those of a backend without them ----------------------
+
+    sim_modem: Any = None
+    """The simulated modem behind the link (``models.modem.SimModem``), None for a real modem: air time,
+    propagation and receptions that an emulated modem reports come from it."""
+
+    def set_address(self, address: int) -> bool:
+        """Answer to ``address`` from now on (an emulated modem's ``AT!AL``); False: this backend cannot."""
+        return False
+
+    def withdraw(self, frames: list[AppFrame], cause: str) -> int:
+        """Take frames sent earlier back out of the queue (``ATZ``); how many were still there."""
+        return 0
+
+    def watch_phy(self, listener: Callable[[PhyEvent], Any] | None) -> None:
+        """Report what the PHY does to ``listener`` (None: stop); a backend without a simulated PHY
+        reports nothing."""
 
 
 class QueuedBackend(Backend):

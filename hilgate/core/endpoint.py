@@ -17,9 +17,9 @@ endpoints when the link appears and follow its changes on a reload.
 
 from __future__ import annotations
 
-from typing import Any, Protocol
+from typing import Any, Callable, Protocol
 
-from .backend import AppFrame
+from .backend import AppFrame, PhyEvent
 from .packets import Decoded, PacketClass
 
 TAKEN = "taken"
@@ -106,6 +106,10 @@ class Endpoint(Protocol):
     kind: str
     busy: bool
     """True while this endpoint holds the link BUSY (an emulated modem awaiting an acknowledgement)."""
+    phy: Callable[[PhyEvent], Any] | None
+    """An optional capability: where the link reports its simulated modem's transmissions and arrivals
+    (an emulated modem's extended notifications); None for an endpoint that does not want them, and
+    then the link's backend reports nothing (nothing is scheduled for it)."""
 
     def deliver(self, frame: AppFrame, t: float) -> str:
         """Give an application a frame the link received; :data:`TAKEN`, :data:`KEPT`, :data:`ABSENT`
@@ -115,9 +119,6 @@ class Endpoint(Protocol):
         """The link's READY/BUSY (the endpoint says it only when it changed for its applications)."""
 
     def close(self) -> None: ...
-
-    # An endpoint may also have ``phy(event: PhyEvent)``: then the link reports its simulated modem's
-    # transmissions and arrivals to it (an emulated modem's extended notifications).
 
 
 class Door(Protocol):

@@ -130,7 +130,7 @@ def open_output(path: str, kind: str, *, append: bool, group: int | None = None,
 
 
 def _open_problem(path: str, kind: str, exc: OSError) -> str:
-    if exc.errno == getattr(os, "ELOOP", 40):
+    if exc.errno == getattr(os, "ELOOP", 40):  # (by name: a constant not every platform has)
         return f"{path} is a symbolic link: hilgate writes its {kind} only into a regular file, not through a link"
     return f"cannot write the {kind} {path}: {exc.strerror or exc}"
 

@@ -20,16 +20,52 @@ from __future__ import annotations
 
 import itertools
 from heapq import heappop, heappush
-from typing import Any, Callable
+from typing import Any, Callable, Protocol
 
-__all__ = ["VirtualScheduler"]
+from ..models.clock import Clock
+
+__all__ = ["Scheduler", "Loop", "VirtualScheduler"]
 
 INF = float("inf")
+
+
+class Scheduler(Clock, Protocol):
+    """What the daemon's parts (doors, drivers, emulators, the router) ask of the scheduler, in either
+    clock: the models' :class:`~hilgate.models.clock.Clock` and the calls below."""
+
+    speed: float
+    """Model seconds per wall-clock second (``--speed``; 1 in virtual time)."""
+    input_lateness: float
+    """How late (model seconds) the loop read the input being handled; 0 when on time or virtual."""
+
+    def after(self, delay: float, fn: Callable[..., Any], *args: Any) -> Any: ...
+
+    def after_wall(self, seconds: float, fn: Callable[..., Any], *args: Any) -> Any: ...
+
+    def defer(self, fn: Callable[[], Any]) -> None: ...
+
+
+class Loop(Scheduler, Protocol):
+    """The real-time scheduler's input side: descriptors, calls from other threads, signals."""
+
+    def add_reader(self, fd: int, callback: Callable[[], Any]) -> None: ...
+
+    def remove_reader(self, fd: int) -> None: ...
+
+    def set_writer(self, fd: int, callback: Callable[[], Any] | None) -> None: ...
+
+    def post(self, fn: Callable[..., Any], *args: Any) -> None: ...
+
+    def on_signal(self, signum: int, handler: Callable[[int], Any]) -> None: ...
+
+    def stop(self) -> None: ...
 
 
 class VirtualScheduler:
     speed = 1.0
     """Model seconds per wall-clock second (the real-time scheduler's ``--speed``; 1 in virtual time)."""
+    input_lateness = 0.0
+    """How late the loop read the input being handled (model seconds): always 0 in virtual time."""
 
     def __init__(self, start: float = 0.0):
         self._now = float(start)

@@ -9,12 +9,22 @@ before they can be opened again).
 from __future__ import annotations
 
 import logging
-from typing import Any
+from typing import Any, Protocol
 
 from ..sim.live_vehicle import LiveVehicle
 from ..scene import Scene
 
 log = logging.getLogger(__name__)
+
+
+class PoseFeed(Protocol):
+    """Something that measures vehicles' poses on a thread of its own (a MAVLink link, a camera; a ROS 2
+    subscription would be one more) and hands them to the loop with ``scheduler.post``: started when a
+    scene names it, stopped on a reload or at exit (its sockets or devices released by then)."""
+
+    def start(self) -> None: ...
+
+    def stop(self) -> None: ...
 
 
 def _identity(heartbeat: tuple | None) -> Any:
@@ -40,8 +50,8 @@ def _feedback_identity(vehicle: Any) -> Any:
 class LiveSources:
     def __init__(self, scheduler: Any):
         self.scheduler = scheduler
-        self.mavlink: list[Any] = []
-        self.cameras: dict[str, Any] = {}
+        self.mavlink: list[PoseFeed] = []
+        self.cameras: dict[str, Any] = {}  # name → the camera's PoseFeed (drivers.aruco.CameraThread)
         self.feedback: list[Any] = []
 
     def apply(self, scene: Scene, poses: dict[str, Any], local: Any = lambda spec: True) -> None:
@@ -88,7 +98,7 @@ class LiveSources:
         try:
             feedback = Feedback(name, params["url"], params["message"], params["rate_hz"], params["origin"],
                                 params["system_id"], lambda: pose.position(now()),
-                                lambda: getattr(pose, "attitude", None), self.scheduler, identity)
+                                lambda: pose.attitude, self.scheduler, identity)
         except ValueError as exc:  # it would send as a ground station: send nothing
             log.error("%s; no feedback sent", exc)
             return

@@ -138,6 +138,7 @@ class Network:
         self._tokens: dict[str, Any] = {}
         self._entities: list[Any] = []
         self._status_cache = b"{}"
+        self.zid: str | None = None  # this daemon's Zenoh id, once open() joined
 
     # -- set-up ---------------------------------------------------------------------------------
 
@@ -444,7 +445,7 @@ class Network:
             world = self.router.world
             for name, pose in world.poses.items():
                 vehicle = self.scene.vehicles.get(name)
-                if vehicle is None or not world.local(vehicle) or getattr(pose, "static", False):
+                if vehicle is None or not world.local(vehicle) or pose.static:
                     continue
                 if isinstance(pose, LiveVehicle):
                     continue  # published at each measurement
@@ -501,7 +502,7 @@ class Network:
     def status(self) -> dict[str, Any]:
         links = [{"id": link_id, "host": host, "state": self.link_state(link_id)}
                  for link_id, host in sorted(self.remote_links.items())]
-        return {"host": self.host, "zid": getattr(self, "zid", None), "epoch_ns": self.epoch_ns if self._entities else None,
+        return {"host": self.host, "zid": self.zid, "epoch_ns": self.epoch_ns if self._entities else None,
                 "hosts": [view.status() for _, view in sorted(self.hosts.items())], "remote_links": links,
                 "counters": dict(self.counters)}
 

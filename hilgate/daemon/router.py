@@ -107,10 +107,11 @@ class RoutedLink:
         """An emulated modem's ``AT!AL``: the simulation uses ``address`` for this link from now on (its
         frames carry it, frames to it arrive), until a reload changes the link."""
         backend = self.backend
-        if not hasattr(backend, "set_address") or address == self.address:
+        if backend is None or address == self.address:
             return
         old = self.address
-        backend.set_address(address)
+        if not backend.set_address(address):
+            return
         self.readdressed = address
         self.router.readdress(self, old, address)
         log.info("link %s: address %d -> %d (AT!AL)", self.id, old, address)
@@ -119,22 +120,20 @@ class RoutedLink:
         """Take these frames back from the backend's queue if they are still there (an emulated modem's
         ``ATZ``); each is traced as a drop with ``cause``."""
         backend = self.backend
-        if not hasattr(backend, "withdraw"):
-            return 0
-        taken = backend.withdraw(frames, cause)
+        taken = backend.withdraw(frames, cause) if backend is not None else 0
         if taken:
             self.state_changed()
         return taken
 
     def _watch_phy(self) -> None:
         """Only while an endpoint reports the PHY (an emulated modem) does the backend report it."""
-        if hasattr(self.backend, "watch_phy"):
-            watching = any(hasattr(endpoint, "phy") for endpoint in self.endpoints)
+        if self.backend is not None:
+            watching = any(endpoint.phy is not None for endpoint in self.endpoints)
             self.backend.watch_phy(self._phy if watching else None)
 
     def _phy(self, event: PhyEvent) -> None:
         for endpoint in list(self.endpoints):
-            report = getattr(endpoint, "phy", None)
+            report = endpoint.phy
             if report is not None:
                 report(event)
 
@@ -165,14 +164,14 @@ class RoutedLink:
         if endpoint.kind == "socket" and self.clients >= self.router.max_link_clients:
             return False
         self.endpoints.append(endpoint)
-        if hasattr(endpoint, "phy"):
+        if endpoint.phy is not None:
             self._watch_phy()
         return True
 
     def detach(self, endpoint: Endpoint) -> None:
         if endpoint in self.endpoints:
             self.endpoints.remove(endpoint)
-            if hasattr(endpoint, "phy"):
+            if endpoint.phy is not None:
                 self._watch_phy()
 
     @property
@@ -180,7 +179,7 @@ class RoutedLink:
         return sum(1 for endpoint in self.endpoints if endpoint.kind == "socket")
 
     def _sim_modem(self) -> Any:
-        return getattr(self.backend, "modem", None)
+        return self.backend.sim_modem if self.backend is not None else None
 
     def airtime(self, size: int) -> float | None:
         modem = self._sim_modem()
@@ -239,7 +238,7 @@ class RoutedLink:
     def _send(self, real: bytes, payload: bytes, seq: int, dst: int) -> None:
         scheduler = self.router.scheduler
         frame = AppFrame(real, payload, self.packet, seq, self.address, dst, scheduler.now())
-        frame.lateness = getattr(scheduler, "input_lateness", 0.0)
+        frame.lateness = scheduler.input_lateness
         self.send(frame)
 
     def send(self, frame: AppFrame) -> None:
@@ -597,7 +596,7 @@ class Router:
         vehicles = []
         for name, pose in self.world.poses.items():
             position = pose.position(now)
-            age = getattr(pose, "age", lambda t: 0.0)(now)
+            age = pose.age(now)
             vehicles.append({
                 "name": name,
                 "source": self.scene.vehicles[name].pose.source_name,

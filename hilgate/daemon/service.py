@@ -114,6 +114,13 @@ class Daemon:
         self.gli_backlog = gli_backlog
         self.scene: Scene | None = None
         self.trace = None
+        # made by run(); shutdown() closes what a failed start got as far as making
+        self.group: int | None = None
+        self.scheduler: RealtimeScheduler | None = None
+        self.router: Router | None = None
+        self.live: LiveSources | None = None
+        self.control: ControlServer | None = None
+        self.tcp_listener: Any = None
         self.stopping = False
         self.started = time.monotonic()
         self._reload_job: SceneJob | None = None
@@ -375,17 +382,17 @@ class Daemon:
         notify("STOPPING=1")
         if self.status_line:
             sys.stderr.write("\n")
-        router = getattr(self, "router", None)
+        router = self.router
         if self.summary_path and router is not None and router.world is not None:
             summary = self.recorder.summary(self.scene, router.world.seed, self.scheduler.now(),
                                             time.monotonic() - self.started, links=router.summary())
             try:
-                write_summary(summary, self.summary_path, getattr(self, "group", None))
+                write_summary(summary, self.summary_path, self.group)
             except OSError as exc:
                 log.error("summary not written: %s", exc)
         if self._reload_job is not None:
             self._reload_job.cancel()
-        for closer in (getattr(self, "live", None), self.control, self.tcp_listener, router, self.network):
+        for closer in (self.live, self.control, self.tcp_listener, router, self.network):
             if closer is not None:
                 try:
                     closer.close()
@@ -394,6 +401,6 @@ class Daemon:
         if self.trace is not None:
             self.recorder.close()
             self.trace.close()
-        scheduler: Any = getattr(self, "scheduler", None)
+        scheduler = self.scheduler
         if scheduler is not None:
             scheduler.close()

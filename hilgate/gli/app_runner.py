@@ -69,7 +69,7 @@ class _CountedLink:
         self.sent += 1
 
     def __getattr__(self, name: str) -> Any:
-        return getattr(self._link, name)
+        return getattr(self._link, name)  # (by name: whatever the caller asks of the link)
 
 
 def _attached(link_id: str, link: Any, runtime_dir: str | None, tcp: tuple[str, int] | None) -> str:
@@ -78,7 +78,7 @@ def _attached(link_id: str, link: Any, runtime_dir: str | None, tcp: tuple[str, 
         backend = link.command({"class": "STATUS"}).get("link", {}).get("backend", "?")
     except (GliError, OSError):
         backend = "?"
-    if getattr(link, "sock", None) is None:
+    if link.sock is None:
         via = f"Zenoh, prefix {link.prefix}" + (f", host {link.info['host']}" if link.info.get("host") else "")
     elif tcp is not None:
         via = f"TCP {tcp[0]}:{tcp[1]}"
@@ -152,7 +152,7 @@ def run_application(cls: type[Application], link_ids: list[str], params: dict[st
                 app.on_receive(context, Message(link_id, message.src, message.dst, message.t, message.data))
 
         for link_id, link in links.items():
-            sock = getattr(link, "sock", None)
+            sock = link.sock
             if sock is not None:
                 def readable(link_id: str = link_id, link: Any = link) -> None:
                     try:

@@ -232,7 +232,7 @@ def _read_int(path: str) -> int | None:
 
 def open_failure(name: str, exc: BaseException | None) -> str:
     """The one-line error for a queue that could not be created, naming the limit it hit."""
-    code = getattr(exc, "errno", None)
+    code = getattr(exc, "errno", None)  # (by name: any exception, with or without errno)
     text = str(exc)
     if code == errno.ENOSPC or "No space left" in text or "total number of queues" in text:
         return (f"cannot create POSIX queue {name}: the system-wide number of queues is used up "
@@ -256,6 +256,7 @@ def open_failure(name: str, exc: BaseException | None) -> str:
 
 def is_user_budget(exc: BaseException) -> bool:
     """mq_open's EMFILE for RLIMIT_MSGQUEUE, not for the descriptor limit."""
+    # by name: any exception, with or without errno
     if "maximum number of files" not in str(exc) and getattr(exc, "errno", None) != errno.EMFILE:
         return False
     return not _descriptors_exhausted()

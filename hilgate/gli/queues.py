@@ -247,6 +247,7 @@ class MqEndpoint:
 
     kind = "mq"
     busy = False
+    phy = None  # (no PHY reports: hilgate.core.endpoint.Endpoint.phy)
 
     def __init__(self, port: LinkPort, scheduler: Any, full_size: bool = True, backlog: int = 1000,
                  group: int | None = None):

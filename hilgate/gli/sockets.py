@@ -60,6 +60,7 @@ class GliClient:
 
     kind = "socket"
     busy = False
+    phy = None  # (no PHY reports: hilgate.core.endpoint.Endpoint.phy)
 
     def __init__(self, sock: socket.socket, scheduler: Any, limits: ClientLimits,
                  lookup: Callable[[str], LinkPort | None], port: LinkPort | None = None,

@@ -86,6 +86,9 @@ def _prefix_hint(session: Any, link_id: str, prefix: str) -> str:
 class ZenohLink:
     """One link of the network, reached over Zenoh (see :class:`hilgate.gli.client.Link`)."""
 
+    sock = None
+    """(A socket link's ``sock``; this one has none: its frames come on Zenoh's threads.)"""
+
     def __init__(self, session: Any, prefix: str, link_id: str, info: dict[str, Any], host: str,
                  client: str | None = None):
         from .client import GliError, Message

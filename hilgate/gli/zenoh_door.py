@@ -136,6 +136,7 @@ class Client:
 class ZenohEndpoint:
     kind = "zenoh"
     busy = False
+    phy = None  # (no PHY reports: hilgate.core.endpoint.Endpoint.phy)
 
     def __init__(self, door: "ZenohDoor", port: LinkPort):
         self.door = door

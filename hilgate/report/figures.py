@@ -225,7 +225,7 @@ def _fit_legends(fig) -> bool:
     changed = False
     fig.canvas.draw()
     for ax in fig.axes:
-        made = getattr(ax, "_hilgate_legend", None)
+        made = getattr(ax, "_hilgate_legend", None)  # (by name: matplotlib's axes carry our mark)
         while made is not None and ax.get_legend() is not None and not _inside(fig, ax.get_legend()):
             width_in, handles, labels, columns, chars = made
             if columns > 1:

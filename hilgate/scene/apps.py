@@ -65,6 +65,7 @@ def app_specs(node: Node, plugins: dict[str, Plugin], links: dict[str, Any]) -> 
         if not colon or plugin is None:
             raise f.child("class").error(f.sub("class"), f"{quote(reference)} is not plugin:Class of a listed plugin "
                                                          "(list the .py file or module under plugins:)")
+        # by name: the class the scene names, by its name
         cls = getattr(plugin.module, class_name, None) if class_name.isidentifier() else None
         if not (isinstance(cls, type) and issubclass(cls, Application)):
             raise f.child("class").error(f.sub("class"), f"{quote(reference)} is not an application (a subclass "

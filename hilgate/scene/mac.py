@@ -41,6 +41,7 @@ def _mac_class(protocol: str, node: Node, path: str, plugins: dict[str, Plugin])
         if plugin is None:
             raise node.error(path, f"MAC {quote(protocol)}: {quote(plugin_name)} is not a listed plugin (list its .py "
                                    "file or module under plugins:, or give --plugin)")
+        # by name: the class the scene names, by its name
         cls = getattr(plugin.module, class_name, None) if class_name.isidentifier() else None
         if cls is None:
             raise node.error(path, f"plugin {plugin_name!r} has no {quote(class_name)}")

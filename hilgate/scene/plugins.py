@@ -156,6 +156,7 @@ def origin_of(cls: type) -> str:
     """Where a plugin's class comes from, to find it again in another process: the plugin file's real
     path (its module name is private to the process that loaded it), or the installed module's name."""
     module = sys.modules.get(cls.__module__)
+    # by name: a module built in memory has no file
     if cls.__module__.startswith(PRIVATE_PREFIX) and module is not None and getattr(module, "__file__", None):
         return os.path.realpath(module.__file__)
     return cls.__module__
@@ -166,7 +167,7 @@ def class_from_origin(origin: str, qualname: str) -> type:
     plugin = load_plugin(origin, "/") if os.path.isabs(origin) else load_plugin(origin, os.getcwd())
     target: object = plugin.module
     for part in qualname.split("."):
-        target = getattr(target, part, None)
+        target = getattr(target, part, None)  # (by name: a dotted name the scene wrote)
     if not isinstance(target, type):
         raise PluginError(f"{origin} has no class {qualname}")
     return target

@@ -17,6 +17,7 @@ import json
 import math
 from typing import Any
 
+from ..models.physical import PhysicalErrorModel
 from . import LinkSpec, Scene
 
 __all__ = ["scene_view", "link_view", "view_hash", "link_changes", "error_view"]
@@ -35,6 +36,7 @@ def _plain(value: Any) -> Any:
     if isinstance(value, (list, tuple)):
         return [_plain(v) for v in value]
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        # by name: every field of a dataclass
         return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
     return str(value)
 
@@ -44,17 +46,16 @@ def error_view(model: Any) -> dict[str, Any]:
     of distance, ``{"kind": "physical", "env", "acoustic", "bitrate_bps", "sender", "sender_bitrate_bps"}``
     for the physical model (the arguments of :class:`hilgate.models.physical.PhysicalErrorModel`; the
     sender the receiver's model stands for until the medium binds a path to its real one)."""
-    if getattr(model, "unit", None) == "physical":
+    if isinstance(model, PhysicalErrorModel):
         return {"kind": "physical", "env": _plain(model.env), "acoustic": _plain(model.acoustic),
                 "bitrate_bps": _plain(model.bitrate_bps), "sender": _plain(model.sender),
                 "sender_bitrate_bps": _plain(model.sender_bitrate_bps)}
-    expression = getattr(model, "expression", None)
-    return {"unit": str(getattr(model, "unit", "?")), "expr": str(getattr(expression, "text", model))}
+    return {"unit": model.unit, "expr": model.expression.text}
 
 
 def link_view(link: LinkSpec) -> dict[str, Any]:
     p = link.params
-    params = {f.name: _plain(getattr(p, f.name)) for f in dataclasses.fields(p)
+    params = {f.name: _plain(getattr(p, f.name)) for f in dataclasses.fields(p)  # (by name: every field of a dataclass)
               if f.name not in ("address", "tx_channel", "rx_channel", "error")}
     params["error"] = error_view(p.error)
     view = {

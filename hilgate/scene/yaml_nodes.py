@@ -288,6 +288,7 @@ def read_limited(path: str, limit: int, what: str = "file", expect: os.stat_resu
     byte is read, and no more than ``limit + 1`` bytes are ever read.  ``expect``: the stat of the
     file the caller checked; a different file found at ``path`` now is refused."""
     try:
+        # by name: a flag not every platform has
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC | getattr(os, "O_NOCTTY", 0))
     except (OSError, ValueError) as exc:
         raise SceneError(path, 0, "", f"cannot read {what}: {_reason(exc)}") from None

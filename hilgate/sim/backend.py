@@ -45,8 +45,13 @@ class SimBackend(Backend):
             app = frame.app_frame if isinstance(frame.app_frame, AppFrame) else None
             self.on_phy(PhyEvent(kind, app, frame.size, frame.src_addr, frame.dst_addr, start, end, cause))
 
-    def set_address(self, address: int) -> None:
+    @property
+    def sim_modem(self) -> SimModem:
+        return self.modem
+
+    def set_address(self, address: int) -> bool:
         self.modem.set_address(address)
+        return True
 
     def withdraw(self, frames: list[AppFrame], cause: str) -> int:
         """Take these application frames out of the modem's FIFO if they are still queued."""

@@ -93,7 +93,7 @@ def link_budget(scene: Scene, frame_bytes: int | None = None, limit: int | None 
                 continue
             if model.constant_zero:
                 continue
-            snr_of = getattr(model, "snr_db", None)
+            snr_of = getattr(model, "snr_db", None)  # (a column of the table: only physical models have an SNR)
             snr = snr_of(d) if snr_of is not None and d is not None else None
             per = None if d is None else (model.per(d, size) if rmin <= d <= rmax else 1.0)
             high = rmax if math.isfinite(rmax) else FAR_M

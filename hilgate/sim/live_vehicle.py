@@ -10,6 +10,8 @@ the position is carried on along the last velocity, when a source gives one.
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 from typing import Any
 
@@ -28,6 +30,7 @@ class AxisState:
 
 class LiveVehicle:
     static = False
+    max_speed_mps = math.inf  # a live source promises no top speed
 
     def __init__(self, name: str, initial: Vec3 | None = None, stale_after_s: float = 2.0, stale: str = "hold",
                  extrapolate_s: float = 0.0, merge: dict[str, str] | None = None):

@@ -79,7 +79,7 @@ def _lateness(frame: Any) -> str:
     """``, "lateness_s": x`` for a frame from an application that the daemon read late (its stamp
     ``t`` may be up to x after the application sent it); nothing otherwise."""
     payload = frame.app_frame
-    late = getattr(payload, "lateness", 0.0) if payload is not None else 0.0
+    late = payload.lateness if payload is not None else 0.0  # (an AppFrame: only applications' frames carry one)
     return f', "lateness_s": {round(late, 6)!r}' if late else ""
 
 

@@ -59,7 +59,7 @@ class World:
 
     def _build_pose(self, vehicle: Any) -> PoseSource:
         pose = build_pose(vehicle)
-        if self.local(vehicle) or getattr(pose, "static", False):
+        if self.local(vehicle) or pose.static:
             return pose  # a static pose is the same on every host: computed here, exactly
         return RemoteVehicle(vehicle)
 
@@ -74,7 +74,7 @@ class World:
                 continue
             dst_addr = BROADCAST if spec.dst == "*" else scene.links[spec.dst].params.address
             stats = reuse.get(spec)
-            if stats is None and hasattr(self.observer, "add_flow"):
+            if stats is None:
                 stats = self.observer.add_flow(spec)
             flows.append(FlowSource(spec, modem, dst_addr, self.clock, random_stream(self.seed, "flow", str(index)), stats))
         return flows
