@@ -26,12 +26,11 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Iterable
 
 from .frame import BROADCAST
-from .path import bind_path
-from .radio import OVERLAP_EPS, Arrival  # noqa: F401  (their home was here; kept importable)
+from .propagation import Propagation, StraightLine
 
 NO_POSE = "no_pose"
 """The cause of a frame that cannot be judged because the sender or a receiver has no position (a live
@@ -45,14 +44,17 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class Channel:
-    """A shared medium: propagation delay τ = ``min_delay_s`` + d / ``speed_mps``."""
+    """A shared medium.  Its ``propagation`` gives every path's delay and loss model (``propagation.py``);
+    a scene's channel is a :class:`~.propagation.StraightLine` at ``speed_mps`` after ``min_delay_s``."""
 
     name: str
     speed_mps: float
     min_delay_s: float = 0.0
+    propagation: Propagation = field(default=None)  # type: ignore[assignment]  # (None: the straight line)
 
-    def delay(self, d: float) -> float:
-        return self.min_delay_s + d / self.speed_mps
+    def __post_init__(self) -> None:
+        if self.propagation is None:
+            object.__setattr__(self, "propagation", StraightLine(self.speed_mps, self.min_delay_s))
 
 
 class _Neighbour:
@@ -63,16 +65,16 @@ class _Neighbour:
     pair whose receiver refuses the sender (``refused``: another band, a modulation it does not decode)
     never takes the fast path (``reach`` is False)."""
 
-    __slots__ = ("radio", "static", "reach", "d", "tau", "in_range", "rmin", "rmax", "min_delay", "speed",
+    __slots__ = ("radio", "static", "reach", "d", "tau", "in_range", "rmin", "rmax", "delay",
                  "per_cache", "model", "power", "refused", "interferes")
 
     def __init__(self, sender: "Radio", receiver: "Radio", channel: Channel):
         self.radio = receiver
         self.rmin, self.rmax = sender.range_m
-        self.min_delay = channel.min_delay_s
-        self.speed = channel.speed_mps
+        propagation = channel.propagation
+        self.delay = propagation.delay  # a moving pair asks it at every transmission
         self.per_cache: dict[int, float] | None = None  # made at the first loss drawn: a million pairs, few draw
-        self.model, self.refused, self.interferes = bind_path(sender, receiver)
+        self.model, self.refused, self.interferes = propagation.bind(sender, receiver)
         self.power = -1.0  # received power on a static path, once asked (collisions: sinr)
         self.static = bool(sender.pose.static and receiver.pose.static)
         self.d = self.tau = 0.0
@@ -84,7 +86,7 @@ class _Neighbour:
                 self.in_range = False
             else:
                 self.d = math.dist(a, b)
-                self.tau = channel.delay(self.d)
+                self.tau = propagation.delay(self.d, a, b)
                 self.in_range = self.rmin <= self.d <= self.rmax
         self.reach = self.static and self.in_range and self.refused is None  # the common case, tested first
 
@@ -324,7 +326,7 @@ class Medium:
         rmin, rmax = sender.range_m
         if not rmin <= d <= rmax:
             return None
-        return self.channels[sender.tx_channel].delay(d)
+        return self.channels[sender.tx_channel].propagation.delay(d, a, b)
 
     def transmit(self, sender: "Radio", frame: "Frame", t: float, duration: float) -> None:
         """``frame`` goes on air from ``sender`` at ``t`` for ``duration`` seconds: hand out its arrivals."""
@@ -379,7 +381,7 @@ class Medium:
                         radio.unreachable(frame)
                     missed += 1
                     continue
-                start = t + nb.min_delay + d / nb.speed
+                start = t + nb.delay(d, sender_position, receiver_position)
             if nb.refused is not None:
                 if not nb.interferes:  # outside its band: it hears nothing
                     if radio.address == dst:

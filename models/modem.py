@@ -234,7 +234,7 @@ class SimModem:
 
     def tau_at(self, range_m: float) -> float:
         """Propagation delay to ``range_m`` metres on this modem's transmit channel."""
-        return self.medium.channels[self.radio.tx_channel].delay(range_m)
+        return self.medium.channels[self.radio.tx_channel].propagation.delay(range_m)
 
     def deliver(self, frame: "Frame") -> None:
         """Hand a good frame to the application after the rx delay and jitter."""

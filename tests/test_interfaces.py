@@ -19,6 +19,7 @@ from hilgate.daemon.live_sources import PoseFeed
 from hilgate.models.clock import Clock
 from hilgate.models.mac import MacHost
 from hilgate.models.observer import Observer
+from hilgate.models.propagation import Propagation
 from hilgate.models.radio import LossModel, RadioHost, SinrLossModel
 from hilgate.models.trajectories import PoseSource
 from seamcheck import members, missing
@@ -49,6 +50,7 @@ SEAMS = {
                     "hilgate.models.path:Unheard",
                     "hilgate.models.medium:_Neighbour"],
 }
+SEAMS[Propagation] = ["hilgate.models.propagation:StraightLine"]
 BACKENDS = ["hilgate.sim.backend:SimBackend", "hilgate.drivers.evologics:EvologicsBackend",
             "hilgate.drivers.s100:S100Backend"]
 

@@ -268,11 +268,11 @@ def test_random_mixed_pair_in_simulation_matches_the_textbook_per(case, tmp_path
 def test_a_path_is_bound_once_per_pair_not_per_frame(monkeypatch):
     """The medium binds the receiver's model to the sender when it lists the pair: 200 frames each way
     between two moving-free modems cost two bindings, and every arrival uses the bound model."""
-    import hilgate.models.medium as medium
+    import hilgate.models.propagation as propagation
 
     calls = []
-    real = medium.bind_path
-    monkeypatch.setattr(medium, "bind_path", lambda s, r: calls.append((s, r)) or real(s, r))
+    real = propagation.bind_path
+    monkeypatch.setattr(propagation, "bind_path", lambda s, r: calls.append((s, r)) or real(s, r))
     loud = Acoustic((7.0, 17.0), 141.0)
     quiet = Acoustic((7.0, 17.0), 141.0, level=3, modulation="qpsk", decodes=("bpsk",))
     env = Environment()

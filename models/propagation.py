@@ -1,0 +1,51 @@
+"""Delay and loss of one path, from one place: the propagation model a channel asks (ns-3's ``PropModel``).
+
+Every (sender, receiver) pair gets its delay and its loss model here, static or moving alike: the medium
+asks :meth:`Propagation.delay` once for a static pair and at every transmission for a moving one, and
+:meth:`Propagation.bind` once per pair for the loss model it hands with each arrival.  Nothing else in
+the models computes a path delay (``Medium.propagation_delay`` for an emulated modem, ``SimModem.tau_at``
+for a MAC's timing ask the same object), so a channel that replaces it, such as a ray-traced (BELLHOP)
+channel, changes every path at once.
+
+:class:`StraightLine` is the model of every shipped scene: sound on a straight line at one speed, the
+loss of the receiver's error model bound to the sender (``path.py``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol
+
+from .path import BoundPath, PathEnd, bind_path
+
+if TYPE_CHECKING:
+    from .trajectories import Vec3
+
+__all__ = ["Propagation", "StraightLine"]
+
+
+class Propagation(Protocol):
+    """What a channel is asked for every path."""
+
+    def delay(self, d: float, a: "Vec3 | None" = None, b: "Vec3 | None" = None) -> float:
+        """Seconds from the sender at ``a`` to the receiver at ``b``, ``d`` metres apart.  Without
+        positions (a MAC's timing at its range: ``SimModem.tau_at``) a model that needs them answers
+        for the distance alone."""
+
+    def bind(self, sender: PathEnd, receiver: PathEnd) -> BoundPath:
+        """The loss model of frames from ``sender`` at ``receiver`` (asked once per pair), and whether
+        the receiver refuses them (``path.BoundPath``)."""
+
+
+@dataclass(frozen=True)
+class StraightLine:
+    """τ = ``min_delay_s`` + d / ``speed_mps``; the loss of the receiver's error model (``bind_path``)."""
+
+    speed_mps: float
+    min_delay_s: float = 0.0
+
+    def delay(self, d: float, a: "Vec3 | None" = None, b: "Vec3 | None" = None) -> float:
+        return self.min_delay_s + d / self.speed_mps
+
+    def bind(self, sender: PathEnd, receiver: PathEnd) -> BoundPath:
+        return bind_path(sender, receiver)
