@@ -46,8 +46,16 @@ CLOCK_TICK = os.sysconf("SC_CLK_TCK")
 LAUNCH = """\
 import sys
 if sys.argv.pop(1) == "fixed":
-    from hilgate.core import realtime
-    realtime.RealtimeScheduler.adaptive = False
+    from hilgate.core import realtime, waiting
+
+    class FixedWait(waiting.AdaptiveWait):  # the fixed spin and linger of earlier versions
+        def overslept(self, late):
+            pass
+
+        def keep_polling(self, now):
+            return now - self.last_input <= self.linger_s
+
+    realtime.AdaptiveWait = FixedWait
 from hilgate.cli import main
 sys.exit(main())
 """

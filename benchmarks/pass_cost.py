@@ -60,7 +60,7 @@ def measuring_scheduler(a: str, b: str, passes: int, profile: bool) -> type[Real
             to_b.send(b"\x01")  # REQ_STATE from both applications: both links are attended
             to_a.send(b"\x01")
             self._handle_inputs(0.0)
-            self._fire_due(self.model_time())
+            self.fire_due(self.model_time())
             _drain(from_a)
             _drain(from_b)
             message = frame(b"ping" * 5, 0, 2)
@@ -74,7 +74,7 @@ def measuring_scheduler(a: str, b: str, passes: int, profile: bool) -> type[Real
                     profiler.enable()
                 self._handle_inputs(0.0)
                 while self.peek() <= self.model_time():
-                    self._fire_due(self.model_time())
+                    self.fire_due(self.model_time())
                 if self._deferred:
                     self.run_deferred()
                 if profiler:

@@ -4,16 +4,20 @@ Ties at one time fire in the order they were scheduled (the sequence number), wh
 a virtual-time run reproducible bit for bit.  A handle is the heap entry itself; cancelling blanks
 its callback and the loop skips it, so cancel is O(1).
 
-:class:`VirtualScheduler` runs as fast as the CPU allows (``hilgate sim``, tests).  The real-time
-scheduler of the daemon (:mod:`hilgate.core.realtime`) is built on the same core, :meth:`peek` and
-:meth:`step`, and only adds waiting for the wall clock and for input; the models cannot tell them
-apart.  Two clocks, one meaning for every call:
+:class:`VirtualScheduler` is the core (:meth:`fire_due`) and virtual time: it runs as fast as the CPU
+allows (``hilgate sim``, tests).  The real-time scheduler of the daemon (:mod:`hilgate.core.realtime`)
+fires its timers with the same :meth:`fire_due` and only adds the wall clock, a wait policy and the
+I/O loop; the models cannot tell them apart.  Two clocks, one meaning for every call:
 
 - :meth:`at` / :meth:`after` are model time;
 - :meth:`after_wall` is wall-clock seconds (model seconds × ``speed`` in real time; the same as
   :meth:`after` in virtual time, where ``speed`` is 1): for what the operator or a device waits for
   (timeouts, retries, periodic flushes), never for the model;
-- :meth:`defer` runs a call once the events due at the current instant have all fired.
+- :meth:`defer` runs a call once the events due at the current instant have all fired, before the
+  clock moves on (to a later timer, or to an input's time in real time), in both clocks.
+
+A callback that raises stops a virtual-time run (a test sees it); the daemon logs it and goes on
+(:meth:`VirtualScheduler._failed`, the one guard, for timers, deferred calls and inputs alike).
 """
 
 from __future__ import annotations
@@ -62,6 +66,11 @@ class Loop(Scheduler, Protocol):
 
 
 class VirtualScheduler:
+    """The timer core of both clocks, and virtual time: :meth:`run` fires every event as fast as the
+    CPU allows (``hilgate sim``, tests).  The real-time scheduler (:mod:`hilgate.core.realtime`) is this
+    class with a wall clock, a wait and an I/O loop around :meth:`fire_due`; the models cannot tell them
+    apart."""
+
     speed = 1.0
     """Model seconds per wall-clock second (the real-time scheduler's ``--speed``; 1 in virtual time)."""
     input_lateness = 0.0
@@ -103,11 +112,14 @@ class VirtualScheduler:
         self._deferred.append(fn)
 
     def advance(self, t: float) -> None:
-        """Move the clock to ``t`` for something that is not a timer (input read at ``t``); never back."""
+        """Move the clock to ``t`` for something that is not a timer (input read at ``t``); never back.
+        The instant being left is over: its deferred calls run first."""
         if t > self._now:
+            if self._deferred:
+                self.run_deferred()
             self._now = t
 
-    # -- the core: look at the next event, fire it -----------------------------------------------
+    # -- the core: the next event, every event due, the deferred calls ----------------------------
 
     def peek(self) -> float:
         """Time of the next event (cancelled ones are dropped), or infinity."""
@@ -116,32 +128,14 @@ class VirtualScheduler:
             heappop(heap)
         return heap[0][0] if heap else INF
 
-    def step(self) -> None:
-        """Fire the next event, at its own time (call :meth:`peek` first: there must be one)."""
-        entry = heappop(self._heap)
-        self._now = entry[0]
-        self.events += 1
-        self._fire(entry[2], entry[3])
-
-    def _fire(self, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
-        fn(*args)
-
-    def run_deferred(self) -> None:
-        deferred = self._deferred  # one list for the scheduler's life: run() keeps a local name for it
-        while deferred:
-            batch = deferred[:]
-            deferred.clear()
-            for fn in batch:
-                self._fire(fn, ())
-
-    # -- virtual time ------------------------------------------------------------------------------
-
-    def run(self, until: float = INF) -> int:
-        """Fire every event up to and including ``until``; the clock then reads ``until`` (if finite).
-
-        This is :meth:`peek` and :meth:`step` written out in one loop: it is the simulator's hot path."""
+    def fire_due(self, until: float) -> int:
+        """Fire every event due at or before ``until``, each at its own time, in the order scheduled;
+        the deferred calls of an instant run once its events have all fired, before the clock moves on.
+        Returns how many fired.  Both clocks run their timers here: it is the simulator's hot path."""
         heap = self._heap
         deferred = self._deferred
+        if deferred and heap and heap[0][0] > self._now:
+            self.run_deferred()  # the instant in which they were deferred (an input's) is over
         fired = 0
         while heap:
             entry = heap[0]
@@ -150,16 +144,46 @@ class VirtualScheduler:
                 break
             heappop(heap)
             fn = entry[2]
-            if fn is None:
+            if fn is None:  # cancelled
                 continue
             self._now = t
-            fn(*entry[3])
             fired += 1
+            try:
+                fn(*entry[3])
+            except Exception:
+                self._failed(fn)
             if deferred and (not heap or heap[0][0] > t):
                 self.run_deferred()
-        if deferred:
+        self.events += fired
+        return fired
+
+    def run_deferred(self) -> None:
+        deferred = self._deferred  # one list for the scheduler's life: fire_due keeps a local name for it
+        while deferred:
+            batch = deferred[:]
+            deferred.clear()
+            for fn in batch:
+                self.call(fn)
+
+    def call(self, fn: Callable[..., Any], *args: Any) -> None:
+        """Call ``fn(*args)`` for the scheduler (a deferred call, an input's handler) under its guard."""
+        try:
+            fn(*args)
+        except Exception:
+            self._failed(fn)
+
+    def _failed(self, fn: Callable[..., Any]) -> None:
+        """A callback raised (called in its ``except``): in virtual time the run stops with it, so a
+        test or ``hilgate sim`` shows the error where it happened.  The daemon logs it and goes on."""
+        raise  # noqa: PLE0704  (the exception being handled)
+
+    # -- virtual time ------------------------------------------------------------------------------
+
+    def run(self, until: float = INF) -> int:
+        """Fire every event up to and including ``until``; the clock then reads ``until`` (if finite)."""
+        fired = self.fire_due(until)
+        if self._deferred:
             self.run_deferred()
         if until != INF and until > self._now:
             self._now = until
-        self.events += fired
         return fired

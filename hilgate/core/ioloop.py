@@ -1,0 +1,98 @@
+"""The real-time loop's inputs, in the manner of gpsd: one epoll set of descriptors (POSIX queues,
+sockets, serial ports), calls posted from other threads and signal handlers, and a wake-up pipe that
+ends a wait when one is posted.  It knows nothing of time: :mod:`hilgate.core.realtime` says how long
+to wait and dispatches what is ready, stamping each input with the model clock."""
+
+from __future__ import annotations
+
+import os
+import select
+import signal
+from collections import deque
+from typing import Any, Callable
+
+
+class IoLoop:
+    def __init__(self) -> None:
+        self.epoll = select.epoll()
+        self.readers: dict[int, Callable[[], Any]] = {}
+        self.writers: dict[int, Callable[[], Any]] = {}
+        self._registered: set[int] = set()
+        self.posted: deque[tuple[Callable[..., Any], tuple[Any, ...]]] = deque()
+        self._signals: dict[int, Callable[[int], Any]] = {}
+        self._wake_r, self._wake_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
+        self.add_reader(self._wake_r, self._drain_wakeups)
+
+    def add_reader(self, fd: int, callback: Callable[[], Any]) -> None:
+        """Call ``callback()`` in the loop whenever ``fd`` is readable (or hung up)."""
+        self.readers[fd] = callback
+        self._update(fd)
+
+    def remove_reader(self, fd: int) -> None:
+        if self.readers.pop(fd, None) is not None:
+            self._update(fd)
+
+    def set_writer(self, fd: int, callback: Callable[[], Any] | None) -> None:
+        """Call ``callback()`` whenever ``fd`` can take more output; None stops watching."""
+        if callback is None:
+            if self.writers.pop(fd, None) is None:
+                return
+        else:
+            self.writers[fd] = callback
+        self._update(fd)
+
+    def _update(self, fd: int) -> None:
+        mask = (select.EPOLLIN if fd in self.readers else 0) | (select.EPOLLOUT if fd in self.writers else 0)
+        try:
+            if not mask:
+                if fd in self._registered:
+                    self._registered.discard(fd)
+                    self.epoll.unregister(fd)
+            elif fd in self._registered:
+                self.epoll.modify(fd, mask)
+            else:
+                self.epoll.register(fd, mask)
+                self._registered.add(fd)
+        except (OSError, ValueError):
+            self._registered.discard(fd)  # already closed: the kernel forgot it
+
+    def post(self, fn: Callable[..., Any], *args: Any) -> None:
+        """Run ``fn(*args)`` in the loop as soon as possible; safe from other threads and signal handlers."""
+        self.posted.append((fn, args))
+        try:
+            os.write(self._wake_w, b"\0")
+        except BlockingIOError:
+            pass  # the pipe is full of wake-ups already
+
+    def on_signal(self, signum: int, handler: Callable[[int], Any]) -> None:
+        """Handle ``signum`` in the loop (not in the interrupted frame)."""
+        self._signals[signum] = handler
+        signal.signal(signum, lambda s, _frame: self.post(self._signals[s], s))
+
+    def _drain_wakeups(self) -> None:
+        try:
+            while os.read(self._wake_r, 4096):
+                pass
+        except BlockingIOError:
+            pass
+
+    def wait(self, timeout: float) -> bool:
+        """Sleep until a descriptor is ready or ``timeout`` seconds passed; whether one is.  ``select()``
+        on the epoll descriptor itself: ``epoll_wait`` rounds its timeout to whole milliseconds."""
+        try:
+            ready, _, _ = select.select([self.epoll.fileno()], [], [], timeout)
+        except InterruptedError:  # pragma: no cover - PEP 475 retries, kept for safety
+            return True
+        return bool(ready)
+
+    def close(self) -> None:
+        for fd in list(self.readers):
+            self.remove_reader(fd)
+        for fd in list(self.writers):
+            self.set_writer(fd, None)
+        self.epoll.close()
+        for fd in (self._wake_r, self._wake_w):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
