@@ -92,6 +92,20 @@ class Connection:
             return
         self.on_data(data)
 
+    def gone(self) -> bool:
+        """Whether the peer has left, looked at now (a close not yet read by the loop): closes it if so."""
+        if self.closed:
+            return True
+        try:
+            if self.sock.recv(1, socket.MSG_PEEK) != b"":
+                return False
+        except (BlockingIOError, InterruptedError):
+            return False
+        except OSError:
+            pass
+        self.close()
+        return True
+
     def write(self, data: bytes) -> bool:
         """Queue ``data``; False (nothing queued) if the connection is closed or its buffer is full."""
         if self.closed or self.write_failed:
