@@ -873,11 +873,6 @@ class S100Emulator:
         self.hosts.close()
 
 
-# Which device each protocol emulates is a column of the backend table (hilgate.drivers.table);
-# this mapping stays for older callers until nothing imports it.
-EMULATORS = {"evologics": EvologicsEmulator, "s100": S100Emulator}
-
-
 class EmulatorDoor:
     """Opens the emulated modem a link's ``emulate:`` asks for, and follows it across reloads."""
 

@@ -314,22 +314,6 @@ class HostCodec:
         parts = [str(len(payload))] + [str(f) for f in fields]
         return (name + "," + ",".join(parts) + ",").encode("latin-1") + payload
 
-    def send_im(self, payload: bytes, dst: int, ack: bool = True, pid: int | None = None) -> bytes:
-        fields: tuple = (dst, "ack" if ack else "noack")
-        if pid is not None:
-            return self._pid_command("*SENDIM", pid, payload, fields)
-        return self.command("*SENDIM", payload=payload, fields=fields)
-
-    def send_burst(self, payload: bytes, dst: int, pid: int | None = None) -> bytes:
-        if pid is not None:
-            return self._pid_command("*SEND", pid, payload, (dst,))
-        return self.command("*SEND", payload=payload, fields=(dst,))
-
-    def _pid_command(self, name: str, pid: int, payload: bytes, fields: tuple) -> bytes:
-        body = (f"{name},p{pid},{len(payload)}," + ",".join(str(f) for f in fields) + ",").encode() + payload
-        self.pending = name
-        return (b"+++AT" if self.data_mode else b"AT") + body + self.eol
-
     def raw(self, payload: bytes) -> bytes:
         """Burst data in data mode is sent as is."""
         return payload

@@ -301,8 +301,6 @@ class Port:
         self.backoff = 0.5
         self.reopen_timer = None
         self.opening = False
-        self.opens = 0
-        self.losses = 0
         self.attempts = 0
         self.outbox: Outbox | None = None
         self.reason: str | None = None  # why the port is down (None while up, or before the first try)
@@ -342,7 +340,6 @@ class Port:
             self.pump = _Pump(device, self.name, self.scheduler, self._pumped, self._pump_failed, self.max_buffer)
         log.info("%s: %s open%s", self.name, self.url, " again" if self.reason is not None else "")
         self.up = True
-        self.opens += 1
         self.backoff = 0.5
         self.reason = None
         self.on_state(True, None)
@@ -420,7 +417,6 @@ class Port:
             return
         self.reason = f"lost {self.url}: {_describe(exc)}"
         log.warning("%s: %s; reopening with backoff up to %g s", self.name, self.reason, self.max_backoff_s)
-        self.losses += 1
         self._release()
         self.on_state(False, self.reason)
         if not self.closed:

@@ -314,7 +314,7 @@ def _zenoh_option(args: argparse.Namespace):
 
 
 def _open_link(args: argparse.Namespace):
-    from .gli.client import Link
+    from .gli.socket_client import Link
     from .daemon.service import parse_tcp
 
     return Link.open(args.link, tcp=parse_tcp(args.tcp) if args.tcp else None, runtime_dir=args.runtime_dir,
@@ -327,7 +327,7 @@ def cmd_send(args: argparse.Namespace) -> int:
     A frame it took is confirmed in one line, with its destination as the channel model reads it
     (on a link whose packet class carries no address on air and that has no MAC, a frame reaches
     every modem in range whatever its destination: UWSim-NET's behaviour, ``addressing: auto``)."""
-    from .gli.client import GliError
+    from .gli.socket_client import GliError
 
     refused = 0
     with _open_link(args) as link:
@@ -456,7 +456,7 @@ def cmd_queues(args: argparse.Namespace) -> int:
     """dccomms never unlinks its queues, and Linux charges them to their creator until someone does."""
     import posix_ipc
 
-    from .gli.queues import queue_names
+    from .gli.limits import queue_names
     from .scene.load import load_scene
 
     scene = load_scene(args.scene, args.overrides, plugins=args.plugins, preset_dirs=args.preset_dirs)
@@ -498,7 +498,8 @@ def cmd_emulate(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from .report.figures import pick_run, report, trace_runs
+    from .report.figures import report
+    from .report.tracedata import pick_run, trace_runs
     from .report.tracefile import TraceError
 
     try:
@@ -810,7 +811,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"hilgate: {exc}", file=sys.stderr)
         return 1
     except Exception as exc:  # a client tool's error (GliError, …): one line, no traceback
-        from .gli.client import GliError
+        from .gli.socket_client import GliError
 
         if isinstance(exc, GliError):
             print(f"hilgate: {exc}", file=sys.stderr)

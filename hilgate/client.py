@@ -1,6 +1,6 @@
 """The GLI client library's public name: ``from hilgate.client import Link`` (it lives in
-:mod:`hilgate.gli.client`)."""
+:mod:`hilgate.gli.socket_client`)."""
 
-from .gli.client import GliError, Link, Message
+from .gli.socket_client import GliError, Link, Message
 
 __all__ = ["Link", "Message", "GliError"]

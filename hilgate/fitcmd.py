@@ -117,7 +117,7 @@ def run_fit(trace: str, scene_path: str | None = None, model: str = "power", lin
     lines (the scene as it was at each moment); ``scene_path`` (``--scene``) replaces them for the
     whole trace, and is needed for a trace that carries no scene (``hilgate sim``'s, an older
     daemon's whose scene file is gone)."""
-    from .report.figures import ReportError, pick_run, trace_runs
+    from .report.tracedata import ReportError, pick_run, trace_runs
     from .scene.load import load_scene
 
     if model not in MODELS:

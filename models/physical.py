@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 from .acoustics import (MODULATIONS, band_noise_db, ber, db_to_linear, francois_garrison_db_per_km,
                         thorp_db_per_km, transmission_loss_db)
@@ -218,11 +218,6 @@ class PhysicalErrorModel:
         if sender == self.sender and rate == self.sender_bitrate_bps:
             return self
         return _bound(self.env, self.acoustic, self.bitrate_bps, sender, rate)
-
-    def with_env(self, **changes: object) -> "PhysicalErrorModel":
-        """A copy with other environment values (``hilgate fit`` varies spreading and the floor)."""
-        return PhysicalErrorModel(replace(self.env, **changes), self.acoustic, self.bitrate_bps, self.sender,
-                                  self.sender_bitrate_bps)
 
     # -- value semantics (a reload compares specs by value; a worker pickles them) --------------
 

@@ -41,7 +41,7 @@ if TYPE_CHECKING:
 
 EPS = 1e-9
 DECIDE = 1e-9  # how long after a boundary a missing answer is declared missing
-IDLE, WAIT_CTS, SEND_DATA, WAIT_ACK, BACKOFF, SILENT = "idle", "wait_cts", "send_data", "wait_ack", "backoff", "silent"
+IDLE, WAIT_CTS, SEND_DATA, WAIT_ACK, BACKOFF = "idle", "wait_cts", "send_data", "wait_ack", "backoff"
 
 
 class SFama(Mac):

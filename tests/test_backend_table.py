@@ -118,7 +118,7 @@ def test_the_s100_paces_at_the_links_bitrate(monkeypatch):
 
 
 def test_the_built_in_rows_keep_todays_names_keys_and_classes():
-    from hilgate.drivers.emulators import EMULATORS
+    from hilgate.drivers.emulators import EvologicsEmulator, S100Emulator
     from hilgate.drivers.evologics import EvologicsBackend, EvologicsOptions
     from hilgate.drivers.s100 import S100Backend, S100Options
 
@@ -129,7 +129,8 @@ def test_the_built_in_rows_keep_todays_names_keys_and_classes():
     assert EvologicsOptions is table.EvologicsOptions and S100Options is table.S100Options
     assert table._resolve(DRIVERS["evologics"].backend) is EvologicsBackend
     assert table._resolve(DRIVERS["s100"].backend) is S100Backend
-    assert {name: table.emulator_for(name) for name in table.emulated_protocols()} == EMULATORS
+    assert {name: table.emulator_for(name) for name in table.emulated_protocols()} == {"evologics": EvologicsEmulator,
+                                                                                   "s100": S100Emulator}
     assert S100Options("/dev/x") == S100Options(port="/dev/x", baud=9600, rtscts=False, air_bitrate_bps=1800.0,
                                                 queue_frames=50)
     assert EvologicsOptions("socket://h:1").eol_bytes() == b"\n"

@@ -22,10 +22,10 @@ def feed_bytewise(codec, data):
     return events
 
 
-def test_send_im_frames_the_payload_by_length():
-    assert HostCodec(eol=b"\r").send_im(NASTY, 2, ack=True) == b"AT*SENDIM,%d,2,ack," % len(NASTY) + NASTY + b"\r"
-    assert HostCodec(eol=b"\n").send_burst(b"xy", 7) == b"AT*SEND,2,7,xy\n"
-    assert HostCodec().send_im(b"z", 3, ack=False, pid=0) == b"AT*SENDIM,p0,1,3,noack,z\r"
+def test_send_commands_frame_the_payload_by_length():
+    im = HostCodec(eol=b"\r").command("*SENDIM", payload=NASTY, fields=(2, "ack"))
+    assert im == b"AT*SENDIM,%d,2,ack," % len(NASTY) + NASTY + b"\r"
+    assert HostCodec(eol=b"\n").command("*SEND", payload=b"xy", fields=(7,)) == b"AT*SEND,2,7,xy\n"
 
 
 @pytest.mark.parametrize("payload", [b"hello", NASTY, b"\r\n", b",,,", b"\x00" * 10, b"+++AT", b""])
@@ -139,7 +139,7 @@ def test_modem_replies_and_notifications_in_both_modes():
 
 def test_host_and_modem_codecs_understand_each_other():
     host, modem = HostCodec(), ModemCodec()
-    command = modem.receive_data(host.send_im(NASTY, 9))[0]
+    command = modem.receive_data(host.command("*SENDIM", payload=NASTY, fields=(9, "ack")))[0]
     assert command.payload == NASTY and command.fields[1:] == ("9", "ack")
     assert host.receive_data(modem.reply(command, "OK")) == [Reply("*SENDIM", "OK")]
     text, payload = ModemCodec.recvim(3, 9, NASTY, False, 1, -2, 3, 0.0)

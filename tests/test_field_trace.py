@@ -6,7 +6,7 @@ import subprocess
 import sys
 
 from daemon_kit import Daemon, unique
-from hilgate.report.figures import load_trace, pick_run, trace_runs
+from hilgate.report.tracedata import load_trace, pick_run, trace_runs
 
 
 def test_each_daemon_start_writes_a_run_header(tmp_path):

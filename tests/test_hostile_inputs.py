@@ -19,7 +19,7 @@ from at_client import AtClient, free_port
 from daemon_kit import Daemon, unique
 from hilgate.drivers.emulators import MAX_TCP_CLIENTS
 from hilgate.scene import SceneError, load_scene_text
-from hilgate.scene.flows import MAX_FRAME_BYTES
+from hilgate.scene.flow_spec import MAX_FRAME_BYTES
 
 TWO_VEHICLES = """\
 channels: {{ac: {{speed_mps: 1500}}}}

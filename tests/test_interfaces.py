@@ -51,7 +51,7 @@ SEAMS = {
                     "hilgate.models.medium:_Neighbour"],
 }
 SEAMS[Propagation] = ["hilgate.models.propagation:StraightLine"]
-BACKENDS = ["hilgate.sim.backend:SimBackend", "hilgate.drivers.evologics:EvologicsBackend",
+BACKENDS = ["hilgate.sim.sim_backend:SimBackend", "hilgate.drivers.evologics:EvologicsBackend",
             "hilgate.drivers.s100:S100Backend"]
 
 

@@ -66,7 +66,8 @@ def test_figures_are_fit_for_a_paper(runs, tmp_path):
     """Issue 14 item 5, checked from what was drawn (not pixels): coinciding series get their own styles
     and are named in the caption; a value span beyond 100× goes on a log scale; dense timelines are
     counted per window; SVG and PDF besides PNG; captions say what produced each figure."""
-    from hilgate.report.figures import figures, load_trace
+    from hilgate.report.figures import figures
+    from hilgate.report.tracedata import load_trace
 
     folder, trace_path = runs
     trace = load_trace(str(trace_path))
@@ -94,7 +95,8 @@ def test_figures_are_fit_for_a_paper(runs, tmp_path):
 
 
 def test_a_dense_timeline_is_counted_per_window(tmp_path):
-    from hilgate.report.figures import DENSE, Packet, Trace, figures
+    from hilgate.report.figures import DENSE, figures
+    from hilgate.report.tracedata import Packet, Trace
 
     trace = Trace()
     for i in range(DENSE + 50):  # 4 Hz for 90 s: marks would make a solid band

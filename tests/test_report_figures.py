@@ -15,7 +15,8 @@ matplotlib = pytest.importorskip("matplotlib")
 from PIL import Image  # noqa: E402  (matplotlib's own dependency)
 
 from hilgate.cli import main  # noqa: E402
-from hilgate.report.figures import RESIDUE_S, Packet, Trace, figures, load_trace  # noqa: E402
+from hilgate.report.figures import RESIDUE_S, figures  # noqa: E402
+from hilgate.report.tracedata import Packet, Trace, load_trace  # noqa: E402
 
 
 def flow_trace(flows: dict[tuple[str, str], list[tuple[float, float]]]) -> Trace:

@@ -18,7 +18,7 @@ import time
 from daemon_kit import Daemon, unique
 from hilgate.client import Link
 from hilgate.fitcmd import run_fit
-from hilgate.report.figures import load_trace
+from hilgate.report.tracedata import load_trace
 
 HANG_GUARD_S = 90
 

@@ -35,7 +35,9 @@ __all__ = ["Application", "Context", "Message", "LinkHandle", "VehicleHandle"]
 
 @dataclass(frozen=True)
 class Message:
-    """A frame an application's link received: from address ``src`` to ``dst`` at model time ``t``."""
+    """A frame an application's link received: from address ``src`` to ``dst`` at model time ``t``, on
+    the link with id ``link``.  One class wherever an application receives: ``hilgate.app`` (an
+    application run by ``hilgate sim`` or ``hilgate app``) and ``hilgate.client`` (``Link.recv``)."""
 
     link: str
     src: int

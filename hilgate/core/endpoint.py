@@ -85,8 +85,6 @@ class LinkPort(Protocol):
     def delay_from(self, address: int, t: float) -> float | None:
         """Propagation delay from the modem at ``address`` to this link's (None: out of range, unknown)."""
 
-    def distance_from(self, address: int, t: float) -> float | None: ...
-
     def reception_from(self, address: int, t: float) -> Any:
         """The receiving modem's measurements of a frame from ``address`` (a ``models.link_budget.Reception``)."""
 

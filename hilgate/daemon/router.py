@@ -29,7 +29,7 @@ from ..models.usbl import UsblFix, fix as usbl_fix
 from ..scene import LinkSpec, Scene
 from ..scene.diff import SceneDiff, diff
 from ..scene.view import link_changes, link_view as scene_view_link, scene_view, view_hash
-from ..sim.backend import SimBackend
+from ..sim.sim_backend import SimBackend
 from ..sim.recorder import Recorder
 from ..sim.world import World
 
@@ -194,13 +194,6 @@ class RoutedLink:
     def delay_from(self, address: int, t: float) -> float | None:
         mine, theirs = self._sender(address)
         return None if theirs is None else mine.medium.propagation_delay(theirs, mine, t)
-
-    def distance_from(self, address: int, t: float) -> float | None:
-        mine, theirs = self._sender(address)
-        if theirs is None:
-            return None
-        a, b = theirs.pose.position(t), mine.pose.position(t)
-        return None if a is None or b is None else math.dist(a, b)
 
     def reception_from(self, address: int, t: float) -> Reception | None:
         """What this link's modem measures of a frame from ``address`` heard at ``t`` (positions, distance,

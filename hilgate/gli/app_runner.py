@@ -17,10 +17,10 @@ import signal
 from collections import deque
 from typing import Any, Callable
 
-from ..core.application import Application, ContextBase, Message
+from ..core.application import Application, ContextBase
 from ..core.paths import client_runtime_dir
 from ..core.realtime import RealtimeScheduler
-from .client import GliError, Link
+from .socket_client import GliError, Link
 
 log = logging.getLogger(__name__)
 
@@ -149,7 +149,7 @@ def run_application(cls: type[Application], link_ids: list[str], params: dict[st
                 if message is None:
                     return
                 counted[link_id].received += 1
-                app.on_receive(context, Message(link_id, message.src, message.dst, message.t, message.data))
+                app.on_receive(context, message)
 
         for link_id, link in links.items():
             sock = link.sock

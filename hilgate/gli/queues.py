@@ -34,8 +34,7 @@ import posix_ipc
 from ..core.backend import AppFrame
 from ..core.endpoint import ABSENT, KEPT, TAKEN, LinkPort
 from ..core.packets import PacketClass, PacketError
-from .limits import (MAX_MESSAGE_SIZE, MAX_MESSAGES, QUEUE_OVERHEAD, is_user_budget, open_failure,  # noqa: F401
-                     queue_cost, queue_names)
+from .limits import MAX_MESSAGE_SIZE, MAX_MESSAGES, is_user_budget, open_failure, queue_cost, queue_names
 from .queue_protocol import FRAME, FrameIn, Ignored, QueueProtocol, Refused, StateRequest
 
 log = logging.getLogger(__name__)

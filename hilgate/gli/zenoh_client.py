@@ -53,7 +53,7 @@ def _session(zenoh_option: Any) -> tuple[Any, str, Identity | None]:
     try:
         session = zenoh.open(config)
     except zenoh.ZError as exc:
-        from .client import GliError
+        from .socket_client import GliError
 
         raise GliError(f"cannot open a Zenoh session: {str(exc).splitlines()[0] if str(exc) else exc}") from None
     deadline = time.monotonic() + 2.0
@@ -84,14 +84,14 @@ def _prefix_hint(session: Any, link_id: str, prefix: str) -> str:
 
 
 class ZenohLink:
-    """One link of the network, reached over Zenoh (see :class:`hilgate.gli.client.Link`)."""
+    """One link of the network, reached over Zenoh (see :class:`hilgate.gli.socket_client.Link`)."""
 
     sock = None
     """(A socket link's ``sock``; this one has none: its frames come on Zenoh's threads.)"""
 
     def __init__(self, session: Any, prefix: str, link_id: str, info: dict[str, Any], host: str,
                  client: str | None = None):
-        from .client import GliError, Message
+        from .socket_client import GliError, Message
 
         self._GliError, self._Message = GliError, Message
         self.session = session
@@ -116,7 +116,7 @@ class ZenohLink:
 
     @classmethod
     def open(cls, link_id: str, zenoh_option: Any, timeout: float = 5.0) -> "ZenohLink":
-        from .client import GliError
+        from .socket_client import GliError
 
         session, prefix, identity = _session(zenoh_option)
         try:
@@ -152,7 +152,7 @@ class ZenohLink:
         data = sample.payload.to_bytes()
         if len(data) >= _RECV.size:
             src, dst, t = _RECV.unpack_from(data)
-            self.inbox.put(self._Message(src, dst, t, data[_RECV.size:]))
+            self.inbox.put(self._Message(self.id, src, dst, t, data[_RECV.size:]))
 
     def _on_state(self, sample: Any) -> None:
         self.ready = sample.payload.to_bytes()[:1] == b"\x01"

@@ -38,8 +38,7 @@ import warnings
 from collections import defaultdict
 from typing import Any
 
-from .tracedata import (Packet, ReportError, Run, Trace, load_summary, load_trace, pick_run,  # noqa: F401
-                        trace_runs)
+from .tracedata import Packet, ReportError, Run, Trace, load_summary, load_trace
 
 CAUSE_COLOURS = {"prop": "#e69f00", "col": "#d62728", "mult": "#9467bd", "fifo": "#222222", "range": "#1f77b4",
                  "closed": "#7f7f7f", "band": "#17becf", "modulation": "#bcbd22"}

@@ -8,7 +8,7 @@ mean"), :mod:`.specs` (the typed result), :mod:`.presets`, :mod:`.overrides` (``
 :mod:`.load` (the whole scene), :mod:`.plugins` and :mod:`.worker` (reloads in a child process).
 """
 
-from .flows import FLOW_KEYS
+from .flow_spec import FLOW_KEYS
 from .links import BACKENDS, LINK_KEYS
 from .load import TOP_KEYS, load_scene, load_scene_text, scene_summary
 from .presets import preset_names

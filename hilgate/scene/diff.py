@@ -21,10 +21,6 @@ class LinkChange:
     after: LinkSpec | None
 
     @property
-    def added(self) -> bool:
-        return self.before is None
-
-    @property
     def removed(self) -> bool:
         return self.after is None
 

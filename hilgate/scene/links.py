@@ -21,8 +21,8 @@ from ..models.usbl import UsblParams
 from .backends import SIM, backend_names, driver_keys, driver_options, emulated_device
 from .hosts import host_name
 from .checks import Fields, boolean, choice, describe, integer, join_path, number, text
-from .limits import modem_limits
-from .mac import mac_spec
+from .modem_limits import modem_limits
+from .mac_spec import mac_spec
 from .physics import ERROR_KEYS, acoustic_params, error_kind, physical_environment
 from .plugins import Plugin
 from .presets import MODEM_KEYS, load_preset, merge

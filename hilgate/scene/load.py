@@ -17,10 +17,10 @@ from typing import Sequence
 from ..models.flows import FlowSpec
 from ..models.medium import Channel
 from .checks import Fields, base_dir, integer, items, join_path, mapping, number, quote, text, trace_path
-from .apps import app_specs
-from .flows import flow_spec
+from .app_spec import app_specs
+from .flow_spec import flow_spec
 from .hosts import resolve_hosts, zenoh_spec
-from .limits import describe_limits
+from .modem_limits import describe_limits
 from .links import Context, assign_addresses, link_spec
 from .overrides import apply_override
 from .plugins import Plugin, PluginError, load_plugin

@@ -141,7 +141,7 @@ class Scene:
     trace_poses_s: float | None = 1.0  # pose samples in the trace every so many seconds (None: none)
     hosts: tuple[str, ...] = ()  # the hosts the scene names (scene/hosts.py); () for one daemon
     zenoh: Any = None  # the ``zenoh:`` section (a ZenohSpec), None when absent
-    apps: tuple = ()  # the ``apps:`` hilgate sim runs in-process (scene/apps.py AppSpec)
+    apps: tuple = ()  # the ``apps:`` hilgate sim runs in-process (scene/app_spec.py AppSpec)
 
     @property
     def multi_host(self) -> bool:

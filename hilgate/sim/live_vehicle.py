@@ -45,7 +45,6 @@ class LiveVehicle:
             self.axes = {a: AxisState(float(v), None, float("-inf"), "initial") for a, v in zip(AXES, initial)}
         self.attitude: tuple[float, float, float] | None = None
         self.extra: dict[str, Any] = {}
-        self.updates = 0
         self.listeners: list[Any] = []  # called after each update (the network publishes it to other hosts)
 
     def update(self, source: str, t: float, position: dict[str, float], velocity: dict[str, float] | None = None,
@@ -59,7 +58,6 @@ class LiveVehicle:
             self.axes[axis] = AxisState(float(value), speed, t, source)
         if attitude is not None:
             self.attitude = attitude
-        self.updates += 1
         for listener in self.listeners:
             listener()
 

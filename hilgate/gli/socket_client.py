@@ -21,11 +21,11 @@ import os
 import socket
 import time
 from collections import deque
-from dataclasses import dataclass
 from typing import Any
 
 from . import wire
 from .token import TOKEN_FILE, TokenError, proof, read_token
+from ..core.application import Message
 from ..core.packets import BROADCAST
 from ..core.names import zenoh_prefix_problem
 from ..core.paths import client_runtime_dir
@@ -37,14 +37,6 @@ __all__ = ["Link", "Message", "GliError"]
 
 class GliError(RuntimeError):
     """hilgate refused something (unknown link, payload too large, …)."""
-
-
-@dataclass(frozen=True)
-class Message:
-    src: int
-    dst: int
-    t: float
-    data: bytes
 
 
 def zenoh_options(zenoh: Any) -> dict[str, Any]:
@@ -201,7 +193,7 @@ class Link:
         for kind, body in self.decoder.feed(data):
             if kind == wire.RECV:
                 src, dst, t, payload = wire.decode_recv(body)
-                self.inbox.append(Message(src, dst, t, payload))
+                self.inbox.append(Message(self.id, src, dst, t, payload))
             elif kind == wire.STATE:
                 self.ready = body[:1] == b"\x01"
             elif kind == wire.WELCOME:
