@@ -136,9 +136,6 @@ class Medium:
         """Called ``tap(sender, frame, t, duration)`` for every transmission from a radio that listens
         here (one this host serves): how other hosts' media hear it (hilgate.daemon.network)."""
 
-    def new_frame_id(self) -> int:
-        return next(self.frame_ids)
-
     def attach(self, radio: "Radio") -> None:
         for name in (radio.tx_channel, radio.rx_channel):
             if name not in self.channels:

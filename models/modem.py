@@ -164,7 +164,7 @@ class SimModem:
         ``dst_link`` is the receiver's link id for the trace (``"*"`` for broadcast), ``dst_addr`` the
         address receivers match; ``flow`` the statistics of the flow that offered it, ``app_frame`` an
         application's frame; MACs make their control frames with another ``kind`` serving ``ref``."""
-        frame = Frame(self.medium.new_frame_id(), self.id, dst_link, dst_addr, size, self.clock.now(), flow,
+        frame = Frame(next(self.medium.frame_ids), self.id, dst_link, dst_addr, size, self.clock.now(), flow,
                       app_frame, kind, ref)
         frame.src_addr = self.radio.address
         return frame

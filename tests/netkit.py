@@ -37,7 +37,7 @@ class Net:
     def send(self, src: str, dst: str | None, size: int, at: float | None = None) -> Frame:
         sender = self.modems[src]
         dst_addr = BROADCAST if dst is None else self.modems[dst].address
-        frame = Frame(self.medium.new_frame_id(), src, dst or "*", dst_addr, size, 0.0)
+        frame = Frame(next(self.medium.frame_ids), src, dst or "*", dst_addr, size, 0.0)
 
         def go():
             frame.t0 = self.clock.now()

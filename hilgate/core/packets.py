@@ -96,12 +96,16 @@ class PacketClass(ABC):
     preamble = b"\x55"
 
     def decode_body(self, body: bytes) -> Decoded:
-        if len(body) != self.body_size:
+        max_real = self.max_real
+        if len(body) != max_real + VIRTUAL_AREA:
             raise PacketError("size", f"{self.name} frames are {self.body_size} bytes on the queue, got {len(body)}")
-        real, payload, src, dst = self.parse_real(body[: self.max_real])
-        seq, v_src, v_dst = _VIRTUAL.unpack_from(body, self.max_real)
-        return Decoded(real, payload, seq, _address(v_src) if src is None else src,
-                       _address(v_dst) if dst is None else dst)
+        real, payload, src, dst = self.parse_real(body[:max_real])
+        seq, v_src, v_dst = _VIRTUAL.unpack_from(body, max_real)
+        if src is None:  # (the virtual area's addresses, 255 and above meaning broadcast: _address inline)
+            src = BROADCAST if v_src >= BROADCAST else v_src
+        if dst is None:
+            dst = BROADCAST if v_dst >= BROADCAST else v_dst
+        return Decoded(real, payload, seq, src, dst)
 
     def encode_body(self, real: bytes, seq: int, src: int, dst: int, prefix: bytes = b"") -> bytes:
         """``prefix`` (a queue message's type byte), the real packet padded to the class's fixed size,

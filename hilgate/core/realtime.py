@@ -165,16 +165,6 @@ class RealtimeScheduler(VirtualScheduler):
 
     # -- the loop -------------------------------------------------------------------------------
 
-    def _begin_inputs(self, blind: float) -> None:
-        """The loop is about to read input.  Input may have waited since the loop last stopped
-        watching its descriptors (``blind``: firing timers, or a preemption between two waits), and
-        longer if the loop overslept or timers are overdue (a preemption during the wait).  That
-        bound is kept in :attr:`input_lateness`; overdue timers then fire first, at their own times."""
-        t = self.model_time()
-        late = max(blind, t - self.peek())
-        self.input_lateness = late if late > self.late_threshold else 0.0
-        self._input_time()
-
     def _input_time(self) -> None:
         """Make the model clock read now for an input: overdue timers fire first, at their own times,
         then the clock moves to the wall clock's model time (never backwards)."""
@@ -203,7 +193,15 @@ class RealtimeScheduler(VirtualScheduler):
         posted = io.posted
         if events_ready or posted:
             self.wait.input_came(time.perf_counter(), timeout > 0)
-            self._begin_inputs(blind)
+            # Input may have waited since the loop last stopped watching its descriptors (``blind``: firing
+            # timers, or a preemption between two waits), and longer if the loop overslept or timers are
+            # overdue (a preemption during the wait).  That bound is kept in input_lateness; overdue
+            # timers then fire first, at their own times.
+            t = self.model_time()
+            late = max(blind, t - self.peek())
+            self.input_lateness = late if late > self.late_threshold else 0.0
+            self.fire_due(t)
+            self.advance(t)
         fresh = True  # the clock was just brought to the wall clock's time: the first input needs no other
         readers, writers = io.readers, io.writers
         for fd, events in events_ready:
@@ -213,18 +211,27 @@ class RealtimeScheduler(VirtualScheduler):
                 fresh = False
                 writer = writers.get(fd)  # looked up after overdue timers, which may close it
                 if writer is not None:
-                    self.call(writer)
+                    try:
+                        writer()
+                    except Exception:
+                        self._failed(writer)
             if events & ~select.EPOLLOUT:
                 if not fresh:
                     self._input_time()
                 fresh = False
                 reader = readers.get(fd)
                 if reader is not None:
-                    self.call(reader)
+                    try:
+                        reader()
+                    except Exception:
+                        self._failed(reader)
         while posted:
             fn, args = posted.popleft()
             self._input_time()
-            self.call(fn, *args)
+            try:
+                fn(*args)
+            except Exception:
+                self._failed(fn)
         self.input_lateness = 0.0
 
     def run(self, until: float = float("inf")) -> int:

@@ -57,7 +57,8 @@ class AdaptiveWait:
     def input_came(self, now: float, after_sleep: bool) -> None:
         """Input is ready at wall time ``now``: pay the linger that led to it, and grow the window if the
         loop had gone to sleep just before (a longer linger would have caught it)."""
-        self.refill(now)
+        self.credit = min(LINGER_CREDIT_CAP, self.credit + (now - self.credit_time) * self.linger_budget)
+        self.credit_time = now  # (refill written out: every input passes here)
         gap = now - self.last_input
         if self.lingering:
             self.credit -= gap  # polled since the last input, and it paid off

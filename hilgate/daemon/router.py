@@ -221,18 +221,16 @@ class RoutedLink:
     # -- application → medium --------------------------------------------------------------------
 
     def send_decoded(self, decoded: Decoded) -> None:
-        self._send(decoded.real, decoded.payload, decoded.seq, decoded.dst)
+        scheduler = self.router.scheduler
+        frame = AppFrame(decoded.real, decoded.payload, self.packet, decoded.seq, self.address, decoded.dst,
+                         scheduler.now())
+        frame.lateness = scheduler.input_lateness
+        self.send(frame)
 
     def send_payload(self, payload: bytes, dst: int) -> None:
         real = self.packet.encode(payload, src=self.address, dst=dst)
         self.seq = (self.seq + 1) & 0xFFFFFFFF
-        self._send(real, payload, self.seq, dst)
-
-    def _send(self, real: bytes, payload: bytes, seq: int, dst: int) -> None:
-        scheduler = self.router.scheduler
-        frame = AppFrame(real, payload, self.packet, seq, self.address, dst, scheduler.now())
-        frame.lateness = scheduler.input_lateness
-        self.send(frame)
+        self.send_decoded(Decoded(real, payload, self.seq, self.address, dst))
 
     def send(self, frame: AppFrame) -> None:
         """Hand a frame to the backend. A frame it cannot carry (too large for the modem) raises

@@ -312,11 +312,11 @@ class MqEndpoint:
         match event:
             case FrameIn(decoded=decoded):
                 try:
-                    self.port.send_decoded(decoded)
+                    self.port.send_decoded(decoded)  # (the link's send says its state changed)
                 except PacketError as exc:
                     log.warning("link %s: %s", self.port.id, exc)
                     self.port.lost(exc.reason, len(decoded.real), src="app")
-                self.port.state_changed()  # the application thinks BUSY now: it is told READY when free
+                    self.port.state_changed()  # the application thinks BUSY now: it is told READY when free
             case StateRequest():
                 self._tell(self.protocol.state_message(self.port.ready))
             case Refused(reason=reason, size=size):
@@ -329,8 +329,8 @@ class MqEndpoint:
 
     def state(self, ready: bool) -> None:
         message = self.protocol.state_change(ready)
-        if message is not None:
-            self._tell(message)
+        if message is not None and self._put(message):  # (_tell written out: every READY passes here)
+            self.protocol.told(message)
 
     def _tell(self, message: bytes) -> None:
         if self._put(message):

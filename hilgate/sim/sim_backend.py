@@ -17,20 +17,27 @@ class SimBackend(Backend):
 
     def __init__(self, modem: SimModem, link_names: Callable[[str, int], str], everyone_in_range: bool = False,
                  limits: Any = None):
-        super().__init__()
         self.modem = modem
+        super().__init__()
         self._link_names = link_names
         self.everyone_in_range = everyone_in_range  # see LinkSpec.everyone_in_range
         self.limits = limits  # LinkSpec.limits: what the real modem would accept (None: anything)
         self.on_phy: Callable[[PhyEvent], Any] | None = None
         modem.on_deliver = self._deliver
-        modem.on_idle = self._idle
         modem.acks.on_outcome = self._acknowledged
 
+    @property
+    def on_idle(self) -> Callable[[], Any] | None:  # type: ignore[override]
+        return self.modem.on_idle
+
+    @on_idle.setter
+    def on_idle(self, callback: Callable[[], Any] | None) -> None:
+        self.modem.on_idle = callback  # the modem tells the link itself: READY follows one call sooner
+
     def rebind(self, modem: SimModem) -> None:
-        self.modem = modem
+        callback, self.modem = self.modem.on_idle, modem
         modem.on_deliver = self._deliver
-        modem.on_idle = self._idle
+        modem.on_idle = callback
         modem.acks.on_outcome = self._acknowledged
         modem.on_phy = self._phy if self.on_phy is not None else None
 
@@ -58,9 +65,7 @@ class SimBackend(Backend):
         wanted = {id(frame) for frame in frames}
         return self.modem.withdraw(lambda frame: id(frame.app_frame) in wanted, cause)
 
-    @property
-    def state(self) -> str:
-        return "up"
+    state = "up"  # a simulated modem is always up (a class attribute: READY asks it at every change)
 
     @property
     def idle(self) -> bool:
@@ -99,10 +104,6 @@ class SimBackend(Backend):
         # Frames of built-in flows carry no application payload: they are background traffic.
         if isinstance(frame.app_frame, AppFrame) and self.on_receive is not None:
             self.on_receive(frame.app_frame)
-
-    def _idle(self) -> None:
-        if self.on_idle is not None:
-            self.on_idle()
 
     def status(self) -> dict[str, Any]:
         stats = self.modem.stats
