@@ -47,8 +47,13 @@ run: $(VENV)/.installed
 sim: $(VENV)/.installed
 	$(BIN)/hilgate sim $(SCENE) $(ARGS)
 
+# The suite on TEST_JOBS workers (pytest-xdist): most tests wait on daemons and applications they start,
+# so more workers than cores keep both cores busy; tests that share a scarce resource (the user's POSIX
+# queue budget, a fixed port, exact timing) run on one worker (their xdist_group, tests/conftest.py).
+TEST_JOBS ?= 4
+
 test: $(VENV)/.installed-test
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(TEST_JOBS) --dist loadgroup
 
 # The fuzz tests (test_fuzz_*) for minutes instead of seconds: HILGATE_FUZZ multiplies their examples.
 fuzz: $(VENV)/.installed-test

@@ -1,9 +1,13 @@
-"""Running the real daemon in a subprocess for tests, and cleaning up after it.
+"""The tests' kit: the real daemon in a subprocess, the ``hilgate`` command, waiting, free ports.
 
 The daemon is started with ``NOTIFY_SOCKET`` pointing at a datagram socket the test owns, so the
 test waits for the very ``READY=1`` systemd would get (and checks that it comes only once every
 endpoint is up).  Link ids carry a unique prefix; their POSIX queues are unlinked at the end, since
 Linux charges them to the user until then (819 200 bytes by default).
+
+Every wait is :func:`wait_until` with the one hang guard :data:`HANG_GUARD_S`: it returns as soon as its
+condition holds, and the guard only stops a hang (a loaded machine running other suites makes a daemon
+slow, never wrong).  The ``daemon_of`` fixture (conftest.py) starts daemons that are closed after the test.
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 import uuid
 
@@ -21,10 +26,73 @@ from hilgate.gli.queues import unlink_queues
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 PEER = os.path.join(HERE, "peers", "dccomms_peer.py")
+SCENE_HEAD = """\
+channels: {ac: {speed_mps: 1500}}
+vehicles:
+  va: {pose: {static: [0, 0, 0]}}
+  vb: {pose: {static: [150, 0, 0]}}
+"""
+"""What most daemon tests' scenes start with: one acoustic channel, two vehicles 150 m apart (links follow)."""
+HANG_GUARD_S = 60.0
+
+
+def quick_scene(name: str, a: str, b: str) -> str:
+    """Two vl2b links 10 m apart at 1 Mb/s (a frame crosses in microseconds), no pose lines in the trace."""
+    return f"""\
+name: {name}
+channels: {{ac: {{speed_mps: 1500}}}}
+vehicles: {{va: {{pose: {{static: [0, 0, 0]}}}}, vb: {{pose: {{static: [10, 0, 0]}}}}}}
+links:
+  {a}: {{vehicle: va, address: 1, packet: vl2b, bitrate_bps: 1e6}}
+  {b}: {{vehicle: vb, address: 2, packet: vl2b, bitrate_bps: 1e6}}
+trace: {{poses_s: 0}}
+"""
+
+
+def two_links(daemon_of, scene) -> tuple["Daemon", str, str]:
+    """A running daemon of ``scene(a, b)`` with two fresh link ids: ``(daemon, a, b)``."""
+    a, b = unique("a"), unique("b")
+    return daemon_of(scene(a, b), [a, b]), a, b
+"""The one bound on every wait of the tests: a hang guard, never a speed requirement."""
 
 
 def unique(prefix: str = "t") -> str:
     return f"{prefix}{uuid.uuid4().hex[:8]}"
+
+
+def wait_until(predicate, what: str = "a condition", timeout: float = HANG_GUARD_S, every: float = 0.05):
+    """Poll ``predicate`` until it returns something true, and return that; fail after ``timeout`` s
+    (a hang guard) saying ``what`` was awaited (a callable: called for the message, e.g. a daemon's log)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout:g} s waiting for {what() if callable(what) else what}")
+        time.sleep(every)
+
+
+def in_background(loop) -> tuple[threading.Event, threading.Thread]:
+    """Run ``loop(stop)`` on a daemon thread (a peer that streams, a reader) until the event ``stop`` it is
+    handed is set (``stop.set(); thread.join()``)."""
+    stop = threading.Event()
+    thread = threading.Thread(target=loop, args=(stop,), daemon=True)
+    thread.start()
+    return stop, thread
+
+
+def free_port(kind: int = socket.SOCK_STREAM) -> int:
+    """A loopback port free now (TCP by default, ``socket.SOCK_DGRAM`` for UDP)."""
+    with socket.socket(socket.AF_INET, kind) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def hilgate(*args: str, **kwargs) -> subprocess.CompletedProcess:
+    """``hilgate ARGS`` as a user runs it (its output captured as text); ``input=`` for its stdin."""
+    kwargs.setdefault("timeout", 3 * HANG_GUARD_S)
+    return subprocess.run([sys.executable, "-m", "hilgate", *args], capture_output=True, text=True, **kwargs)
 
 
 def _unlimited_queue_budget() -> None:
@@ -60,7 +128,7 @@ class Daemon:
             preexec_fn=_unlimited_queue_budget if queue_budget_unlimited else None)
         self.notifications: list[str] = []
 
-    def wait_for(self, word: str, timeout: float = 20.0) -> list[str]:
+    def wait_for(self, word: str, timeout: float = HANG_GUARD_S) -> list[str]:
         """Wait for a notify datagram containing ``word``; returns its lines."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
@@ -99,17 +167,25 @@ class Daemon:
     def link_status(self, link: str) -> dict:
         return next(l for l in self.status()["links"] if l["id"] == link)
 
-    def wait_clients(self, link: str, count: int = 1, timeout: float = 60.0) -> None:
+    def alive(self) -> bool:
+        if self.process.poll() is not None:
+            raise AssertionError(f"daemon exited with {self.process.returncode}:\n{self.output()}")
+        return True
+
+    def wait_clients(self, link: str, count: int = 1) -> None:
         """Wait until ``count`` socket clients are attached to ``link``: a client process started just
         before (``hilgate listen``, ``hilgate app``) gets only the frames sent once it is attached, and
-        on a loaded host its start-up alone can take seconds.  The bound only guards against a hang."""
-        deadline = time.monotonic() + timeout
-        while self.link_status(link)["clients"] < count:
-            if time.monotonic() > deadline:
-                raise AssertionError(f"fewer than {count} clients on {link} after {timeout} s:\n{self.output()}")
-            if self.process.poll() is not None:
-                raise AssertionError(f"daemon exited with {self.process.returncode}:\n{self.output()}")
-            time.sleep(0.05)
+        on a loaded host its start-up alone can take seconds."""
+        wait_until(lambda: self.alive() and self.link_status(link)["clients"] >= count,
+                   lambda: f"{count} clients on {link}:\n{self.output()}")
+
+    def wait_up(self, *links: str) -> None:
+        """Wait until every one of ``links`` is up (a real modem's port opened)."""
+        def up() -> bool:
+            states = {l["id"]: l["state"] for l in self.status()["links"]}
+            return self.alive() and all(states[link] == "up" for link in links)
+
+        wait_until(up, lambda: f"links {', '.join(links)} up: {self.status()['links']}\n{self.output()}", every=0.1)
 
     def reload(self, scene_text: str | None = None) -> None:
         if scene_text is not None:

@@ -52,5 +52,15 @@ class Net:
     def run(self, until: float = float("inf")) -> None:
         self.clock.run(until)
 
+    def lost_of(self, src: str, dst: str, n: int, size: int) -> int:
+        """Send ``n`` frames of ``size`` bytes from ``src`` to ``dst``, one a second, run, and count those
+        ``dst`` lost (every frame is either received or lost there)."""
+        for i in range(n):
+            self.send(src, dst, size, at=i * 1.0)
+        self.run()
+        lost = len(self.of("err", dst))
+        assert len(self.of("rx", dst)) + lost == n
+        return lost
+
     def of(self, ev: str, link: str | None = None):
         return [e for e in self.events.of(ev) if link is None or e[2] == link]

@@ -11,18 +11,16 @@ import resource
 import signal
 import subprocess
 import sys
-import time
 
 import pytest
 
-from daemon_kit import Daemon, unique
+from daemon_kit import Daemon, HANG_GUARD_S, free_port, hilgate, unique, wait_until
 from hilgate.client import Link
 from hilgate.daemon.access import AccessError, LinkLock
 from hilgate.gli.queues import unlink_queues
 from hilgate.scene import SceneError
 from hilgate.scene.load import load_scene
 
-HANG_GUARD_S = 60.0
 
 
 def scene(links: dict[str, str], extra: str = "") -> str:
@@ -33,29 +31,11 @@ def scene(links: dict[str, str], extra: str = "") -> str:
             f"trace: {{poses_s: 0}}\n{extra}")
 
 
-def hilgate(*args: str, **kwargs) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "hilgate", *args], capture_output=True, text=True,
-                          timeout=HANG_GUARD_S * 3, **kwargs)
-
-
-def wait_until(predicate, why: str) -> None:
-    deadline = time.monotonic() + HANG_GUARD_S
-    while not predicate():
-        assert time.monotonic() < deadline, why
-        time.sleep(0.05)
-
-
 @pytest.fixture
-def pair(tmp_path):
+def pair(daemon_of):
     """Two links: ``a`` addressed as dccomms' vl2b reads it (everyone in range), ``b`` strict."""
     a, b = unique("oa"), unique("ob")
-    daemon = Daemon(tmp_path, scene({a: "", b: ", addressing: strict"}), [a, b])
-    daemon.wait_for("READY=1")
-    try:
-        yield daemon, a, b
-    finally:
-        daemon.close()
-        unlink_queues([a, b])
+    return daemon_of(scene({a: "", b: ", addressing: strict"}), [a, b]), a, b
 
 
 # -- hilgate send ---------------------------------------------------------------------------------
@@ -289,14 +269,6 @@ def test_a_held_link_names_the_holders_whole_command_line():
 
 
 # -- the Zenoh prefix ----------------------------------------------------------------------------------
-
-def free_port() -> int:
-    import socket
-
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
 
 def test_applications_name_the_networks_zenoh_prefix(tmp_path):
     link, prefix, port = unique("zp"), unique("lab"), free_port()

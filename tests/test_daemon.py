@@ -17,7 +17,7 @@ import time
 
 import pytest
 
-from daemon_kit import Daemon, peer_events, unique
+from daemon_kit import SCENE_HEAD, Daemon, peer_events, two_links, unique
 from hilgate.gli import wire
 from hilgate.client import GliError, Link
 
@@ -29,25 +29,15 @@ EXPECTED = 0.05 + 0.12 + 0.1
 def scene(a: str, b: str, *, bitrate: float = 1000, tx_delay: float = 0.05, extra: str = "") -> str:
     return f"""\
 name: daemon-test
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles:
-  va: {{pose: {{static: [0, 0, 0]}}}}
-  vb: {{pose: {{static: [150, 0, 0]}}}}
-links:
+{SCENE_HEAD}links:
   {a}: {{vehicle: va, address: 1, bitrate_bps: {bitrate}, tx_delay_s: {tx_delay}, packet: vl2b}}
   {b}: {{vehicle: vb, address: 2, bitrate_bps: 1000, tx_delay_s: 0.05, packet: vl2b}}
 {extra}"""
 
 
 @pytest.fixture
-def pair(tmp_path):
-    a, b = unique("a"), unique("b")
-    daemon = Daemon(tmp_path, scene(a, b), [a, b])
-    try:
-        daemon.wait_for("READY=1")
-        yield daemon, a, b
-    finally:
-        daemon.close()
+def pair(daemon_of):
+    return two_links(daemon_of, scene)
 
 
 def test_ready_only_once_every_endpoint_is_up(pair):

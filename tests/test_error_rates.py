@@ -34,11 +34,7 @@ def test_loss_fraction_matches_the_per(unit, rate, size, distance):
     net = Net(Channel("ac", 1500.0), seed=11)
     net.modem("a", (0, 0, 0), bitrate_bps=1e5)
     net.modem("b", (distance, 0, 0), error=model)
-    for i in range(n):
-        net.send("a", "b", size, at=i * 1.0)
-    net.run()
-    lost = len(net.of("err", "b"))
-    assert len(net.of("rx", "b")) + lost == n
+    lost = net.lost_of("a", "b", n, size)
     assert all(cause == "prop" for *_, cause in net.of("err", "b"))
     low, high = binomial_bounds(n, p)
     assert low <= lost <= high, (lost, n * p)

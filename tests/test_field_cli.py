@@ -1,29 +1,14 @@
 """The command-line tools report what the daemon answered, and refuse bad arguments in one line."""
 
-import subprocess
-import sys
 
 import pytest
 
-from daemon_kit import Daemon, unique
-
-
-def hilgate(*args: str, stdin: str | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "hilgate", *args], capture_output=True, text=True, input=stdin,
-                          timeout=120)
+from daemon_kit import Daemon, hilgate, quick_scene, unique
 
 
 def test_send_reports_a_frame_the_daemon_refuses_and_exits_1(tmp_path):
     a, b = unique("a"), unique("b")
-    daemon = Daemon(tmp_path, f"""\
-name: cli
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles: {{va: {{pose: {{static: [0, 0, 0]}}}}, vb: {{pose: {{static: [10, 0, 0]}}}}}}
-links:
-  {a}: {{vehicle: va, address: 1, packet: vl2b, bitrate_bps: 1e6}}
-  {b}: {{vehicle: vb, address: 2, packet: vl2b, bitrate_bps: 1e6}}
-trace: {{poses_s: 0}}
-""", [a, b])
+    daemon = Daemon(tmp_path, quick_scene("cli", a, b), [a, b])
     try:
         daemon.wait_for("READY=1")
         ok = hilgate("send", a, "--to", "2", "--runtime-dir", daemon.runtime, "hello")
@@ -31,7 +16,7 @@ trace: {{poses_s: 0}}
         big = hilgate("send", a, "--to", "2", "--runtime-dir", daemon.runtime, "x" * 5000)
         assert big.returncode == 1
         assert "refused" in big.stderr and "Traceback" not in big.stderr
-        lines = hilgate("send", a, "--runtime-dir", daemon.runtime, stdin="one\n" + "y" * 5000 + "\nthree\n")
+        lines = hilgate("send", a, "--runtime-dir", daemon.runtime, input="one\n" + "y" * 5000 + "\nthree\n")
         assert lines.returncode == 1 and lines.stderr.count("refused") == 1
         assert sum(daemon.link_status(a)["drop_causes"].values()) == 2  # and the daemon counted both
     finally:

@@ -9,11 +9,10 @@ daemon's own; traces and summaries are created 0640 for the daemon's group.
 import os
 import stat
 import subprocess
-import sys
 
 import pytest
 
-from daemon_kit import Daemon, unique
+from daemon_kit import Daemon, hilgate, unique
 from hilgate.core.outputs import OutputError, open_output, output_problem, pty_link_problem
 from hilgate.drivers.emulators import PtyHost
 from hilgate.scene import SceneError, load_scene_text
@@ -28,10 +27,6 @@ vehicles: {{v: {{pose: {{static: [0, 0, 0]}}}}}}
 links:
   {link}: {{vehicle: v, address: 4, emulate: {{protocol: evologics, pty: {pty}}}}}
 """
-
-
-def hilgate(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "hilgate", *args], capture_output=True, text=True, timeout=120)
 
 
 def one_line(result: subprocess.CompletedProcess) -> str:

@@ -8,17 +8,13 @@ import time
 
 import pytest
 
-from daemon_kit import Daemon, peer_events, unique
+from daemon_kit import SCENE_HEAD, Daemon, peer_events, two_links, unique
 
 
 def scene(a: str, b: str, extra_links: str = "", extra: str = "") -> str:
     return f"""\
 name: hardening
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles:
-  va: {{pose: {{static: [0, 0, 0]}}}}
-  vb: {{pose: {{static: [150, 0, 0]}}}}
-links:
+{SCENE_HEAD}links:
   {a}: {{vehicle: va, address: 1, bitrate_bps: 10000, packet: vl2b}}
   {b}: {{vehicle: vb, address: 2, bitrate_bps: 10000, packet: vl2b}}
 {extra_links}
@@ -27,14 +23,8 @@ trace: {{poses_s: 0}}
 
 
 @pytest.fixture
-def pair(tmp_path):
-    a, b = unique("a"), unique("b")
-    daemon = Daemon(tmp_path, scene(a, b), [a, b])
-    try:
-        daemon.wait_for("READY=1")
-        yield daemon, a, b
-    finally:
-        daemon.close()
+def pair(daemon_of):
+    return two_links(daemon_of, scene)
 
 
 def control_connection(daemon):

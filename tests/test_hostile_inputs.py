@@ -9,14 +9,13 @@ TCP clients.  Every daemon here runs for real, its emulated modems on real ptys 
 import os
 import socket
 import subprocess
-import sys
 import time
 import tty
 
 import pytest
 
 from at_client import AtClient, free_port
-from daemon_kit import Daemon, unique
+from daemon_kit import Daemon, hilgate, unique
 from hilgate.drivers.emulators import MAX_TCP_CLIENTS
 from hilgate.scene import SceneError, load_scene_text
 from hilgate.scene.flow_spec import MAX_FRAME_BYTES
@@ -27,11 +26,6 @@ vehicles: {{va: {{pose: {{static: [0, 0, 0]}}}}, vb: {{pose: {{static: [10, 0, 0
 links:
 {links}
 """
-
-
-def hilgate(*args: str, cwd: str | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "hilgate", *args], capture_output=True, text=True, timeout=120,
-                          cwd=cwd)
 
 
 def stopped(daemon: Daemon) -> str:

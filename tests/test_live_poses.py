@@ -8,25 +8,18 @@ import math
 import socket
 import subprocess
 import sys
-import threading
 import time
 
 import pytest
 
 import hilgate.drivers.mavlink_source  # noqa: F401  (sets MAVLink 2 before pymavlink is imported)
-from daemon_kit import Daemon, unique
+from daemon_kit import Daemon, free_port, in_background, unique, wait_until
 from hilgate.client import Link
 from hilgate.models.controlled import Controlled
 from hilgate.models.medium import Channel
 from hilgate.sim.live_vehicle import LiveVehicle
 from netkit import Net
 from pymavlink import mavutil
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 # -- the pose board -----------------------------------------------------------------------------------
@@ -92,13 +85,11 @@ class FakeBlueRov:
         self.link = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1, source_component=1)
         self.position = [150.0, 0.0, 5.0]
         self.sending = True
-        self.stop = threading.Event()
-        self.thread = threading.Thread(target=self._run, daemon=True)
-        self.thread.start()
+        self.stop, self.thread = in_background(self._run)
 
-    def _run(self):
+    def _run(self, stop):
         boot = time.monotonic()
-        while not self.stop.is_set():
+        while not stop.is_set():
             if self.sending:
                 ms = int((time.monotonic() - boot) * 1000)
                 mav = self.link.mav
@@ -108,7 +99,7 @@ class FakeBlueRov:
                 mav.local_position_ned_send(ms, x, y, z, 0.0, 0.0, 0.0)
                 mav.attitude_send(ms, 0.1, -0.2, 1.5, 0, 0, 0)
                 mav.global_position_int_send(ms, int(39.99 * 1e7), int(-0.07 * 1e7), 0, int(-z * 1000), 0, 0, 0, 0)
-            self.stop.wait(0.05)
+            stop.wait(0.05)
 
     def close(self):
         self.stop.set()
@@ -134,15 +125,8 @@ def status_of(daemon, name):
     return next(v for v in daemon.status()["vehicles"] if v["name"] == name)
 
 
-def wait_until(predicate, timeout=60.0):
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(0.05)
-
-
 def test_fake_bluerov_over_mavlink_moves_the_modem_and_goes_stale(tmp_path):
-    port = free_udp_port()
+    port = free_port(socket.SOCK_DGRAM)
     topside, bluerov = unique("top"), unique("rov")
     daemon = Daemon(tmp_path, live_scene(port, bluerov, topside), [topside, bluerov])
     vehicle = FakeBlueRov(port)
@@ -175,7 +159,7 @@ def test_fake_bluerov_over_mavlink_moves_the_modem_and_goes_stale(tmp_path):
 
 
 def test_applications_steer_controlled_vehicles_and_feedback_reaches_the_autopilot(tmp_path):
-    autopilot_port = free_udp_port()
+    autopilot_port = free_port(socket.SOCK_DGRAM)
     autopilot = mavutil.mavlink_connection(f"udpin:127.0.0.1:{autopilot_port}", source_system=1)
     follower = unique("fol")
     scene = f"""\

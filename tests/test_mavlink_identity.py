@@ -13,17 +13,11 @@ import time
 import pytest
 
 import hilgate.drivers.mavlink_source  # noqa: F401  (sets MAVLink 2 before pymavlink is imported)
-from daemon_kit import Daemon, unique
+from daemon_kit import Daemon, free_port, in_background, unique, wait_until
 from hilgate.scene import SceneError, load_scene_text
 from pymavlink import mavutil
 
 MAV = mavutil.mavlink
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 class Vehicle:
@@ -36,13 +30,11 @@ class Vehicle:
         self.port = self.link.port.getsockname()[1]
         self.received: list = []
         self.lock = threading.Lock()
-        self.stop = threading.Event()
-        self.thread = threading.Thread(target=self._run, daemon=True)
-        self.thread.start()
+        self.stop, self.thread = in_background(self._run)
 
-    def _run(self):
+    def _run(self, stop):
         boot = time.monotonic()
-        while not self.stop.is_set():
+        while not stop.is_set():
             ms = int((time.monotonic() - boot) * 1000)
             mav = self.link.mav
             try:
@@ -68,13 +60,6 @@ class Vehicle:
         self.link.close()
 
 
-def wait_until(predicate, timeout=60.0, why="timed out"):
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, why
-        time.sleep(0.05)
-
-
 def position(daemon, vehicle):
     return next(v for v in daemon.status()["vehicles"] if v["name"] == vehicle)["position"]
 
@@ -97,7 +82,7 @@ links:
 
 
 def test_by_default_a_vehicle_gets_nothing_and_asked_rates_come_from_a_companion(tmp_path):
-    quiet_port, rates_port = free_udp_port(), free_udp_port()
+    quiet_port, rates_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM)
     link = unique("mq")
     vehicles = f"""\
   quiet: {{pose: {{mavlink: {{url: "udpin:127.0.0.1:{quiet_port}"}}}}}}
@@ -110,7 +95,7 @@ def test_by_default_a_vehicle_gets_nothing_and_asked_rates_come_from_a_companion
     try:
         daemon.wait_for("READY=1")
         wait_until(lambda: position(daemon, "quiet") == [4.0, 3.0, 2.0] and position(daemon, "rates") is not None)
-        wait_until(lambda: rates.messages("COMMAND_LONG"), why="the scene asked for message rates")
+        wait_until(lambda: rates.messages("COMMAND_LONG"), "the scene asked for message rates")
         time.sleep(3.0)  # three heartbeat periods: a heartbeat hilgate sent would have arrived by now
         assert quiet.messages() == []  # nothing the scene did not ask for: no heartbeat, no request
         assert rates.messages("HEARTBEAT") == []
@@ -146,8 +131,8 @@ def test_an_asked_heartbeat_is_an_onboard_peripherals_and_feedback_goes_as_the_s
     daemon = Daemon(tmp_path, SCENE.format(vehicles=vehicles, link=link, first="configured"), [link])
     try:
         daemon.wait_for("READY=1")
-        wait_until(lambda: position(daemon, "configured") == [4.0, 3.0, 2.0], why="no pose: hilgate never spoke")
-        wait_until(lambda: position(daemon, "companion") == [4.0, 3.0, 2.0], why="no pose: hilgate never spoke")
+        wait_until(lambda: position(daemon, "configured") == [4.0, 3.0, 2.0], "no pose: hilgate never spoke")
+        wait_until(lambda: position(daemon, "companion") == [4.0, 3.0, 2.0], "no pose: hilgate never spoke")
         wait_until(lambda: len(configured.messages("HEARTBEAT")) >= 3 and len(companion.messages("HEARTBEAT")) >= 2)
         wait_until(lambda: configured.messages("COMMAND_LONG"))
         for beat in configured.messages("HEARTBEAT"):

@@ -7,12 +7,11 @@ import io
 import json
 import subprocess
 import sys
-import time
 
 import pytest
 
 from at_pty_client import AtClient
-from daemon_kit import Daemon, unique
+from daemon_kit import SCENE_HEAD, Daemon, unique
 from hilgate.client import GliError, Link
 from hilgate.core.packets import PacketError
 from hilgate.drivers.table import EVOLOGICS_LIMITS
@@ -21,13 +20,6 @@ from hilgate.sim.apps import _VirtualLink
 from hilgate.sim.simulate import Simulation
 
 VL2B = 5  # preamble, two length bytes, CRC-16: the bytes vl2b adds to a payload on air
-
-
-def wait_up(daemon, link, timeout=60):
-    deadline = time.monotonic() + timeout
-    while daemon.link_status(link)["state"] != "up":
-        assert time.monotonic() < deadline, f"{link} not up\n{daemon.output()}"
-        time.sleep(0.1)
 
 
 def refusal(link, payload, dst):
@@ -52,18 +44,14 @@ def test_the_simulated_link_refuses_what_the_driver_refuses_with_the_same_words(
     preset = "model: evologics-s2cr-7-17, packet: vl2b" + (f", limits: {{{modes}}}" if modes else "")
     sim_limits = ", ".join(filter(None, [f"send_as: {mode}", modes]))
     daemon = Daemon(tmp_path, f"""\
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles:
-  va: {{pose: {{static: [0, 0, 0]}}}}
-  vb: {{pose: {{static: [150, 0, 0]}}}}
-links:
+{SCENE_HEAD}links:
   {d}: {{vehicle: va, backend: evologics, port: {pty}, address: 1, im: {im}, {preset}}}
   {e}: {{vehicle: va, address: 1, emulate: {{protocol: evologics, pty: {pty}}}, {preset}}}
   {s}: {{vehicle: vb, address: 2, model: evologics-s2cr-7-17, packet: vl2b, limits: {{{sim_limits}}}}}
 """, [d, e, s])
     try:
         daemon.wait_for("READY=1")
-        wait_up(daemon, d)
+        daemon.wait_up(d)
         too_large = b"x" * (most - VL2B + 1)
         fits = b"y" * (most - VL2B)
         with Link.open(d, runtime_dir=daemon.runtime) as ld, Link.open(s, runtime_dir=daemon.runtime) as ls:

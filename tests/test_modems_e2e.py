@@ -13,7 +13,7 @@ import time
 
 import pytest
 
-from daemon_kit import Daemon, unique
+from daemon_kit import SCENE_HEAD, Daemon, unique
 from hilgate.client import Link
 from hilgate.sim.world import random_stream
 
@@ -23,11 +23,7 @@ def scene(tmp_path, protocol, a, b, ea, eb, packet):
     driver = f"backend: {protocol}, port: {pa}" if protocol == "evologics" else f"backend: s100, port: {pa}"
     driver_b = driver.replace(str(pa), str(pb))
     return f"""\
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles:
-  va: {{pose: {{static: [0, 0, 0]}}}}
-  vb: {{pose: {{static: [150, 0, 0]}}}}
-links:
+{SCENE_HEAD}links:
   {a}: {{vehicle: va, {driver}, address: 1, packet: {packet}}}
   {b}: {{vehicle: vb, {driver_b}, address: 2, packet: {packet}}}
   {ea}: {{vehicle: va, address: 1, bitrate_bps: 1000, tx_delay_s: 0.05, packet: {packet},
@@ -35,16 +31,6 @@ links:
   {eb}: {{vehicle: vb, address: 2, bitrate_bps: 1000, tx_delay_s: 0.05, packet: {packet},
          emulate: {{protocol: {protocol}, pty: {pb}}}}}
 """
-
-
-def wait_up(daemon, links, timeout=60):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        states = {l["id"]: l["state"] for l in daemon.status()["links"]}
-        if all(states[l] == "up" for l in links):
-            return
-        time.sleep(0.1)
-    raise AssertionError(f"links not up: {states}\n{daemon.output()}")
 
 
 def wait_ready(daemon, link, timeout=60):
@@ -62,7 +48,7 @@ def test_application_to_application_through_real_drivers_and_emulators(tmp_path,
     daemon = Daemon(tmp_path, scene(tmp_path, protocol, a, b, ea, eb, packet), [a, b, ea, eb])
     try:
         daemon.wait_for("READY=1")
-        wait_up(daemon, [a, b])
+        daemon.wait_up(a, b)
         device = os.stat(os.path.realpath(tmp_path / "modem_a"))  # the emulated modem's pty: for the daemon's group
         assert stat.S_IMODE(device.st_mode) == 0o660 and device.st_gid == os.getegid()
         expected = []
@@ -106,7 +92,7 @@ def test_a_frame_too_large_for_an_instant_message_is_refused_clearly(tmp_path):
     daemon = Daemon(tmp_path, scene(tmp_path, "evologics", a, b, ea, eb, "vl2b"), [a, b, ea, eb])
     try:
         daemon.wait_for("READY=1")
-        wait_up(daemon, [a])
+        daemon.wait_up(a)
         with Link.open(a, runtime_dir=daemon.runtime) as la:
             la.send(b"x" * 100, dst=2)
             with pytest.raises(Exception, match="do not fit an instant message"):
@@ -128,11 +114,7 @@ def test_the_evologics_driver_sees_acknowledgements_lost_on_the_channel_and_reco
                           if (o := predicted_ack_outcome(s, ea, frames, retries, per))["recovered"])
     daemon = Daemon(tmp_path, f"""\
 seed: {seed}
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles:
-  va: {{pose: {{static: [0, 0, 0]}}}}
-  vb: {{pose: {{static: [150, 0, 0]}}}}
-links:
+{SCENE_HEAD}links:
   {a}: {{vehicle: va, backend: evologics, port: {pa}, address: 1, packet: vl2b, im_retries: {retries}}}
   {b}: {{vehicle: vb, backend: evologics, port: {pb}, address: 2, packet: vl2b}}
   {ea}: {{vehicle: va, model: evologics-s2cr-7-17, range_m: [0, 300], error: {{expr: "{per}"}}, address: 1,
@@ -142,7 +124,7 @@ links:
 """, [a, b, ea, eb])
     try:
         daemon.wait_for("READY=1")
-        wait_up(daemon, [a, b])
+        daemon.wait_up(a, b)
         sent = [b"frame %d" % i for i in range(frames)]
         received = []
         with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:

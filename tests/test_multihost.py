@@ -24,7 +24,7 @@ import uuid
 import pytest
 import serial
 
-from daemon_kit import Daemon, unique  # noqa: E402
+from daemon_kit import Daemon, free_port, unique, wait_until  # noqa: E402
 from hilgate.client import Link  # noqa: E402
 from hilgate.core.packets import packet_class  # noqa: E402
 from test_live_poses import FakeBlueRov  # noqa: E402  (pymavlink's ArduSub, as in the one-host test)
@@ -45,20 +45,6 @@ def credentials(tmp_path_factory):
     return CREDS
 
 
-def free_port(kind: int = socket.SOCK_STREAM) -> int:
-    with socket.socket(socket.AF_INET, kind) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
-
-
-def wait_until(predicate, timeout: float = 60.0, what: str = "a condition"):
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value:
-            return value
-        assert time.monotonic() < deadline, f"timed out waiting for {what}"
-        time.sleep(0.05)
 
 
 class Host:

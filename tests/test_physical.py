@@ -176,11 +176,7 @@ def test_loss_fraction_in_simulation_matches_the_analytic_per(modulation, target
     net = Net(Channel("ac", 1500.0), seed=5)
     net.modem("a", (0, 0, 0), bitrate_bps=1900.0, error=m)
     net.modem("b", (d, 0, 0), bitrate_bps=1900.0, error=m)
-    for i in range(n):
-        net.send("a", "b", size, at=i * 1.0)
-    net.run()
-    lost = len(net.of("err", "b"))
-    assert len(net.of("rx", "b")) + lost == n
+    lost = net.lost_of("a", "b", n, size)
     sigma = math.sqrt(n * p * (1 - p))
     assert abs(lost - n * p) <= Z * sigma, (lost, n * p)
 

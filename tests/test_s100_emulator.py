@@ -20,7 +20,7 @@ import serial
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from daemon_kit import Daemon, peer_events, unique
+from daemon_kit import SCENE_HEAD, Daemon, peer_events, unique
 from fuzzkit import examples
 from hilgate.core.packets import packet_class
 from hilgate.core.scheduler import VirtualScheduler
@@ -81,11 +81,7 @@ def test_without_flow_control_the_modem_holds_45_bytes():
 
 def scene(tmp_path, ea, eb, baud, rtscts=False, bitrate=1000):
     return f"""\
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles:
-  va: {{pose: {{static: [0, 0, 0]}}}}
-  vb: {{pose: {{static: [150, 0, 0]}}}}
-links:
+{SCENE_HEAD}links:
   {ea}: {{vehicle: va, address: 1, bitrate_bps: {bitrate}, packet: simple:20,
          emulate: {{protocol: s100, pty: {tmp_path / 'a'}, baud: {baud}, rtscts: {str(rtscts).lower()}}}}}
   {eb}: {{vehicle: vb, address: 2, bitrate_bps: {bitrate}, packet: simple:20,
@@ -241,11 +237,7 @@ links:
 def driver_scene(tmp_path, a, b, ea, eb, rtscts):
     flow = f"rtscts: {str(rtscts).lower()}"
     return f"""\
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles:
-  va: {{pose: {{static: [0, 0, 0]}}}}
-  vb: {{pose: {{static: [150, 0, 0]}}}}
-links:
+{SCENE_HEAD}links:
   {a}: {{vehicle: va, backend: s100, port: {tmp_path / 'a'}, baud: 19200, {flow}, address: 1, bitrate_bps: 1000,
         packet: simple:100}}
   {b}: {{vehicle: vb, backend: s100, port: {tmp_path / 'b'}, baud: 19200, {flow}, address: 2, bitrate_bps: 1000,
@@ -264,13 +256,12 @@ def test_hilgates_driver_gets_a_long_frame_across_in_45_byte_pieces_without_flow
     its terminator, as it did on a loaded CI host): the emulated S100 sends each piece as the real one would
     (45, 45, then 10 + CR LF) and loses none; the far driver joins them.  With RTS/CTS the frame goes whole."""
     from hilgate.client import Link
-    from test_modems_e2e import wait_up
 
     a, b, ea, eb = unique("da"), unique("db"), unique("ea"), unique("eb")
     daemon = Daemon(tmp_path, driver_scene(tmp_path, a, b, ea, eb, rtscts), [a, b, ea, eb])
     try:
         daemon.wait_for("READY=1")
-        wait_up(daemon, [a, b])
+        daemon.wait_up(a, b)
         with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
             payload = bytes(range(60)) + b"\r\n+++" + bytes(range(200, 230))
             la.send(payload, dst=2)
@@ -388,7 +379,6 @@ def test_a_simulated_links_applications_get_the_frames_an_s100_sent_in_pieces(tm
     class, as a bridge on the receiving side hunts them.  Nothing is counted as no frame."""
     from hilgate.client import Link
     from hilgate.core.packets import packet_class
-    from test_modems_e2e import wait_up
 
     d, e, s = unique("drv"), unique("emu"), unique("sim")
     daemon = Daemon(tmp_path, f"""\
@@ -404,7 +394,7 @@ links:
 """, [d, e, s])
     try:
         daemon.wait_for("READY=1")
-        wait_up(daemon, [d])
+        daemon.wait_up(d)
         wire = packet_class(packet)
         size = max(n for n in range(wire.max_payload + 1) if wire.real_length(n) == 100)  # 100 bytes on air
         payloads = [(bytes([i]) + b"\r\n+++AT" + bytes(range(40, 40 + size)))[:size] for i in range(3)]

@@ -15,12 +15,11 @@ import sys
 import threading
 import time
 
-from daemon_kit import Daemon, unique
+from daemon_kit import Daemon, unique, wait_until
 from hilgate.client import Link
 from hilgate.fitcmd import run_fit
 from hilgate.report.tracedata import load_trace
 
-HANG_GUARD_S = 90
 
 
 def scenes(tmp_path, a, b, ea, eb):
@@ -51,11 +50,7 @@ links:
 
 
 def wait(condition, what, daemon):
-    deadline = time.monotonic() + HANG_GUARD_S
-    while not condition():
-        assert time.monotonic() < deadline, f"{what} not within {HANG_GUARD_S} s (a hang guard)\n{daemon.output()}"
-        assert daemon.process.poll() is None, daemon.output()
-        time.sleep(0.05)
+    wait_until(lambda: daemon.alive() and condition(), lambda: f"{what}\n{daemon.output()}")
 
 
 def trace_so_far(daemon):

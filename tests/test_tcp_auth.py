@@ -21,7 +21,7 @@ import textwrap
 
 import pytest
 
-from daemon_kit import Daemon, unique
+from daemon_kit import Daemon, quick_scene, unique
 from hilgate.client import GliError, Link
 from hilgate.gli import wire
 from hilgate.gli.session import AuthError, Hello, Session
@@ -32,15 +32,7 @@ GROUP = 54323
 
 
 def scene(a: str, b: str) -> str:
-    return f"""\
-name: tcp-auth
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles: {{va: {{pose: {{static: [0, 0, 0]}}}}, vb: {{pose: {{static: [10, 0, 0]}}}}}}
-links:
-  {a}: {{vehicle: va, address: 1, packet: vl2b, bitrate_bps: 1e6}}
-  {b}: {{vehicle: vb, address: 2, packet: vl2b, bitrate_bps: 1e6}}
-trace: {{poses_s: 0}}
-"""
+    return quick_scene("tcp-auth", a, b)
 
 
 def free_port() -> int:
