@@ -27,3 +27,21 @@ def daemon_of(tmp_path):
     yield start
     for daemon in started:
         daemon.close()
+
+
+# Tests that must not share the machine with the rest of the suite: they time a serial line or a
+# preemption in real time, or run daemons the kit does not start (so nothing waits for the user's
+# POSIX-queue budget, which every test run on the machine shares) with many links.  `make test` runs
+# them after the parallel part, alone (-m serial); a plain `pytest` runs everything as before.
+SERIAL = {
+    "test_s100_emulator.py": "an S100 over ptys: pieces joined by the line's idle time",
+    "test_field_realtime.py": "a preemption, provoked and measured",
+    "test_realtime.py": "the real-time scheduler's own timing",
+    "test_formation.py": "examples/formation/run.py: five links' queues in daemons of its own",
+}
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.path.name in SERIAL:
+            item.add_marker(pytest.mark.serial)

@@ -120,13 +120,28 @@ class Daemon:
         self.notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
         self.notify.bind(self.notify_path)
         self.log = open(tmp_path / "daemon.log", "w+")
-        environment = dict(os.environ, NOTIFY_SOCKET=self.notify_path, **(env or {}))
-        self.process = subprocess.Popen(
-            [sys.executable, "-m", "hilgate", "-v", "run", str(self.scene), "--runtime-dir", self.runtime,
-             "--trace", str(self.trace), "--summary", str(self.summary), "--no-status-line", *args],
-            stdout=self.log, stderr=subprocess.STDOUT, env=environment,
+        self._start = dict(
+            args=[sys.executable, "-m", "hilgate", "-v", "run", str(self.scene), "--runtime-dir", self.runtime,
+                  "--trace", str(self.trace), "--summary", str(self.summary), "--no-status-line", *args],
+            stdout=self.log, stderr=subprocess.STDOUT, env=dict(os.environ, NOTIFY_SOCKET=self.notify_path, **(env or {})),
             preexec_fn=_unlimited_queue_budget if queue_budget_unlimited else None)
+        self.process = subprocess.Popen(**self._start)
         self.notifications: list[str] = []
+        self.budget_waits = 0
+
+    def _waiting_for_queues(self) -> bool:
+        """The daemon could not start because this user's POSIX-queue budget (shared by every test run on
+        the machine, and by the other workers of this one) was used up: it removed what it had made, and
+        it is started again once the others may have let go (another test's wait, not this test's failure)."""
+        if "the queue budget of this user is used up" not in self.output() or any(
+                "READY=1" in n.split("\n") for n in self.notifications):
+            return False
+        self.budget_waits += 1
+        time.sleep(min(2.0, 0.2 * self.budget_waits))
+        self.log.seek(0)
+        self.log.truncate()
+        self.process = subprocess.Popen(**self._start)
+        return True
 
     def wait_for(self, word: str, timeout: float = HANG_GUARD_S) -> list[str]:
         """Wait for a notify datagram containing ``word``; returns its lines."""
@@ -136,7 +151,7 @@ class Daemon:
             try:
                 data = self.notify.recv(4096).decode()
             except socket.timeout:
-                if self.process.poll() is not None:
+                if self.process.poll() is not None and not self._waiting_for_queues():
                     raise AssertionError(f"daemon exited with {self.process.returncode}:\n{self.output()}")
                 continue
             self.notifications.append(data)

@@ -39,6 +39,8 @@ def decode_vl2b(body: bytes) -> dict:
 
 
 def emit(**fields) -> None:
+    """One event; ``mono`` is when it happened (now, unless given: a send is stamped before it is made, so
+    a delay measured from it never comes out shorter than the real one, however late this process runs)."""
     print(json.dumps({"mono": time.monotonic(), **fields}), flush=True)
 
 
@@ -73,8 +75,9 @@ def main() -> int:
     emit(ev="req_state")
     for i in range(a.send):
         payload = f"{a.link}#{i:04d}".encode().ljust(a.size, b".")[: a.size]
+        before = time.monotonic()
         tx.send(b"\x00" + encode_vl2b(payload, i, a.src, a.dst))
-        emit(ev="sent", seq=i, payload=payload.decode())
+        emit(ev="sent", seq=i, payload=payload.decode(), mono=before)
         if i + 1 < a.send:
             time.sleep(a.interval)
     if a.raw:
