@@ -48,13 +48,14 @@ sim: $(VENV)/.installed
 	$(BIN)/hilgate sim $(SCENE) $(ARGS)
 
 # The suite on TEST_JOBS workers (pytest-xdist): most tests wait on daemons and applications they start,
-# so more workers than cores keep both cores busy.  Tests that time real-time behaviour or hold much of
-# the user's POSIX-queue budget outside the test kit (marked serial: tests/conftest.py says which and why)
-# run after it, alone.
+# so more workers than cores keep both cores busy.  A test file stays on one worker (--dist loadscope):
+# its module fixtures (an installed venv, a paper's runs) are made once, not once per worker.  Tests that
+# time real-time behaviour or hold much of the user's POSIX-queue budget outside the test kit (marked
+# serial: tests/conftest.py says which and why) run after it, alone.
 TEST_JOBS ?= 4
 
 test: $(VENV)/.installed-test
-	$(BIN)/python -m pytest -q -n $(TEST_JOBS) -m "not serial"
+	$(BIN)/python -m pytest -q -n $(TEST_JOBS) --dist loadscope -m "not serial"
 	$(BIN)/python -m pytest -q -m serial
 
 # The fuzz tests (test_fuzz_*) for minutes instead of seconds: HILGATE_FUZZ multiplies their examples.

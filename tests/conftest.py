@@ -37,11 +37,12 @@ SERIAL = {
     "test_s100_emulator.py": "an S100 over ptys: pieces joined by the line's idle time",
     "test_field_realtime.py": "a preemption, provoked and measured",
     "test_realtime.py": "the real-time scheduler's own timing",
-    "test_formation.py": "examples/formation/run.py: five links' queues in daemons of its own",
+    "test_formation.py::test_the_application_classes_keep_formation_through_hilgate_app":
+        "examples/formation/run.py: five links' queues in a daemon of its own",
 }
 
 
 def pytest_collection_modifyitems(config, items):
     for item in items:
-        if item.path.name in SERIAL:
+        if item.path.name in SERIAL or f"{item.path.name}::{item.originalname}" in SERIAL:
             item.add_marker(pytest.mark.serial)
