@@ -1,0 +1,207 @@
+"""hilgate on ROS 2 (issue 27), against a second Cyclone DDS participant standing in for a ROS 2 node
+(tests/ros2kit.py), on loopback, in a DDS domain drawn for this run.
+
+What a ROS 2 node sends moves the channel model (odometry at 50 Hz: the propagation delay of the link
+follows exactly, from the trace, as in the MAVLink test); hilgate's poses, ``/tf`` and ``/diagnostics``
+arrive; a frame from a "ROS 2 node" reaches a dccomms application and back; hostile samples are counted,
+never applied.  tests/test_ros2_wire.py holds the bytes and the type hashes against rosbags.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+
+import pytest
+
+from ros2kit import Publication, Subscription, namespace, ros2_section, wait_until, publications  # noqa: F401
+from daemon_kit import Daemon, unique
+from hilgate.client import Link
+from hilgate.ros2.idl import message_class
+from hilgate.ros2.messages import user_data
+
+Odometry = message_class("nav_msgs/msg/Odometry")
+
+
+class Simulator:
+    """A robot simulator's odometry: ``nav_msgs/msg/Odometry`` in ENU at 50 Hz, until told to stop."""
+
+    def __init__(self, topic: str):
+        self.publication = Publication(topic, "nav_msgs/msg/Odometry")
+        self.enu = (0.0, 150.0, -5.0)  # 150 m north, 5 m deep
+        self.sending = True
+        self.sent = 0
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self):
+        while not self.stop.is_set():
+            if self.sending:
+                message = Odometry()
+                message.header.frame_id = "odom"
+                message.child_frame_id = "base_link"
+                p = message.pose.pose.position
+                p.x, p.y, p.z = self.enu
+                message.pose.pose.orientation.w = 1.0
+                self.publication.write(message)
+                self.sent += 1
+            self.stop.wait(0.02)
+
+    def close(self):
+        self.stop.set()
+        self.thread.join()
+        self.publication.close()
+
+
+def status_of(daemon, name):
+    return next(v for v in daemon.status()["vehicles"] if v["name"] == name)
+
+
+def test_odometry_at_50_hz_moves_the_vehicle_and_the_delay_follows(tmp_path):
+    ns = namespace()
+    topside, bluerov = unique("top"), unique("rov")
+    scene = f"""\
+channels: {{ac: {{speed_mps: 1500}}}}
+vehicles:
+  topside: {{pose: {{static: [0, 0, 0]}}}}
+  bluerov:
+    pose: {{ros2: {{topic: {ns}/bluerov/odom, type: nav_msgs/msg/Odometry, frame_id: odom}}}}
+    stale_after_s: 1.0
+    stale: drop
+links:
+  {topside}: {{vehicle: topside, address: 1, bitrate_bps: 1000, addressing: strict}}
+  {bluerov}: {{vehicle: bluerov, address: 2, bitrate_bps: 1000, addressing: strict}}
+{ros2_section(ns)}"""
+    daemon = Daemon(tmp_path, scene, [topside, bluerov])
+    simulator = Simulator(f"{ns}/bluerov/odom")
+    try:
+        daemon.wait_for("READY=1")
+        wait_until(lambda: status_of(daemon, "bluerov")["position"] is not None, what="the first pose")
+        seen = status_of(daemon, "bluerov")
+        assert seen["position"] == [150.0, 0.0, 5.0] and seen["source"] == "ros2"  # ENU → NED
+        with Link.open(topside, runtime_dir=daemon.runtime) as top, Link.open(bluerov, runtime_dir=daemon.runtime) as rov:
+            top.send(b"near", dst=2)
+            assert rov.recv(timeout=30).data == b"near"
+            simulator.enu = (0.0, 300.0, -5.0)
+            wait_until(lambda: status_of(daemon, "bluerov")["position"] == [300.0, 0.0, 5.0], what="the new pose")
+            top.send(b"away", dst=2)
+            assert rov.recv(timeout=30).data == b"away"
+            simulator.sending = False  # the simulator stops: silence, stale, dropped
+            wait_until(lambda: status_of(daemon, "bluerov")["position"] is None, what="the stale pose dropped")
+            top.send(b"lost", dst=2)
+            assert rov.recv(timeout=1.5) is None
+        ros2 = daemon.status()["ros2"]
+        (source,) = ros2["poses_in"]
+        assert source["messages"] == source["messages"] and source["refused"] == {}
+        assert 0 < source["applied"] <= source["messages"] <= simulator.sent
+        daemon.stop()
+        events = daemon.trace_events()
+        enq = {e["pkt"]: e["t"] for e in events if e.get("ev") == "enq"}
+        delays = [round(e["t"] - enq[e["pkt"]], 6) for e in events if e.get("ev") == "rx"]
+        # 9 bytes on air = 72 ms, then the distance to the vehicle 5 m deep, 150 m then 300 m away
+        assert delays == [round(0.072 + math.hypot(150, 5) / 1500, 6), round(0.072 + math.hypot(300, 5) / 1500, 6)]
+        assert [e["cause"] for e in events if e.get("ev") == "err"] == ["range"]
+    finally:
+        simulator.close()
+        daemon.close()
+
+
+def test_poses_tf_and_diagnostics_are_published_as_the_scene_asks(tmp_path):
+    ns = namespace()
+    a, b = unique("a"), unique("b")
+    scene = f"""\
+channels: {{ac: {{speed_mps: 1500}}}}
+vehicles:
+  ship: {{pose: {{static: [10, 20, 0]}}}}
+  auv: {{pose: {{path: {{start: [100, 0, 30], legs: [{{to: [100, 50, 30], speed_mps: 0.001}}]}}}}}}
+links:
+  {a}: {{vehicle: ship, address: 1, gli: [socket]}}
+  {b}: {{vehicle: auv, address: 2, gli: [socket]}}
+{ros2_section(ns, '''  frame_id: map
+  publish:
+    poses: {rate_hz: 20}
+    tf: {rate_hz: 20, reliability: best_effort}
+    diagnostics: {rate_hz: 5}
+''')}"""
+    ship = Subscription(f"{ns}/ship/pose", "geometry_msgs/msg/PoseStamped")
+    tf = Subscription("/tf", "tf2_msgs/msg/TFMessage", "best_effort")
+    diagnostics = Subscription("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
+    daemon = Daemon(tmp_path, scene, [a, b])
+    try:
+        daemon.wait_for("READY=1")
+        pose = ship.wait(2)[-1]
+        assert pose.header.frame_id == "map"
+        assert (pose.pose.position.x, pose.pose.position.y, pose.pose.position.z) == (20.0, 10.0, -0.0)  # ENU
+        assert (pose.pose.orientation.x, pose.pose.orientation.y, pose.pose.orientation.z, pose.pose.orientation.w) \
+            == (0.0, 0.0, 0.0, 1.0)
+        ours = [m for m in tf.wait(1) if any(t.child_frame_id == "ship" for t in m.transforms)]
+        wait_until(lambda: any(any(t.child_frame_id == "auv" for t in m.transforms) for m in tf.samples),
+                   what="the AUV's transform")
+        transforms = {t.child_frame_id: t for m in tf.samples for t in m.transforms if t.header.frame_id == "map"}
+        assert ours and transforms["auv"].transform.translation.x == pytest.approx(0.0, abs=0.1)
+        assert transforms["auv"].transform.translation.y == 100.0 and transforms["auv"].transform.translation.z == -30.0
+        report = wait_until(lambda: next((m for m in diagnostics.samples
+                                          if any(s.name == f"hilgate: {a}" for s in m.status)), None),
+                            what="a diagnostic of link a")
+        status = {s.name: s for s in report.status}
+        mine = status[f"hilgate: {a}"]
+        values = {kv.key: kv.value for kv in mine.values}
+        assert mine.level == 0 and mine.message == "ready" and mine.hardware_id == "sim"
+        assert values["state"] == "up" and values["tx_packets"] == "0" and values["ready"] == "True"
+        with Link.open(a, runtime_dir=daemon.runtime) as link:
+            link.send(b"hello", dst=2)
+            wait_until(lambda: any(kv.key == "tx_packets" and kv.value == "1" for m in diagnostics.samples
+                                   for s in m.status if s.name == f"hilgate: {a}" for kv in s.values),
+                       what="the counter in /diagnostics")
+        # nothing was published the scene did not ask for: no link topics (their gli has no ros2)
+        assert not any(f"/{a}/" in topic or f"/{b}/" in topic for topic in publications(ns))
+        published = daemon.status()["ros2"]
+        assert published["domain_id"] > -1 and published["interfaces"] == ["loopback"]
+        assert published["published"]["poses"] > 0 and published["failed"] == 0
+    finally:
+        for subscription in (ship, tf, diagnostics):
+            subscription.close()
+        daemon.close()
+
+
+def test_a_ros2_node_and_a_dccomms_application_talk_through_two_links(tmp_path):
+    ns = namespace()
+    node_link, app_link = unique("node"), unique("app")
+    scene = f"""\
+channels: {{ac: {{speed_mps: 1500}}}}
+vehicles:
+  a: {{pose: {{static: [0, 0, 0]}}}}
+  b: {{pose: {{static: [300, 0, 0]}}}}
+links:
+  {node_link}: {{vehicle: a, address: 1, bitrate_bps: 2000, gli: [ros2]}}
+  {app_link}: {{vehicle: b, address: 2, bitrate_bps: 2000}}
+{ros2_section(ns)}"""
+    Frame = message_class("hilgate_msgs/msg/Frame")
+    recv = Subscription(f"{ns}/{node_link}/recv", "hilgate_msgs/msg/Frame")
+    ready = Subscription(f"{ns}/{node_link}/ready", "std_msgs/msg/Bool", durability="transient_local")
+    send = Publication(f"{ns}/{node_link}/send", "hilgate_msgs/msg/Frame")
+    daemon = Daemon(tmp_path, scene, [node_link, app_link])
+    try:
+        daemon.wait_for("READY=1")
+        assert ready.wait(1)[-1].data is True  # the state a node that starts late gets at once
+        application = daemon.peer(app_link, "--send", "1", "--dst", "1", "--receive", "1", "--timeout", "60")
+        heard = recv.wait(1)[0]  # the dccomms application's frame reaches the node
+        assert (heard.src, heard.dst, bytes(heard.data)) == (2, 1, f"{app_link}#0000".encode()[:10])
+        assert heard.model_time > 0.2 and heard.stamp.sec > 1_600_000_000
+        wait_until(lambda: send.matched(), what="hilgate's reader of the send topic")
+        send.write(Frame(dst=2, data=b"from ROS 2"))  # and the node answers
+        events = __import__("daemon_kit").peer_events(application)
+        frames = [e for e in events if e["ev"] == "frame"]
+        assert [(f["payload"], f["src"], f["dst"], f["crc_ok"]) for f in frames] == [("from ROS 2", 1, 2, True)]
+        wait_until(lambda: len(ready.samples) >= 3, what="BUSY and READY again")  # it went BUSY while sending
+        assert [s.data for s in ready.samples][-2:] == [False, True]
+        # the type hash of each endpoint hilgate opened, in its USER_DATA, as a Jazzy node reads it
+        seen = wait_until(lambda: (lambda p: p if len(p) == 3 else None)(publications(ns)), what="three writers")
+        # (hilgate's recv and ready, and this test's own send)
+        assert seen[f"rt{ns}/{node_link}/recv"] == ("hilgate_msgs::msg::dds_::Frame_", user_data("hilgate_msgs/msg/Frame"))
+        assert seen[f"rt{ns}/{node_link}/ready"] == ("std_msgs::msg::dds_::Bool_", user_data("std_msgs/msg/Bool"))
+    finally:
+        for entity in (recv, ready, send):
+            entity.close()
+        daemon.close()
