@@ -205,3 +205,98 @@ links:
         for entity in (recv, ready, send):
             entity.close()
         daemon.close()
+
+
+# -- hostile and broken nodes -------------------------------------------------------------------------
+
+
+def test_poses_that_are_no_poses_are_counted_and_never_applied(tmp_path):
+    ns = namespace()
+    link = unique("h")
+    scene = f"""\
+channels: {{ac: {{speed_mps: 1500}}}}
+vehicles:
+  rov: {{pose: {{ros2: {{topic: {ns}/rov/pose_in, type: geometry_msgs/msg/PoseStamped, frame_id: odom}}}}}}
+links:
+  {link}: {{vehicle: rov, address: 1, gli: [socket]}}
+{ros2_section(ns)}"""
+    PoseStamped = message_class("geometry_msgs/msg/PoseStamped")
+    publication = Publication(f"{ns}/rov/pose_in", "geometry_msgs/msg/PoseStamped")
+    daemon = Daemon(tmp_path, scene, [link])
+
+    def pose(x, y, z, frame="odom"):
+        message = PoseStamped()
+        message.header.frame_id = frame
+        message.pose.position.x, message.pose.position.y, message.pose.position.z = x, y, z
+        message.pose.orientation.w = 1.0
+        return message
+
+    try:
+        daemon.wait_for("READY=1")
+        wait_until(publication.matched, what="hilgate's reader")
+        publication.write(pose(1.0, 2.0, -3.0))
+        wait_until(lambda: status_of(daemon, "rov")["position"] == [2.0, 1.0, 3.0], what="the good pose")
+        publication.write(pose(math.nan, 0.0, 0.0))
+        publication.write(pose(0.0, math.inf, 0.0))
+        publication.write(pose(1e300, 0.0, 0.0))
+        publication.write(pose(7.0, 7.0, 7.0, frame="map"))  # another frame than the scene's
+        # CDR that Cyclone DDS passes (it refuses truncated samples itself) but that is no text: a frame id
+        # in Latin-1, as a tool that is not ROS might write it
+        latin = pose(0.0, 0.0, 0.0, frame="od").serialize().replace(b"od\x00", b"\xf6d\x00")
+        publication.write_raw(latin)
+        publication.write_raw(latin)
+        publication.write(pose(4.0, 5.0, -6.0))  # and a good one after them all is taken
+        wait_until(lambda: status_of(daemon, "rov")["position"] == [5.0, 4.0, 6.0], what="the last good pose")
+        source = wait_until(lambda: (lambda s: s if sum(s["refused"].values()) == 6 else None)(
+            daemon.status()["ros2"]["poses_in"][0]), what="six refusals")
+        assert source["refused"] == {"not_finite": 2, "out_of_range": 1, "frame_id": 1, "decode": 2}
+        assert source["messages"] == 6  # the decoded ones: two good, four refused
+        assert source["applied"] == 2
+        assert daemon.process.poll() is None and "Traceback" not in daemon.output()
+    finally:
+        publication.close()
+        daemon.close()
+
+
+def test_frames_a_node_floods_or_breaks_are_counted_by_cause_and_none_is_lost_uncounted(tmp_path):
+    ns = namespace()
+    node_link, app_link = unique("f"), unique("g")
+    scene = f"""\
+channels: {{ac: {{speed_mps: 1500}}}}
+vehicles:
+  a: {{pose: {{static: [0, 0, 0]}}}}
+  b: {{pose: {{static: [15, 0, 0]}}}}
+links:
+  {node_link}: {{vehicle: a, address: 1, bitrate_bps: 1000000, gli: [ros2]}}
+  {app_link}: {{vehicle: b, address: 2, bitrate_bps: 1000000, gli: [socket]}}
+{ros2_section(ns)}"""
+    Frame = message_class("hilgate_msgs/msg/Frame")
+    send = Publication(f"{ns}/{node_link}/send", "hilgate_msgs/msg/Frame")
+    daemon = Daemon(tmp_path, scene, [node_link, app_link])
+    flood = 400
+    try:
+        daemon.wait_for("READY=1")
+        wait_until(send.matched, what="hilgate's reader")
+        send.write(Frame(dst=2, data=bytes(70_000)))   # more than any packet class carries
+        send.write(Frame(dst=2, data=bytes(3000)))     # more than this link's packet class carries
+        for i in range(flood):                          # far faster than the door lets one writer send
+            send.write(Frame(dst=2, data=i.to_bytes(2, "big")))
+        total = flood + 2
+
+        def accounted():
+            events = daemon.trace_events()
+            enq = sum(1 for e in events if e.get("ev") == "enq" and e.get("src") == node_link)
+            drops = {}
+            for e in events:
+                if e.get("ev") == "drop" and e.get("link") == node_link:
+                    drops[e["cause"]] = drops.get(e["cause"], 0) + e.get("n", 1)
+            return (enq, drops) if enq + sum(drops.values()) == total else None
+
+        enq, drops = wait_until(accounted, what="every frame sent or counted")
+        assert drops["bad_frame"] == 2 and drops.get("rate", 0) + drops.get("client_queue", 0) > 0
+        assert set(drops) <= {"bad_frame", "rate", "client_queue"} and enq >= 64
+        assert daemon.process.poll() is None and "Traceback" not in daemon.output()
+        assert sum(daemon.link_status(node_link)["drop_causes"].values()) == total - enq
+    finally:
+        send.close()
+        daemon.close()

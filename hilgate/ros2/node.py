@@ -12,7 +12,7 @@ import logging
 import os
 from typing import Any
 
-from .participant import Participant
+from .participant import DDSException, Participant
 
 log = logging.getLogger(__name__)
 
@@ -58,9 +58,13 @@ class Ros2Node:
         if self._participant is None:
             spec = self.spec
             self.domain_id = domain_from(spec)
-            self._participant = Participant(self.domain_id, spec.interfaces, spec.peers)
+            where = ", ".join(spec.interfaces) if spec.interfaces else "loopback"
+            try:
+                self._participant = Participant(self.domain_id, spec.interfaces, spec.peers)
+            except DDSException as exc:  # Cyclone has said why on stderr (an interface that is not there…)
+                raise Ros2Error(f"ros2: cannot join DDS domain {self.domain_id} on {where}: {exc}") from None
             log.info("ROS 2: joined DDS domain %d on %s (namespace %s)", self.domain_id,
-                     ", ".join(spec.interfaces) if spec.interfaces else "loopback only", spec.namespace)
+                     where if spec.interfaces else "loopback only", spec.namespace)
         return self._participant
 
     @property
