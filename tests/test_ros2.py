@@ -93,7 +93,7 @@ links:
             assert rov.recv(timeout=1.5) is None
         ros2 = daemon.status()["ros2"]
         (source,) = ros2["poses_in"]
-        assert source["messages"] == source["messages"] and source["refused"] == {}
+        assert source["refused"] == {} and source["topic"] == f"{ns}/bluerov/odom"
         assert 0 < source["applied"] <= source["messages"] <= simulator.sent
         daemon.stop()
         events = daemon.trace_events()
@@ -299,4 +299,56 @@ links:
         assert sum(daemon.link_status(node_link)["drop_causes"].values()) == total - enq
     finally:
         send.close()
+        daemon.close()
+
+
+# -- the domain and reloads ----------------------------------------------------------------------------------
+
+
+def test_domain_from_ros_domain_id_and_reloads_that_add_a_link_or_would_move_the_domain(tmp_path):
+    from ros2kit import DOMAIN
+
+    ns = namespace()
+    first, second = unique("p"), unique("q")
+    base = f"""\
+channels: {{ac: {{speed_mps: 1500}}}}
+vehicles:
+  a: {{pose: {{static: [0, 0, 0]}}}}
+links:
+  {first}: {{vehicle: a, address: 1, gli: [ros2]}}
+"""
+    section = f"ros2: {{namespace: {ns}}}\n"
+    daemon = Daemon(tmp_path, base + section, [first, second], env={"ROS_DOMAIN_ID": str(DOMAIN)})
+    ready = Subscription(f"{ns}/{second}/ready", "std_msgs/msg/Bool", durability="transient_local")
+    try:
+        daemon.wait_for("READY=1")
+        assert daemon.status()["ros2"]["domain_id"] == DOMAIN
+        daemon.reload(base + f"  {second}: {{vehicle: a, address: 2, gli: [socket, ros2]}}\n" + section)
+        assert ready.wait(1)[-1].data is True  # the new link's topics, on the running participant
+        moved = base + f"ros2: {{namespace: {ns}, domain_id: {(DOMAIN + 1) % 233}}}\n"
+        daemon.scene.write_text(moved)
+        reply = daemon.control({"class": "RELOAD"})
+        assert reply["ok"] is False and "restart it to change them" in reply["error"]
+        assert daemon.status()["ros2"]["domain_id"] == DOMAIN and daemon.link_status(second)["state"] == "up"
+    finally:
+        ready.close()
+        daemon.close()
+
+
+def test_a_ros_domain_id_that_is_no_domain_is_refused_in_one_line(tmp_path):
+    link = unique("d")
+    scene = f"""\
+channels: {{ac: {{speed_mps: 1500}}}}
+vehicles:
+  a: {{pose: {{static: [0, 0, 0]}}}}
+links:
+  {link}: {{vehicle: a, gli: [ros2]}}
+"""
+    daemon = Daemon(tmp_path, scene, [link], env={"ROS_DOMAIN_ID": "999"})
+    try:
+        assert daemon.process.wait(60) != 0
+        errors = [line for line in daemon.output().splitlines() if line.startswith("hilgate: ")]
+        assert len(errors) == 1 and errors[0].endswith("ros2: ROS_DOMAIN_ID='999' is not a domain id from 0 to 232")
+        assert "Traceback" not in daemon.output()
+    finally:
         daemon.close()
