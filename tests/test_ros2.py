@@ -352,3 +352,44 @@ links:
         assert "Traceback" not in daemon.output()
     finally:
         daemon.close()
+
+
+def test_diagnostics_of_many_links_go_out_in_chunks_one_turn_each(tmp_path):
+    """The publisher on the model's clock (virtual time) and the test's own participant: 40 links make
+    three arrays of 16, 16 and 8 statuses, each built in its own turn of the loop."""
+    from ros2kit import node
+    from hilgate.core.scheduler import VirtualScheduler
+    from hilgate.ros2.publish import CHUNK, Publisher
+    from hilgate.scene.ros2 import PublishSpec, Ros2Spec, ros_token
+
+    ns = namespace()
+    spec = Ros2Spec(namespace=ns, diagnostics=PublishSpec(1.0), poses=PublishSpec(1.0))
+    scheduler = VirtualScheduler()
+    turns = []
+
+    def link(i):
+        def status():
+            turns.append(scheduler.now())
+            return {"id": f"l{i}", "state": "up", "ready": i % 2 == 0, "tx_packets": i, "rx_packets": 0, "drops": 0,
+                    "unread": 0, "fifo_bytes": 0, "drop_causes": {"rate": 1} if i == 3 else {}, "backend": "sim"}
+        return status
+
+    vehicles = [lambda i=i: (f"v{i}", (float(i), 0.0, 0.0), None, None, False) for i in range(20)]
+    diagnostics = Subscription("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
+    poses = Subscription(f"{ns}/v19/pose", "geometry_msgs/msg/PoseStamped")
+    publisher = Publisher(node(), scheduler, spec, lambda: vehicles, lambda: [link(i) for i in range(40)], ros_token)
+    try:
+        wait_until(lambda: publisher.diag_writer.get_publication_matched_status().current_count, what="the match")
+        scheduler.run(1.0)
+        arrays = [m for m in diagnostics.wait(3) if any(s.name.startswith("hilgate: l") for s in m.status)]
+        assert [len(m.status) for m in arrays] == [CHUNK, CHUNK, 40 - 2 * CHUNK]
+        assert len(turns) == 40 and scheduler.now() == 1.0
+        statuses = {s.name: s for m in arrays for s in m.status}
+        assert statuses["hilgate: l1"].level == 1 and statuses["hilgate: l1"].message == "busy"
+        assert {kv.key: kv.value for kv in statuses["hilgate: l3"].values}["drops.rate"] == "1"
+        assert poses.wait(1)[0].pose.position.y == 19.0  # the 20th vehicle, in the second turn
+        assert publisher.status() == {"published": {"poses": 20, "tf": 0, "diagnostics": 3}, "failed": 0, "skipped": 0}
+    finally:
+        publisher.close()
+        diagnostics.close()
+        poses.close()

@@ -67,18 +67,22 @@ class Ros2Bridge:
             self.publisher = Publisher(self.node.participant, self.scheduler, wanted, self._vehicles,
                                        self._links, ros_token)
 
-    def _vehicles(self) -> list[tuple]:
-        world = self.router.world
-        now = self.scheduler.now()
-        states = []
-        for name, pose in world.poses.items():
-            age = pose.age(now) if hasattr(pose, "age") else None
-            stale = pose.stale(now) if hasattr(pose, "stale") else False
-            states.append((name, pose.position(now), getattr(pose, "attitude", None), age, stale))
-        return states
+    def _vehicles(self) -> list:
+        """Each vehicle's state as a function the publisher calls in its turn (model time then)."""
+        now = self.scheduler.now
 
-    def _links(self) -> list[dict]:
-        return [link.status() for link in self.router.links.values()]
+        def state(name: str, pose: Any) -> Any:
+            def get() -> tuple:
+                t = now()
+                age = pose.age(t) if hasattr(pose, "age") else None
+                stale = pose.stale(t) if hasattr(pose, "stale") else False
+                return name, pose.position(t), getattr(pose, "attitude", None), age, stale
+            return get
+
+        return [state(name, pose) for name, pose in self.router.world.poses.items()]
+
+    def _links(self) -> list:
+        return [link.status for link in self.router.links.values()]
 
     # -- for live pose sources --------------------------------------------------------------------
 
