@@ -10,11 +10,13 @@ never applied.  tests/test_ros2_wire.py holds the bytes and the type hashes agai
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 import threading
 
 import pytest
 
-from ros2kit import Publication, Subscription, namespace, ros2_section, wait_until, publications  # noqa: F401
+from ros2kit import DOMAIN, Publication, Subscription, namespace, publications, ros2_section, wait_until
 from daemon_kit import Daemon, unique
 from hilgate.client import Link
 from hilgate.ros2.idl import message_class
@@ -91,6 +93,9 @@ links:
             wait_until(lambda: status_of(daemon, "bluerov")["position"] is None, what="the stale pose dropped")
             top.send(b"lost", dst=2)
             assert rov.recv(timeout=1.5) is None
+        printed = subprocess.run([sys.executable, "-m", "hilgate", "status", "--runtime-dir", daemon.runtime],
+                                 capture_output=True, text=True, timeout=60).stdout
+        assert f"ROS 2: domain {DOMAIN} on loopback, namespace {ns}" in printed and f"{ns}/bluerov/odom" in printed
         ros2 = daemon.status()["ros2"]
         (source,) = ros2["poses_in"]
         assert source["refused"] == {} and source["topic"] == f"{ns}/bluerov/odom"
@@ -306,8 +311,6 @@ links:
 
 
 def test_domain_from_ros_domain_id_and_reloads_that_add_a_link_or_would_move_the_domain(tmp_path):
-    from ros2kit import DOMAIN
-
     ns = namespace()
     first, second = unique("p"), unique("q")
     base = f"""\
