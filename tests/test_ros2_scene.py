@@ -128,3 +128,16 @@ def test_a_twist_in_the_body_frame_becomes_the_worlds_velocity():
     north = (0.0, 0.0, math.sin(math.pi / 4), math.cos(math.pi / 4))  # ENU: facing north
     assert frames.rotate(north, (2.0, 0.0, 0.0)) == pytest.approx((0.0, 2.0, 0.0))  # forward = north
     assert frames.position_to_scene(frames.rotate(north, (2.0, 0.0, 0.0)), "enu") == pytest.approx((2.0, 0.0, 0.0))
+
+
+def test_cyclone_talks_on_loopback_unless_interfaces_are_named():
+    from hilgate.ros2.participant import config_xml
+
+    loopback = config_xml()
+    assert '<NetworkInterface address="127.0.0.1"/>' in loopback and "<AllowMulticast>false</AllowMulticast>" in loopback
+    assert '<Peer address="127.0.0.1"/>' in loopback and "<ParticipantIndex>auto</ParticipantIndex>" in loopback
+    named = config_xml(("eth0", "192.168.2.1"), ("10.0.0.9",))
+    assert '<NetworkInterface name="eth0"/><NetworkInterface address="192.168.2.1"/>' in named
+    assert "127.0.0.1" not in named and "AllowMulticast" not in named and '<Peer address="10.0.0.9"/>' in named
+    assert "<MaxSampleSize>1048576B</MaxSampleSize>" in named
+    assert "&quot;" in config_xml(('a"b',))  # (the scene refuses such names; the XML is escaped all the same)
