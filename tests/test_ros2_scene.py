@@ -140,4 +140,5 @@ def test_cyclone_talks_on_loopback_unless_interfaces_are_named():
     assert '<NetworkInterface name="eth0"/><NetworkInterface address="192.168.2.1"/>' in named
     assert "127.0.0.1" not in named and "AllowMulticast" not in named and '<Peer address="10.0.0.9"/>' in named
     assert "<MaxSampleSize>1048576B</MaxSampleSize>" in named
-    assert "&quot;" in config_xml(('a"b',))  # (the scene refuses such names; the XML is escaped all the same)
+    # (the scene refuses such names; the XML is escaped all the same)
+    assert '<NetworkInterface name="a&lt;&quot;\'b"/>' in config_xml(("a<\"'b",))
