@@ -20,6 +20,7 @@ from .access import LinkLock
 from ..core.backend import AppFrame, Backend, PhyEvent
 from ..core.endpoint import ABSENT, KEPT, TAKEN, Door, Endpoint
 from ..core.packets import Decoded, PacketClass, packet_class
+from ..drivers.bridge import ReceivingBridge, from_emulator
 from ..drivers.table import DRIVERS, open_backend
 from ..models.frame import BROADCAST
 from ..models.link_budget import Reception, SimpleLinkBudget, reception
@@ -51,6 +52,7 @@ class RoutedLink:
         self.seq = 0
         self.lock: LinkLock | None = None
         self.unread_kept = 0  # frames nobody took, kept in the queue for an application that starts late
+        self.bridge: ReceivingBridge | None = None  # made for the first bytes an emulated modem sends here
         self._state_pending = False
         self._usbl_rng: random.Random | None = None
         self.readdressed: int | None = None  # the address an emulated modem's AT!AL gave the link
@@ -72,6 +74,8 @@ class RoutedLink:
         self.state_changed()
 
     def update(self, spec: LinkSpec, endpoints_changed: bool) -> None:
+        if spec.packet != self.spec.packet:
+            self._flush_bridge()
         self.spec = spec
         self.packet = packet_class(spec.packet)
         if self.readdressed is not None:  # a reload that changes the link gives it its scene address again
@@ -131,6 +135,11 @@ class RoutedLink:
     @property
     def emulate(self) -> dict[str, Any]:
         return dict(self.spec.emulate)
+
+    @property
+    def limits(self) -> Any:
+        """What the link's modem accepts (its ``limits:``, from its preset; None: not stated)."""
+        return self.spec.limits
 
     @property
     def ready(self) -> bool:
@@ -230,6 +239,7 @@ class RoutedLink:
         if backend is None:
             self.lost("no_backend", len(frame.real), src="app")
             return
+        backend.admit(frame)  # PacketError: too large for the modem (its limits)
         if (isinstance(backend, SimBackend) and not backend.everyone_in_range
                 and self.router.addressed_to_nobody(self.spec.params.tx_channel, frame.dst)):
             # it still goes on air (and may spoil others' frames), but nobody will ever take it
@@ -257,9 +267,44 @@ class RoutedLink:
         """A frame the link received, to every endpoint.  One that no application at all was there to
         take is counted and traced (``no_reader``); one an application could not take is a loss of
         that application's (``app_full``, ``client_slow``)."""
+        if frame.meta is not None and from_emulator(frame):
+            self._from_emulator(frame)
+            return
+        self._hand(frame, self.endpoints)
+
+    def _from_emulator(self, frame: AppFrame) -> None:
+        """An emulated modem's bytes (an EvoLogics message, an S100's piece): this link's emulated
+        modems print them as they are, its applications get the frames a bridge on the receiving side
+        makes of them (:mod:`hilgate.drivers.bridge`), and bytes that make none are counted and traced."""
         t = self.router.scheduler.now()
-        taken = kept = False
-        for endpoint in list(self.endpoints):
+        emulators = [endpoint for endpoint in self.endpoints if endpoint.kind == "emulator"]
+        for endpoint in emulators:
+            outcome = endpoint.deliver(frame, t)
+            if outcome not in (TAKEN, KEPT, ABSENT):
+                self.lost(outcome, len(frame.real))
+        if self.bridge is None:
+            self.bridge = ReceivingBridge(self.packet)
+        frames, losses = self.bridge.take(frame)
+        sender = self.router.link_name(self.spec.params.rx_channel, frame.src)
+        for loss in losses:
+            self.lost("not_a_frame", loss.size, ev="err", src=sender, reason=loss.reason)
+        others = [endpoint for endpoint in self.endpoints if endpoint.kind != "emulator"]
+        for whole in frames:
+            self._hand(whole, others, taken=bool(emulators))
+        if frame.on_delivered is not None and frame.dst == self.address:
+            frame.on_delivered(frame, self)
+
+    def _flush_bridge(self) -> None:
+        """Bytes held for a frame that can no longer be completed (the link closes, its class changes)."""
+        if self.bridge is not None:
+            for loss in self.bridge.flush():
+                self.lost("not_a_frame", loss.size, ev="err", reason=loss.reason)
+            self.bridge = None
+
+    def _hand(self, frame: AppFrame, endpoints: list[Endpoint], taken: bool = False) -> None:
+        t = self.router.scheduler.now()
+        kept = False
+        for endpoint in list(endpoints):
             outcome = endpoint.deliver(frame, t)
             if outcome == TAKEN:
                 taken = True
@@ -309,12 +354,17 @@ class RoutedLink:
             # what the link's applications are told (READY/BUSY): false while a frame is still in the
             # modem's hands, e.g. a real modem's IM until its DELIVEREDIM or FAILEDIM
             "ready": self.ready,
+            # whom a frame from an application reaches: its destination, or everyone in range where the
+            # packet class carries no address on air and no MAC needs one (addressing: auto)
+            "app_dst": ("everyone in range" if isinstance(backend, SimBackend) and backend.everyone_in_range
+                        else "as addressed"),
         }
         if figures.get("reason"):
             status["reason"] = figures["reason"]
         return status
 
     def close(self) -> None:
+        self._flush_bridge()
         for endpoint in list(self.endpoints):
             if endpoint.kind == "socket":
                 endpoint.close()
@@ -357,7 +407,7 @@ class Router:
 
     def _sim_backend(self, spec: LinkSpec) -> Backend:
         assert self.world is not None
-        return SimBackend(self.world.modems[spec.id], self.link_name, spec.everyone_in_range)
+        return SimBackend(self.world.modems[spec.id], self.link_name, spec.everyone_in_range, spec.limits)
 
     def addressed_to_nobody(self, channel: str, address: int) -> bool:
         return address != BROADCAST and (channel, address) not in self._names
@@ -412,6 +462,7 @@ class Router:
             elif isinstance(link.backend, SimBackend):
                 link.backend.rebind(self.world.modems[spec.id])
                 link.backend.everyone_in_range = spec.everyone_in_range
+                link.backend.limits = spec.limits
                 link._watch_phy()
                 log.info("link %s reconfigured", spec.id)
             link.state_changed()

@@ -54,6 +54,31 @@ def _link_list(scene: Scene, host: str | None, limit: int = 12) -> str:
     return ", ".join(parts)
 
 
+def _links(n: int) -> str:
+    return f"{n} link" if n == 1 else f"{n} links"
+
+
+def _endpoint_list(scene: Scene, host: str | None, runtime_dir: str, tcp: str | None) -> str:
+    """The endpoints this daemon opened, for its start line: only the kinds its links use."""
+    served = [link for link in scene.links.values() if host is None or link.host == host]
+    parts = []
+    queues = sum("mq" in link.gli for link in served)
+    if queues:
+        parts.append(f"POSIX queues /ID_{{tx,rx}}_dlnk_phy ({_links(queues)})")
+    sockets = sum("socket" in link.gli for link in served)
+    if sockets:
+        parts.append(f"sockets {runtime_dir}/gli/ID.sock ({_links(sockets)})")
+    if tcp:
+        parts.append(f"TCP {tcp}")
+    for link in served:
+        emulate = dict(link.emulate)
+        if emulate:
+            where = f"pty {emulate['pty']}" if emulate.get("pty") else f"TCP port {emulate.get('tcp')}"
+            parts.append(f"{link.id} as an emulated {emulate.get('protocol')} modem at {where}")
+    parts.append(f"control {runtime_dir}/control.sock")
+    return ", ".join(parts)
+
+
 class Daemon:
     def __init__(self, scene_path: str, overrides: list[str] | tuple[str, ...] = (), runtime_dir: str = "",
                  speed: float = 1.0, tcp: str | None = None, trace_path: str | None = None,
@@ -167,11 +192,9 @@ class Daemon:
             self._periodic()
             gc.collect()
             gc.freeze()  # everything built so far is long-lived: keep it out of the collector's walks
-            log.info("hilgate %s started: scene %r (%s), %d links (%s), endpoints: POSIX queues /ID_{tx,rx}_dlnk_phy, "
-                     "sockets %s/gli/ID.sock%s, control %s/control.sock; run %s",
-                     __version__, scene.name, os.path.abspath(self.scene_path), len(self.router.links),
-                     _link_list(scene, host), self.runtime_dir,
-                     f", TCP {self.tcp}" if self.tcp else "", self.runtime_dir, self.run_id)
+            log.info("hilgate %s started: scene %r (%s), %s (%s), endpoints: %s; run %s",
+                     __version__, scene.name, os.path.abspath(self.scene_path), _links(len(self.router.links)),
+                     _link_list(scene, host), _endpoint_list(scene, host, self.runtime_dir, self.tcp), self.run_id)
         except BaseException:
             removed = unlink_created()  # it never said READY: its queues would only cost the user's budget
             if removed:

@@ -192,8 +192,7 @@ class Recorder:
         if stats is not None and frame.kind == DATA and (
             frame.dst_addr == modem.address or frame.dst_addr == BROADCAST
         ):
-            lost = stats.lost
-            lost[cause] = lost.get(cause, 0) + 1
+            stats.lost[cause] = stats.lost.get(cause, 0) + 1  # (no_pose, closed, band, modulation… beside the usual four)
         if self._write is not None:
             self._line(t, "err", modem, frame, cause)
 
