@@ -142,3 +142,14 @@ def test_cyclone_talks_on_loopback_unless_interfaces_are_named():
     assert "<MaxSampleSize>1048576B</MaxSampleSize>" in named
     # (the scene refuses such names; the XML is escaped all the same)
     assert '<NetworkInterface name="a&lt;&quot;\'b"/>' in config_xml(("a<\"'b",))
+
+
+def test_the_example_of_docs_ros2_md_loads():
+    import re
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parent.parent / "docs" / "ros2.md").read_text()
+    example = re.search(r"```yaml\n(.*?)```", page, re.S).group(1)
+    loaded = load_scene_text(BASE + example)
+    assert loaded.ros2.domain_id is None and loaded.ros2.poses.rate_hz == 10 and loaded.links["rov"].gli == ("ros2",)
+    assert dict(loaded.vehicles["bluerov"].pose.params[0][1])["frame_id"] == "odom"
