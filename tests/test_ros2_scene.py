@@ -114,7 +114,7 @@ def test_orientations_cross_between_enu_flu_and_ned_frd():
     north = (0.0, 0.0, math.sin(math.pi / 4), math.cos(math.pi / 4))
     assert frames.orientation_to_scene(east, "enu") == pytest.approx((0.0, 0.0, math.pi / 2))
     assert frames.orientation_to_scene(north, "enu") == pytest.approx((0.0, 0.0, 0.0), abs=1e-12)
-    # nose up 10° in FLU (pitch -10° about y-left… i.e. REP-103's negative pitch) is +10° in FRD
+    # nose up 10°: a pitch of -10° about FLU's y (left), +10° about FRD's y (right); facing east
     nose_up = frames.quaternion_from_rpy((0.0, -math.radians(10), 0.0))
     roll, pitch, yaw = frames.orientation_to_scene(nose_up, "enu")
     assert (roll, pitch) == pytest.approx((0.0, math.radians(10))) and yaw == pytest.approx(math.pi / 2)
