@@ -196,6 +196,12 @@ def _link_note(link: dict) -> str:
     return ", ".join(f"{cause} {n}" for cause, n in sorted(causes.items()))
 
 
+def _since(link: dict) -> str:
+    """Since when (model time, as ``t`` above) the link has had its backend; counts are over the run."""
+    since = link.get("since_s")
+    return "-" if since is None else f"{since:.1f}"
+
+
 def _print_network(answer: dict, as_json: bool) -> None:
     """``hilgate status --network``: every host's daemon, its links and how late the others' frames come."""
     import json
@@ -241,9 +247,10 @@ def _print_status(status: dict, as_json: bool) -> None:
     from .report.tables import _render
 
     print(f"t = {status.get('time', 0):.3f} s")
-    print(_render(["link", "backend", "state", "tx", "rx", "drops", "unread", "fifo B", "note"],
-                  [[l["id"], l["backend"], l["state"], str(l["tx_packets"]), str(l["rx_packets"]), str(l["drops"]),
-                    str(l.get("unread", 0)), str(l["fifo_bytes"]), _link_note(l)] for l in status["links"]]))
+    print(_render(["link", "backend", "state", "since s", "tx", "rx", "drops", "unread", "fifo B", "note"],
+                  [[l["id"], l["backend"], l["state"], _since(l), str(l["tx_packets"]), str(l["rx_packets"]),
+                    str(l["drops"]), str(l.get("unread", 0)), str(l["fifo_bytes"]), _link_note(l)]
+                   for l in status["links"]], left=3))
     print()
     print(_render(["vehicle", "source", "x", "y", "z", "age s"],
                   [[v["name"], v["source"], *(f"{c:.3f}" for c in (v["position"] or [float("nan")] * 3)),
@@ -502,7 +509,8 @@ def cmd_emulate(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from .report.figures import ReportError, pick_run, report, trace_runs
+    from .report.figures import pick_run, report, trace_runs
+    from .report.tracefile import TraceError
 
     try:
         runs = trace_runs(args.trace)
@@ -513,8 +521,9 @@ def cmd_report(args: argparse.Namespace) -> int:
                   f"{run.start} (scene {run.scene}); choose another with --run ID or --run N", file=sys.stderr)
         formats = tuple(dict.fromkeys(["png", *(args.formats or [])]))
         written = report(args.trace, args.summaries, args.out, args.vehicles, args.csv, args.title,
-                         tuple(args.window) if args.window else None, run if len(runs) > 1 else None, formats)
-    except ReportError as exc:
+                         tuple(args.window) if args.window else None, run if len(runs) > 1 else None, formats,
+                         args.width)
+    except TraceError as exc:  # (ReportError is one): a line that names the file, the line and what is wrong
         print(f"hilgate: {exc}", file=sys.stderr)
         return 1
     print(f"{len(written)} files in {args.out}: open {written[-1]}")
@@ -522,16 +531,20 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_fit(args: argparse.Namespace) -> int:
-    from .fitcmd import FitError, plot_fit, print_fit, run_fit
+    from .fitcmd import plot_fit, print_fit, run_fit
+    from .report.tracefile import TraceError
+
+    import numpy as np
 
     try:
-        result = run_fit(args.trace, args.scene, args.model, args.link, args.simulated, args.run, args.pose_gap,
-                         args.window, tuple(args.overrides))
-        print_fit(result, sys.stdout, args.bins)
+        with np.errstate(all="ignore"):  # degenerate data give infinite intervals, printed as such
+            result = run_fit(args.trace, args.scene, args.model, args.link, args.simulated, args.run, args.pose_gap,
+                             args.window, tuple(args.overrides))
+            print_fit(result, sys.stdout, args.bins)
         if args.plot:
             plot_fit(result, args.plot, args.bins)
             print(f"\nplot: {args.plot}")
-    except FitError as exc:
+    except TraceError as exc:  # (FitError is one)
         print(f"hilgate: fit: {exc}", file=sys.stderr)
         return EXIT_SCENE
     return 0
@@ -736,6 +749,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--window", type=float, nargs=2, metavar=("START", "END"), help="only these seconds of the trace")
     p.add_argument("--format", dest="formats", action="append", choices=["svg", "pdf"],
                    help="also write each figure as SVG or PDF (vector, for a paper; repeatable)")
+    p.add_argument("--width", type=float, metavar="INCHES",
+                   help="draw the figures this wide, e.g. 3.5 for one column of a paper (default 9, the bars of "
+                        "many flows wider; text keeps its size, tick labels are thinned where they would overlap)")
     p.add_argument("--run", metavar="ID|N", help="a trace the daemon appended to across restarts holds several runs: "
                                                  "this one (its id, or 1 for the first, -1 the last; default the last)")
 

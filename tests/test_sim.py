@@ -92,7 +92,13 @@ def test_summary_has_exactly_the_design_fields():
         "from", "to", "offered", "fifo_drops", "tx_packets", "tx_bytes", "rx_packets", "rx_bytes", "lost",
         "throughput_Bps", "efficiency", "delay_mean_s", "delay_p50_s", "delay_p95_s", "jitter_s"]
     assert list(summary["flows"][0]["lost"]) == ["prop", "col", "mult", "range"]
-    assert list(summary["links"][0]) == ["id", "tx_packets", "rx_packets", "fifo_drops", "fifo_peak_bytes"]
+    # DESIGN.md's link fields first; then (issue 24) the backend and one segment per backend period, the
+    # same as the daemon's summary writes (here one simulated period over the whole run)
+    link = summary["links"][0]
+    assert list(link) == ["id", "tx_packets", "rx_packets", "fifo_drops", "fifo_peak_bytes", "backend", "segments"]
+    assert link["backend"] == "sim" and link["segments"] == [
+        {"backend": "sim", "start_s": 0.0, "end_s": 10, "tx_packets": link["tx_packets"],
+         "rx_packets": link["rx_packets"], "drops": link["fifo_drops"], "fifo_peak_bytes": link["fifo_peak_bytes"]}]
     assert summary["scene"] == "pair" and summary["seed"] == 5 and summary["sim_time_s"] == 10
 
 

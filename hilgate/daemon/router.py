@@ -17,6 +17,7 @@ from collections import Counter
 from typing import Any, Callable
 
 from .access import LinkLock
+from .accounts import Counters, LinkAccount
 from ..core.backend import AppFrame, Backend, PhyEvent
 from ..core.endpoint import ABSENT, KEPT, TAKEN, Door, Endpoint
 from ..core.packets import Decoded, PacketClass, packet_class
@@ -26,7 +27,8 @@ from ..models.frame import BROADCAST
 from ..models.link_budget import Reception, SimpleLinkBudget, reception
 from ..models.usbl import UsblFix, fix as usbl_fix
 from ..scene import LinkSpec, Scene
-from ..scene.diff import diff
+from ..scene.diff import SceneDiff, diff
+from ..scene.view import link_changes, link_view as scene_view_link, scene_view, view_hash
 from ..sim.backend import SimBackend
 from ..sim.recorder import Recorder
 from ..sim.world import World
@@ -40,8 +42,9 @@ class RoutedLink:
     """One DCComms id: its backend and the endpoints in front of it.  To its endpoints it is a
     :class:`~hilgate.core.endpoint.LinkPort`; it never imports their classes."""
 
-    def __init__(self, spec: LinkSpec, router: "Router"):
+    def __init__(self, spec: LinkSpec, router: "Router", account: LinkAccount | None = None):
         self.router = router
+        self.account = account if account is not None else LinkAccount(spec.id)
         self.spec = spec
         self.id = spec.id
         self.packet: PacketClass = packet_class(spec.packet)
@@ -63,10 +66,17 @@ class RoutedLink:
         for door in doors:
             self.doors.append((door, door.open(self)))  # (a handle of None: nothing to open yet)
 
-    def set_backend(self, backend: Backend) -> None:
+    def set_backend(self, backend: Backend, kind: str | None = None) -> None:
+        """Put ``backend`` (of ``kind``, the scene's name for it) behind the endpoints: the old one is
+        closed first, and its period of the link's account ends with what it counted."""
+        now = self.router.scheduler.now()
+        first = self.backend is None
         if self.backend is not None and self.backend is not backend:
             self.backend.close()
+            self.account.close(now)
         self.backend = backend
+        if self.account.current is None:
+            self.account.open(now, kind or self.spec.backend, self.counters, from_zero=first)
         backend.on_receive = self.deliver
         backend.on_idle = self.state_changed
         backend.on_state = lambda state: self.state_changed()
@@ -335,20 +345,32 @@ class RoutedLink:
 
     # -- operations ------------------------------------------------------------------------------
 
+    def counters(self) -> Counters:
+        """What the backend and the GLI in front of it counted so far (read at the edges of a period
+        of the link's account, and by ``hilgate status``; never per frame)."""
+        backend = self.backend
+        figures = backend.status() if backend is not None else {}
+        return {"tx_packets": figures.get("tx_packets", 0), "rx_packets": figures.get("rx_packets", 0),
+                "drops": figures.get("drops", 0), "unread_kept": self.unread_kept,
+                "drop_causes": {cause: n for cause, n in self.gli_drops.items() if n},
+                "fifo_peak_bytes": figures.get("fifo_peak_bytes")}
+
     def status(self) -> dict[str, Any]:
         backend = self.backend
-        figures = backend.status() if backend else {"tx_packets": 0, "rx_packets": 0, "drops": 0, "fifo_bytes": 0}
-        causes = {cause: n for cause, n in self.gli_drops.items() if n}
+        figures = backend.status() if backend else {"fifo_bytes": 0}
+        totals = self.account.totals()  # over every backend the link has had in this run
+        causes = totals["drop_causes"]
+        current = self.account.current
         status = {
             "id": self.id,
             "backend": self.spec.backend,
             "state": backend.state if backend else "down",
-            "tx_packets": figures["tx_packets"],
-            "rx_packets": figures["rx_packets"],
+            "tx_packets": totals["tx_packets"],
+            "rx_packets": totals["rx_packets"],
             # what an application lost; a frame no application was there to read is counted apart
-            "drops": figures["drops"] + sum(n for cause, n in causes.items() if cause not in UNREAD_CAUSES),
+            "drops": totals["drops"] + sum(n for cause, n in causes.items() if cause not in UNREAD_CAUSES),
             "fifo_bytes": figures["fifo_bytes"],
-            "unread": causes.get("no_reader", 0) + self.unread_kept,
+            "unread": causes.get("no_reader", 0) + totals["unread_kept"],
             "drop_causes": causes,
             "clients": self.clients,
             # what the link's applications are told (READY/BUSY): false while a frame is still in the
@@ -358,6 +380,9 @@ class RoutedLink:
             # packet class carries no address on air and no MAC needs one (addressing: auto)
             "app_dst": ("everyone in range" if isinstance(backend, SimBackend) and backend.everyone_in_range
                         else "as addressed"),
+            # since when the link has had this backend: model time, and the wall clock (UTC)
+            "since_s": round(current.start, 6) if current is not None else None,
+            "since": current.since if current is not None else None,
         }
         if figures.get("reason"):
             status["reason"] = figures["reason"]
@@ -374,6 +399,7 @@ class RoutedLink:
         self.endpoints = []
         if self.backend is not None:
             self.backend.close()
+        self.account.close(self.router.scheduler.now())
         if self.lock is not None:
             self.lock.release()
             self.lock = None
@@ -392,6 +418,7 @@ class Router:
         self.doors: list[Door] = list(doors or [])
         self.max_link_clients = max_link_clients
         self.links: dict[str, RoutedLink] = {}
+        self.accounts: dict[str, LinkAccount] = {}  # every link this daemon served in the run, even removed ones
         self.world: World | None = None
         self.scene: Scene | None = None
         self._names: dict[tuple[str, int], str] = {}
@@ -425,8 +452,48 @@ class Router:
         return open_backend(spec, self.scheduler, self.recorder.event)
 
     def apply(self, scene: Scene) -> None:
-        """Build the first scene, or change the running one into ``scene`` (already validated)."""
-        changes = diff(self.scene, scene)
+        """Build the first scene, or change the running one into ``scene`` (already validated).  A
+        reload is traced once applied (a ``reload`` line: :meth:`_trace_reload`), even in part."""
+        before = self.scene
+        changes = diff(before, scene)
+        if before is None:
+            self._apply(scene, changes)
+            return
+        try:
+            self._apply(scene, changes)
+        except BaseException:
+            self._trace_reload(before, scene, changes, partial=True)
+            raise
+        self._trace_reload(before, scene, changes, partial=False)
+
+    def _trace_reload(self, before: Scene, after: Scene, changes: SceneDiff, partial: bool) -> None:
+        """The ``reload`` line: when, the new scene's hash and the scene itself (as the ``run`` line has
+        it, so that ``hilgate fit`` and ``report`` know what each link was from here on), and per link
+        what changed (backend before/after, parameters).  Events before it belong to the old scene."""
+        view = scene_view(after)
+        changed = {}
+        for link_id in changes.links:
+            old = before.links.get(link_id)
+            changed[link_id] = link_changes(None if old is None else scene_view_link(old), view["links"].get(link_id))
+        line: dict[str, Any] = {"t": round(self.scheduler.now(), 9), "ev": "reload", "scene": after.name,
+                                "scene_hash": view_hash(view), "changes": changed}
+        if changes.vehicles or changes.vehicles_removed:
+            line["vehicles"] = sorted(changes.vehicles | changes.vehicles_removed)
+        if changes.channels_changed:
+            line["channels_changed"] = True
+        if changes.flows_changed:
+            line["flows_changed"] = True
+        if partial:
+            line["partial"] = True  # applying failed half-way: the daemon's log says why
+        line["scene_view"] = view
+        self.recorder.event(line)
+
+    def summary(self) -> list[dict[str, Any]]:
+        """Every link this daemon served during the run, with its totals and its backend periods."""
+        now = self.scheduler.now()
+        return [account.summary(now) for account in self.accounts.values()]
+
+    def _apply(self, scene: Scene, changes: SceneDiff) -> None:
         self._names = {(l.params.rx_channel, l.params.address): l.id for l in scene.links.values()}
         self._names.update({(l.params.rx_channel, BROADCAST): "*" for l in scene.links.values()})
         for link in self.links.values():  # links an AT!AL readdressed keep their address if unchanged
@@ -458,7 +525,7 @@ class Router:
             link.update(spec, change.endpoints_changed)
             if change.backend_changed:
                 log.info("link %s: backend %s -> %s", spec.id, change.before.backend, spec.backend)
-                link.set_backend(self.backend_factories[spec.backend](spec))
+                link.set_backend(self.backend_factories[spec.backend](spec), spec.backend)
             elif isinstance(link.backend, SimBackend):
                 link.backend.rebind(self.world.modems[spec.id])
                 link.backend.everyone_in_range = spec.everyone_in_range
@@ -471,7 +538,8 @@ class Router:
 
     def _add(self, spec: LinkSpec, announce: bool) -> None:
         lock = LinkLock(spec.id)  # one daemon per link id on this host, or refused here
-        link = RoutedLink(spec, self)
+        account = self.accounts.get(spec.id) or LinkAccount(spec.id)  # a link re-added goes on counting
+        link = RoutedLink(spec, self, account)
         link.lock = lock
         try:
             link.open_doors(self.doors)
@@ -479,7 +547,8 @@ class Router:
             link.close()
             raise
         self.links[spec.id] = link
-        link.set_backend(self.backend_factories[spec.backend](spec))
+        self.accounts[spec.id] = account
+        link.set_backend(self.backend_factories[spec.backend](spec), spec.backend)
         if announce:
             log.info("link %s added (%s)", spec.id, spec.backend)
 

@@ -31,6 +31,7 @@ from ..gli.zenoh_auth import CredentialError, Identity, load_identity
 from ..scene import Scene, SceneError, load_scene
 from ..scene.hosts import HOST_NAME, ZenohSpec
 from ..scene.links import require_narrow_addresses
+from ..scene.view import scene_view, view_hash
 from ..scene.worker import SceneJob, request_for
 from ..core.notify import notify, watchdog_interval
 from ..core.outputs import OutputError, open_output, output_problem
@@ -115,6 +116,7 @@ class Daemon:
         self.scene: Scene | None = None
         self.trace = None
         self.stopping = False
+        self.started = time.monotonic()
         self._reload_job: SceneJob | None = None
         self._reload_again = False
         self._reload_waiting: list[Callable[[bool, str], Any]] = []
@@ -143,13 +145,15 @@ class Daemon:
         self.group = group
         self.trace = (open_output(trace_path, "trace", append=True, group=group, buffering=1 << 16)
                       if trace_path else None)
+        self.started = time.monotonic()  # the summary's wall_time_s (before model time 0)
         self.scheduler = scheduler = RealtimeScheduler(self.speed)
         self.recorder = Recorder(self.trace)
         self.run_id = uuid.uuid4().hex[:12]
+        view = scene_view(scene)  # the scene as it is now: the trace must not depend on the file later
         self.recorder.event({"t": 0.0, "ev": "run", "run": self.run_id,
                              "start": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="milliseconds"),
                              "scene": scene.name, "path": os.path.abspath(self.scene_path), "version": __version__,
-                             "speed": self.speed})
+                             "speed": self.speed, "scene_hash": view_hash(view), "scene_view": view})
         self.router = Router(scheduler, self.recorder, max_link_clients=self.max_link_clients, host=host)
         self.clients = ClientLimits(self.max_clients, self.max_link_clients)
         self.router.doors = [
@@ -387,8 +391,8 @@ class Daemon:
             sys.stderr.write("\n")
         router = getattr(self, "router", None)
         if self.summary_path and router is not None and router.world is not None:
-            summary = self.recorder.summary(self.scene, router.world.seed, self.scheduler.now(), 0.0,
-                                            router.world.modems.values())
+            summary = self.recorder.summary(self.scene, router.world.seed, self.scheduler.now(),
+                                            time.monotonic() - self.started, links=router.summary())
             try:
                 write_summary(summary, self.summary_path, getattr(self, "group", None))
             except OSError as exc:

@@ -102,7 +102,7 @@ class SimBackend(Backend):
     def status(self) -> dict[str, Any]:
         stats = self.modem.stats
         return {"tx_packets": stats.tx_packets, "rx_packets": stats.rx_packets, "drops": stats.fifo_drops,
-                "fifo_bytes": self.modem.queued_bytes, "lost": dict(stats.lost)}
+                "fifo_bytes": self.modem.queued_bytes, "fifo_peak_bytes": stats.fifo_peak_bytes, "lost": dict(stats.lost)}
 
     def close(self) -> None:
         self.modem.on_deliver = None
