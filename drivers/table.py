@@ -33,7 +33,7 @@ from typing import Any, Callable, Iterator
 
 __all__ = [
     "Option", "Driver", "DRIVERS", "EvologicsOptions", "S100Options", "S100EmulatorOptions", "option", "from_link", "scene_options", "emulator_options",
-    "driver_names", "emulated_protocols", "open_backend", "emulator_for",
+    "M64Options", "M64EmulatorOptions", "MicromodemOptions", "driver_names", "emulated_protocols", "open_backend", "emulator_for",
 ]
 
 KINDS = ("port", "integer", "number", "boolean", "choice")
@@ -120,6 +120,46 @@ class S100EmulatorOptions:
 
 
 @dataclass(frozen=True)
+class M64Options:
+    """``backend: m64`` (:mod:`hilgate.drivers.m64`): a Water Linked Modem-M64.  A pair talks when one is
+    role ``a`` and the other ``b`` on the same ``modem_channel`` (1-7); frames cross as ``WlUDPSocket`` datagrams in
+    8-byte packets, about one a second each way."""
+
+    port: str = option(Option("port", hint="a device such as /dev/ttyUSB0"))
+    role: str = option(Option("choice", choices=("a", "b"), hint="a or b: one modem of a pair is a, the other b"))
+    modem_channel: int = option(Option("integer", 1, 7, hint="the pair's channel, 1 to 7 (Water Linked recommends 2 or 3)"))
+    baud: int = option(Option("integer", 50, 4_000_000), 115200)
+    queued_packets: int = option(Option("integer", 1, 1000), 2)  # kept in the modem's queue (as WlUDPSocket)
+    poll_s: float = option(Option("number", above=0), 0.2)  # how often the queue is asked (wcl), as WlUDPSocket
+    diagnostic_s: float = option(Option("number", minimum=0), 5.0)  # wcd into the trace (0: never)
+    command_timeout_s: float = option(Option("number", above=0), 1.0)
+    queue_frames: int = option(Option("integer", 0, 100_000), 50)
+
+
+@dataclass(frozen=True)
+class M64EmulatorOptions:
+    """``emulate: {protocol: m64}`` (:class:`hilgate.drivers.m64_emulator.M64Emulator`): the role and
+    channel the modem has at power-on (a host's ``wcs`` changes them)."""
+
+    role: str = option(Option("choice", choices=("a", "b")), "a")
+    channel: int = option(Option("integer", 1, 7), 1)
+
+
+@dataclass(frozen=True)
+class MicromodemOptions:
+    """``backend: micromodem`` (:mod:`hilgate.drivers.micromodem`): a WHOI Micro-Modem; each frame is one
+    packet of ``rate`` (its frames sized as the rate allows), with the modem's acknowledgement if ``ack``."""
+
+    port: str = option(Option("port", hint="a device such as /dev/ttyUSB0"))
+    baud: int = option(Option("integer", 50, 4_000_000), 19200)
+    rate: int = option(Option("integer", 0, 5), 1)
+    ack: bool = option(BOOLEAN, False)
+    command_timeout_s: float = option(Option("number", above=0), 2.0)
+    cycle_timeout_s: float = option(Option("number", above=0), 60.0)
+    queue_frames: int = option(Option("integer", 0, 100_000), 50)
+
+
+@dataclass(frozen=True)
 class Driver:
     """One row of the table (see the module's docstring)."""
 
@@ -137,6 +177,10 @@ DRIVERS: dict[str, Driver] = {driver.name: driver for driver in (
            "hilgate.drivers.emulators:EvologicsEmulator", emulator_tcp=True),
     Driver("s100", "S100", S100Options, "hilgate.drivers.s100:S100Backend",
            "hilgate.drivers.emulators:S100Emulator", emulator_options=S100EmulatorOptions),
+    Driver("m64", "Modem-M64", M64Options, "hilgate.drivers.m64:M64Backend",
+           "hilgate.drivers.m64_emulator:M64Emulator", emulator_options=M64EmulatorOptions),
+    Driver("micromodem", "Micro-Modem", MicromodemOptions, "hilgate.drivers.micromodem:MicromodemBackend",
+           "hilgate.drivers.micromodem_emulator:MicromodemEmulator"),
 )}
 
 

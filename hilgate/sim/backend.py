@@ -45,6 +45,9 @@ class SimBackend(Backend):
     def set_address(self, address: int) -> None:
         self.modem.set_address(address)
 
+    def set_band(self, band_khz: tuple[float, float]) -> None:
+        self.modem.set_band(band_khz)
+
     def withdraw(self, frames: list[AppFrame], cause: str) -> int:
         """Take these application frames out of the modem's FIFO if they are still queued."""
         wanted = {id(frame) for frame in frames}
