@@ -111,6 +111,8 @@ class RoutedLink:
         if hasattr(backend, "set_band"):
             backend.set_band(band_khz)
             self.retuned = (float(band_khz[0]), float(band_khz[1]))
+            self.router.recorder.event({"t": round(self.router.scheduler.now(), 9), "ev": "band", "link": self.id,
+                                        "band_khz": list(self.retuned)})
 
     def withdraw(self, frames: list[AppFrame], cause: str) -> int:
         """Take these frames back from the backend's queue if they are still there (an emulated modem's
