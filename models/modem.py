@@ -317,7 +317,7 @@ class SimModem:
         if self.closed:
             return
         t = self.clock.now()
-        duration = frame.size * 8.0 / self.bitrate
+        duration = frame.size * 8.0 / self.bitrate if frame.airtime is None else frame.airtime
         self.stats.tx_packets += 1
         self.observer.tx(t, self, frame)
         self.radio.transmit(frame, t, duration)
