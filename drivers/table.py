@@ -156,6 +156,7 @@ class MicromodemOptions:
     ack: bool = option(BOOLEAN, False)
     command_timeout_s: float = option(Option("number", above=0), 2.0)
     cycle_timeout_s: float = option(Option("number", above=0), 60.0)
+    ack_timeout_s: float = option(Option("number", above=0), 10.0)
     queue_frames: int = option(Option("integer", 0, 100_000), 50)
 
 

@@ -168,3 +168,80 @@ def test_a_host_that_gives_no_data_gets_a_data_timeout_and_the_cycle_ends(tmp_pa
         port.close()
     finally:
         daemon.close()
+
+
+# -- hilgate's driver against the emulator -----------------------------------------------------------------
+
+
+def driver_scene(tmp_path, da, db, ea, eb, rate=1, ack=True, packet="vl2b"):
+    pa, pb = tmp_path / "a", tmp_path / "b"
+    return f"""\
+channels: {{ac: {{speed_mps: 1500}}}}
+vehicles:
+  va: {{pose: {{static: [0, 0, 0]}}}}
+  vb: {{pose: {{static: [150, 0, 0]}}}}
+links:
+  {da}: {{vehicle: va, backend: micromodem, port: {pa}, address: 1, rate: {rate}, ack: {str(ack).lower()}, packet: {packet},
+         gli: [socket]}}
+  {db}: {{vehicle: vb, backend: micromodem, port: {pb}, address: 2, rate: {rate}, packet: {packet}, gli: [socket]}}
+  {ea}: {{vehicle: va, model: micromodem, address: 1, gli: [socket], emulate: {{protocol: micromodem, pty: {pa}}}}}
+  {eb}: {{vehicle: vb, model: micromodem, address: 2, gli: [socket], emulate: {{protocol: micromodem, pty: {pb}}}}}
+"""
+
+
+def wait_up(daemon, links, timeout=60):
+    deadline = time.monotonic() + timeout
+    while True:
+        states = {l["id"]: l["state"] for l in daemon.status()["links"]}
+        if all(states[l] == "up" for l in links):
+            return
+        assert time.monotonic() < deadline, f"links not up: {states}\n{daemon.output()}"
+        time.sleep(0.05)
+
+
+def test_hilgate_drivers_carry_frames_application_to_application_through_emulated_micromodems(tmp_path):
+    da, db, ea, eb = unique("da"), unique("db"), unique("ea"), unique("eb")
+    daemon = Daemon(tmp_path, driver_scene(tmp_path, da, db, ea, eb), [da, db, ea, eb], "--speed", str(SPEED))
+    try:
+        daemon.wait_for("READY=1")
+        wait_up(daemon, [da, db])
+        sent = [b"short", b"x" * 150]  # one frame; three frames of rate 1 (155 bytes of vl2b on air)
+        with Link.open(da, runtime_dir=daemon.runtime) as la, Link.open(db, runtime_dir=daemon.runtime) as lb:
+            for payload in sent:
+                la.send(payload, dst=2)
+                message = lb.recv(timeout=60)
+                assert message is not None and message.data == payload and message.src == 1
+            lb.send(b"back", dst=1)
+            message = la.recv(timeout=60)
+            assert message is not None and message.data == b"back" and message.src == 2
+            la.send(b"y" * 200, dst=2)  # 205 bytes on air: more than rate 1's 3 x 64
+            with pytest.raises(Exception, match="do not fit a rate-1 packet of the Micro-Modem"):
+                la.recv(timeout=30)
+        deadline = time.monotonic() + 60
+        while sum(e["ev"] == "delivered" for e in _events(daemon) if e.get("link") == da) < 2:
+            assert time.monotonic() < deadline, "acknowledgements never traced"
+            time.sleep(0.05)
+        daemon.stop()
+        events = daemon.trace_events()
+        assert [(e["size"], e["frames"]) for e in events if e.get("link") == da and e["ev"] == "tx"] == [(10, 1), (155, 3)]
+        assert [e["size"] for e in events if e.get("link") == db and e["ev"] == "rx"] == [10, 155]
+        stats = [e for e in events if e.get("link") == db and e["ev"] == "modem_stats"]
+        assert [(e["mode"], e["rate"], e["frames"], e["bad_frames"]) for e in stats] == [(0, 1, 1, 0), (0, 1, 3, 0)]
+        # on the simulated channel each packet took its rate's air time for whole frames plus 0.1 s, exactly
+        tx = {e["pkt"]: e["t"] for e in events if e.get("link") == ea and e["ev"] == "tx" and "kind" not in e}
+        rx = [e for e in events if e.get("link") == eb and e["ev"] == "rx" and e["pkt"] in tx]
+        assert [round(e["t"] - tx[e["pkt"]], 9) for e in rx] == [round(0.3 + n * 64 * 8 / 525 + 0.1, 9) for n in (1, 3)]
+        losses = [(e["link"], e["cause"]) for e in events if e["ev"] in ("drop", "err") and e.get("link") in (da, db)]
+        assert losses == [(da, "size")]  # the 200-byte frame, refused when the application sent it
+    finally:
+        daemon.close()
+
+
+def _events(daemon):
+    events = []
+    for line in daemon.trace.read_text().splitlines():
+        try:
+            events.append(json.loads(line))
+        except ValueError:
+            pass
+    return events
