@@ -1,11 +1,14 @@
 # The README's two set-up commands: `make run` and `make test`.
 # Each creates .venv in the repository when it is missing and installs the project into it.
+# `make run ARGS="--runtime-dir /tmp/mine --tcp 4280"` and `make sim ARGS="--until 600 --seed 3"` pass
+# options to `hilgate run` / `hilgate sim`; SCENE=FILE runs another scene.
 
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 SCENE  ?= scenes/demo.yaml
 FUZZ   ?= 1
+ARGS   ?=
 
 # `sudo make install` / `sudo make uninstall`: hilgate as a systemd service (systemd/install.sh;
 # docs/operations.md). DESTDIR=DIR writes every file under DIR instead and skips the root-only steps (the
@@ -22,22 +25,27 @@ PURGE        ?=
 .PHONY: run test sim bench fuzz paper install uninstall clean
 
 $(BIN)/python:
+	@echo "make: creating $(VENV), a Python environment of this checkout's own"
 	$(PYTHON) -m venv $(VENV)
 
+# pip says what it fetches and installs (the first run takes about a minute); later runs skip it.
 $(VENV)/.installed: pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e .
+	@echo "make: installing hilgate and its dependencies into $(VENV) (the first time only; about a minute)"
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check --upgrade pip
+	$(BIN)/python -m pip install --disable-pip-version-check -e .
+	@echo "make: installed; the commands are $(BIN)/hilgate, or run 'source $(BIN)/activate' once"
 	touch $@
 
 $(VENV)/.installed-test: pyproject.toml $(VENV)/.installed
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	@echo "make: installing the test tools into $(VENV)"
+	$(BIN)/python -m pip install --disable-pip-version-check -e '.[test]'
 	touch $@
 
 run: $(VENV)/.installed
-	$(BIN)/hilgate run $(SCENE)
+	$(BIN)/hilgate run $(SCENE) $(ARGS)
 
 sim: $(VENV)/.installed
-	$(BIN)/hilgate sim $(SCENE)
+	$(BIN)/hilgate sim $(SCENE) $(ARGS)
 
 test: $(VENV)/.installed-test
 	$(BIN)/python -m pytest -q
@@ -47,10 +55,16 @@ fuzz: $(VENV)/.installed-test
 	HILGATE_FUZZ=$(FUZZ) $(BIN)/python -m pytest -q -k fuzz
 
 # The paper comparison (docs/paper-comparison.md, docs/paper-exp2.md) and the formation figure
-# (docs/figures/exp3-formation.png, from the virtual-time run): virtual time only, about a minute.
+# (docs/figures/exp3-formation.png, from the virtual-time run): virtual time only. 42 s on this project's
+# 2-core machine while other test runs shared it (0.8 + 36 + 5 s); longer when every core is busy.
+PAPER_TIME := under a minute of CPU time (longer when the cores are busy)
 paper: $(VENV)/.installed-test
+	@echo "make paper: three steps, $(PAPER_TIME)"
+	@echo "make paper: 1/3 docs/paper-exp2.md (the second experiment as the paper ran it)"
 	$(BIN)/python docs/paper_exp2.py > /dev/null
+	@echo "make paper: 2/3 docs/paper-comparison.md (every finding of the paper; it counts its runs)"
 	$(BIN)/python docs/paper_comparison.py > /dev/null
+	@echo "make paper: 3/3 docs/figures/exp3-formation.png (the formation figure)"
 	$(BIN)/python docs/formation_figure.py
 
 install uninstall:

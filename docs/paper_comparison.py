@@ -4,7 +4,7 @@ the command that gives hilgate's, and, where they differ, the experiments that f
 docs/paper-comparison.md (docs/paper.md links it).  Nothing in it is typed by hand; run it again after a
 change to the model:
 
-    python docs/paper_comparison.py          # about a minute (some 170 virtual-time runs); `make paper`
+    python docs/paper_comparison.py          # some 170 virtual-time runs, under a minute; `make paper`
 
 Variants are the shipped scenes with ``--set`` overrides, or (for what ``--set`` cannot reach, the
 flows, which are a list) a textual edit of the scene named in ``VARIANTS``; each is run for several
@@ -64,7 +64,19 @@ class Variant:
         out = io.StringIO() if trace else None
         summary = Simulation(load_scene_text(text, path, overrides), trace=out).run()
         events = [json.loads(line) for line in out.getvalue().splitlines()] if trace else []
+        _progress()
         return summary, events
+
+
+_runs = 0
+
+
+def _progress(every: int = 25) -> None:
+    """A line on stderr every ``every`` runs, so that ``make paper`` is not silent for its minute."""
+    global _runs
+    _runs += 1
+    if _runs % every == 0:
+        print(f"paper_comparison.py: {_runs} virtual-time runs done", file=sys.stderr, flush=True)
 
 
 PERIODIC = ("poisson: true", "poisson: false")

@@ -3,7 +3,7 @@
 findings beside hilgate's: writes docs/paper-exp2.md (docs/paper.md links it).  Nothing in it is typed by
 hand; run it again after a change to the model:
 
-    python docs/paper_exp2.py            # about ten seconds
+    python docs/paper_exp2.py            # about a second (three runs of 600 simulated seconds)
 """
 
 from __future__ import annotations

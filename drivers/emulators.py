@@ -38,18 +38,17 @@ from .evologics_codec import BadCommand, Command, Data, ModemCodec
 from .evologics_settings import Firmware, Settings, decimal
 from .s100_codec import (CRLF, IDLE_S, PIECE, TERMINATOR, FrameHunter, InputBuffer, Notice, SerialLine, Skipped,
                          wire_class)
-from .table import emulator_for
+from .table import ModemLimits, emulator_for, limits_for
 
 log = logging.getLogger(__name__)
 
-IM_MAX = 64
-BURST_MAX = 1024
 FOREVER = 1 << 30  # !RI255: retry for ever
 BATTERY_V = 24.0  # AT?BV: no battery is modelled; a charged 24 V pack
 MAX_TIME_S = 2 ** 32 - 1  # AT!UT: the modem's system time is a 32-bit count of seconds
 MAX_TCP_CLIENTS = 8  # an emulated modem's TCP port: hosts at once (a real S2C serves a few on its port)
 TCP_OUTPUT_CAP = 256 * 1024  # answers kept for a TCP host that does not read (beyond: not sent)
 LINE_AHEAD_S = 2.0  # the emulated S100 reads at most this far ahead of its serial line (then the writer waits)
+SEND_MODES = {"*SENDIM": "im", "*SENDIMS": "ims", "*SENDPBM": "pbm", "*SEND": "burst"}
 
 
 class PtyHost:
@@ -240,6 +239,11 @@ class EvologicsEmulator:
     def _on_connect(self, host: Any) -> None:
         self.codecs[host] = ModemCodec()
 
+    @property
+    def limits(self) -> ModemLimits:
+        """What this modem accepts: the link's ``limits:`` (read anew, a reload may change them)."""
+        return limits_for("evologics", self.port.limits)
+
     def close(self) -> None:
         self.hosts.close()
 
@@ -260,8 +264,9 @@ class EvologicsEmulator:
         """Burst data in data mode goes to ``AR``; with ``AR`` 0 a modem cannot send it (dropped, counted
         in ``AT?ZD`` and traced), nor beyond the transmit pool (``AT?ZO``)."""
         remote = self.settings["AR"]
-        for start in range(0, len(payload), BURST_MAX):
-            piece = payload[start:start + BURST_MAX]
+        most = self.limits.most("burst") or len(payload) or 1
+        for start in range(0, len(payload), most):
+            piece = payload[start:start + most]
             if remote == 0:
                 self.dropped += 1
                 self.port.lost("no_remote_address", len(piece), src="app")
@@ -450,17 +455,16 @@ class EvologicsEmulator:
         if not 0 <= dst <= 255:
             reply("ERROR WRONG DESTINATION ADDRESS")
             return
+        mode = SEND_MODES[command.name]
+        most = self.limits.most(mode)
+        if most is not None and len(payload) > most:  # the link's limits: (its preset's), else the S2C's
+            reply("ERROR OUT OF RANGE")
+            return
         if command.name == "*SEND":
-            if len(payload) > BURST_MAX:
-                reply("ERROR OUT OF RANGE")
-                return
             if self._full(len(payload), reply):
                 return
             reply("OK")
             self._send(payload, dst, "burst", True)
-            return
-        if len(payload) > IM_MAX:
-            reply("ERROR OUT OF RANGE")
             return
         ack = command.name == "*SENDIM" and fields[2] == "ack"
         if command.name == "*SENDIM" and fields[2] not in ("ack", "noack", "force"):
@@ -489,9 +493,13 @@ class EvologicsEmulator:
             frame.meta["pc"] = self.packet_counter
         if dst != BROADCAST and (ack or kind == "burst"):
             # the receiving modem answers on the channel (hilgate.models.acoustic_ack); an IM retries !RI
-            # times (255: for ever), a burst !RC times; the model's outcome is the report
-            retries = int(self.settings["RI" if ack else "RC"])
-            frame.ack_retries = FOREVER if ack and retries == 255 else retries
+            # times (255: for ever), a burst !RC times (a burst is acknowledged whatever ``ack`` says);
+            # the model's outcome is the report
+            if kind == "burst":
+                frame.ack_retries = int(self.settings["RC"])
+            else:
+                retries = int(self.settings["RI"])
+                frame.ack_retries = FOREVER if retries == 255 else retries
             frame.on_acknowledged = self._acknowledged
             if kind == "burst":
                 self.bursts[frame.meta["pc"]] = frame
@@ -708,6 +716,7 @@ class S100Emulator:
         self.baud = int(spec.get("baud", 9600))
         self.rtscts = bool(spec.get("rtscts", False))
         self.speed = getattr(scheduler, "speed", 1.0)  # line times are wall-clock seconds
+        self.piece = limits_for("s100", port.limits).piece_bytes or PIECE  # held without flow control (limits:)
         self.states: dict[Any, _S100Host] = {}
         self.hosts = _open_hosts(spec, scheduler, self._on_data, self._on_connect, port.id)
 
@@ -729,7 +738,7 @@ class S100Emulator:
         if state.buffer is None and not self.rtscts:
             airtime = self.port.airtime(1)
             if airtime:
-                state.buffer = InputBuffer(1.0 / airtime)  # drained at the air bitrate
+                state.buffer = InputBuffer(1.0 / airtime, self.piece)  # drained at the air bitrate
         if state.buffer is not None:
             fits = state.buffer.accept(start, len(data), bt)
             lost = fits.count(False)
@@ -758,11 +767,12 @@ class S100Emulator:
                     state.waiting = (event, CRLF[len(after):])
                     continue
             self.scheduler.at(at, self._event, state, event)
-        while state.buffer is not None and hunter.held >= PIECE:
+        piece = self.piece
+        while state.buffer is not None and hunter.held >= piece:
             # without flow control the modem sends what it holds once it has 45 bytes, CR LF or not: a
             # longer frame goes on air in 45-byte pieces (the far host's own framing joins them again)
-            local = hunter.consumed + PIECE - base
-            self.scheduler.at(arrivals[local - 1] if local > 0 else start, self._piece, state, hunter.take(PIECE))
+            local = hunter.consumed + piece - base
+            self.scheduler.at(arrivals[local - 1] if local > 0 else start, self._piece, state, hunter.take(piece))
         self.scheduler.cancel(state.idle_timer)
         state.idle_timer = self.scheduler.at(line.free_at + IDLE_S * self.speed, self._idle, state)
         self._pace(host, state, now)
@@ -795,7 +805,7 @@ class S100Emulator:
             state.other += event.data
             if state.other.endswith(CRLF):
                 self._send_other(state)
-            elif state.buffer is not None and len(state.other) >= PIECE:
+            elif state.buffer is not None and len(state.other) >= self.piece:
                 self._piece(state, b"")
         elif isinstance(event, Notice):
             state.other += event.text + CRLF
@@ -804,9 +814,10 @@ class S100Emulator:
     def _piece(self, state: _S100Host, data: bytes) -> None:
         """45 bytes without flow control: what is pending goes as packets of 45 bytes (the rest waits)."""
         state.other += data
-        while len(state.other) >= PIECE:
-            self._send_raw(bytes(state.other[:PIECE]))
-            del state.other[:PIECE]
+        piece = self.piece
+        while len(state.other) >= piece:
+            self._send_raw(bytes(state.other[:piece]))
+            del state.other[:piece]
 
     def _idle(self, state: _S100Host) -> None:
         """Nothing came for :data:`IDLE_S`: a frame still waiting for its CR LF goes (the modem's

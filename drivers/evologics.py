@@ -2,7 +2,8 @@
 
 The driver keeps the modem in command mode and sends GLI frames as instant messages
 (``AT*SENDIM``, at most 64 bytes, with or without acoustic acknowledgement) or as burst data
-(``AT*SEND``, at most 1024 bytes).  Received ``RECVIM``, ``RECVIMS``, ``RECVPBM`` and ``RECV`` go to
+(``AT*SEND``, at most 1024 bytes; both from the link's ``limits:``, and a larger frame is refused when
+the application sends it).  Received ``RECVIM``, ``RECVIMS``, ``RECVPBM`` and ``RECV`` go to
 the applications.  Only one command is ever in flight, each with a timeout; an IM with ``ack`` holds
 the next one back until ``DELIVEREDIM`` or ``FAILEDIM`` (the modem would answer ``BUSY DELIVERING``).
 After a delivery the driver asks ``AT?T`` for the one-way propagation time and traces it with the
@@ -23,12 +24,10 @@ from hilgate.core.packets import PacketClass, PacketError, Raw
 
 from .evologics_codec import AsyncError, AtProtocolError, Data, HostCodec, Notification, Reply, Unexpected
 from .port import Port
-from .table import EvologicsOptions  # declared in the backend table, with its scene checks
+from .table import EVOLOGICS_LIMITS, EvologicsOptions  # declared in the backend table, with its scene checks
 
 log = logging.getLogger(__name__)
 
-IM_MAX = 64
-BURST_MAX = 1024
 SOUND_SPEED = 1500.0
 
 
@@ -41,6 +40,7 @@ class EvologicsBackend(QueuedBackend):
         self.address = address
         self.packet = packet
         self.options = options
+        self.limits = options.limits or EVOLOGICS_LIMITS
         self.codec = HostCodec(eol=options.eol_bytes())
         self.commands: deque[tuple[str, str, bytes | None, tuple, Callable[[Reply], Any] | None]] = deque()
         self.inflight: tuple | None = None
@@ -57,16 +57,12 @@ class EvologicsBackend(QueuedBackend):
     def idle(self) -> bool:
         return not self.queue and self.sending is None
 
-    @property
-    def limit(self) -> int:
-        return IM_MAX if self.options.im else BURST_MAX
-
-    def send(self, frame: AppFrame) -> bool:
-        if len(frame.real) > self.limit:
-            mode = "an instant message" if self.options.im else "a burst"
-            raise PacketError("size", f"{len(frame.real)} bytes on air do not fit {mode} of the EvoLogics modem "
-                                      f"(at most {self.limit}); use a smaller packet class or im: false")
-        return super().send(frame)
+    def admit(self, frame: AppFrame) -> None:
+        """A frame larger than the mode takes (``im:``, the link's ``limits:``) is refused now, with the
+        text a simulated link with the same limits gives (:meth:`ModemLimits.refusal`)."""
+        problem = self.limits.refusal(len(frame.real), "im" if self.options.im else "burst")
+        if problem is not None:
+            raise PacketError("size", problem)
 
     def close(self) -> None:
         for timer in (self.inflight_timer, self.delivery_timer, self.retry_timer):

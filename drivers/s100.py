@@ -18,8 +18,8 @@ from hilgate.core.backend import AppFrame, QueuedBackend
 from hilgate.core.packets import Decoded, PacketClass, Raw
 
 from .port import Port
-from .s100_codec import FrameHunter, Notice, Skipped, pieces, wire_class
-from .table import S100Options  # declared in the backend table, with its scene checks
+from .s100_codec import PIECE, FrameHunter, Notice, Skipped, pieces, wire_class
+from .table import S100_LIMITS, S100Options  # declared in the backend table, with its scene checks
 
 log = logging.getLogger(__name__)
 
@@ -34,6 +34,7 @@ class S100Backend(QueuedBackend):
         self.packet = packet
         self.wire = wire_class(packet)
         self.options = options
+        self.piece = (options.limits or S100_LIMITS).piece_bytes or PIECE  # without RTS/CTS (limits:)
         self.hunter = FrameHunter(packet)
         self.pieces: deque[bytes] = deque()
         self.piece_timer = None
@@ -64,7 +65,7 @@ class S100Backend(QueuedBackend):
             return
         frame = self.queue.popleft()
         real = frame.real if not isinstance(self.packet, Raw) else self.wire.encode(frame.payload)
-        self.pieces.extend(pieces(real, self.options.rtscts))
+        self.pieces.extend(pieces(real, self.options.rtscts, self.piece))
         self.tx_packets += 1
         self.event("tx", size=len(real))
         self._write_piece()

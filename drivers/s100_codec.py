@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from hilgate.core.packets import BROADCAST, Decoded, HilgateFrame, PacketClass, PacketError, Raw
 
 CRLF = b"\r\n"
-PIECE = 45
+PIECE = 45  # without flow control (the link's limits: piece_bytes; drivers/table.py S100_LIMITS)
 MAX_NOTICE = 200
 EPS = 1e-9
 LINE_BITS = 10  # 8N1: a start bit, 8 data bits and a stop bit on the serial line for each byte
@@ -82,7 +82,7 @@ def wire_class(packet: PacketClass) -> PacketClass:
     return HilgateFrame() if isinstance(packet, Raw) else packet
 
 
-def pieces(real: bytes, rtscts: bool) -> list[bytes]:
+def pieces(real: bytes, rtscts: bool, piece: int = PIECE) -> list[bytes]:
     """What to write, in order: the whole packet then CR LF with RTS/CTS; else the packet and its CR LF
     cut into 45-byte pieces (each to be paced at the air bitrate).
 
@@ -94,7 +94,7 @@ def pieces(real: bytes, rtscts: bool) -> list[bytes]:
     if rtscts:
         return [real + CRLF]
     wire = real + CRLF
-    return [wire[i : i + PIECE] for i in range(0, len(wire), PIECE)]
+    return [wire[i : i + piece] for i in range(0, len(wire), piece)]
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,9 @@ One :class:`Driver` row per modem type says
 - how to **open** it: ``"module:Class"`` of its backend, built as
   ``Class(link_id, address, packet, options, scheduler, trace)`` by :func:`open_backend`;
 - its **emulator**: ``"module:Class"`` of the emulated device that a simulated link can show on a pty
-  (and, if ``emulator_tcp``, on a loopback TCP port), found by :func:`emulator_for`.
+  (and, if ``emulator_tcp``, on a loopback TCP port), found by :func:`emulator_for`;
+- its **limits**: what the modem accepts (:class:`ModemLimits`) when the link's preset says nothing:
+  the driver and the emulator refuse beyond them, and so does a simulated link whose preset states them.
 
 The scene loader (:mod:`hilgate.scene.backends`) reads the keys, the checks, the "only for backend X"
 and the "did you mean" from this table, and the daemon opens backends and emulators through it:
@@ -32,7 +34,7 @@ from dataclasses import MISSING, Field, dataclass, field, fields
 from typing import Any, Callable, Iterator
 
 __all__ = [
-    "Option", "Driver", "DRIVERS", "EvologicsOptions", "S100Options", "S100EmulatorOptions", "option", "from_link", "scene_options", "emulator_options",
+    "Option", "Driver", "DRIVERS", "ModemLimits", "MODES", "SEND_AS", "limits_for", "EvologicsOptions", "S100Options", "S100EmulatorOptions", "option", "from_link", "scene_options", "emulator_options",
     "M64Options", "M64EmulatorOptions", "MicromodemOptions", "driver_names", "emulated_protocols", "open_backend", "emulator_for",
 ]
 
@@ -61,6 +63,7 @@ PORT = Option("port")
 BOOLEAN = Option("boolean")
 SCENE = "hilgate.scene"  # the metadata key of a field that is a scene option
 LINK = "hilgate.link"    # the metadata key of a field filled from the link's modem keys
+SPEC = "hilgate.spec"    # the metadata key of a field filled from the link's spec (its limits)
 
 
 def option(check: Option, default: Any = MISSING) -> Any:
@@ -73,6 +76,83 @@ def from_link(attribute: str, default: Any) -> Any:
     return field(default=default, metadata={LINK: attribute})
 
 
+def from_limits(default: "ModemLimits | None") -> Any:
+    """A field the link's ``limits:`` fills (its preset's, else ``default``, the driver's own)."""
+    return field(default=default, metadata={SPEC: "limits"})
+
+
+# -- what a modem accepts -------------------------------------------------------------------------------
+
+MODES = {"im": "an instant message", "ims": "a synchronous instant message", "pbm": "a piggyback message",
+         "burst": "a burst"}
+"""The EvoLogics S2C's ways of sending, as a refusal names them (``AT*SENDIM``, ``AT*SENDIMS``,
+``AT*SENDPBM``, ``AT*SEND``)."""
+SEND_AS = ("im", "burst")
+"""The modes GLI frames can go as: the driver's ``im: true`` and ``im: false`` (a simulated link's
+``send_as``)."""
+PLURALS = {"im": "instant messages", "ims": "synchronous instant messages", "pbm": "piggyback messages",
+           "burst": "bursts"}
+
+
+@dataclass(frozen=True)
+class ModemLimits:
+    """What a modem accepts, as a preset's ``limits:`` states it (``models/*.yaml`` say where each figure
+    comes from), or as its driver assumes without one.
+
+    - ``modes``: (mode, bytes) — the largest payload of one message of each mode (EvoLogics: ``im``,
+      ``ims``, ``pbm``, ``burst``);
+    - ``send_as``: the mode a *simulated* link's GLI frames are sent as (the driver's ``im:`` decides for
+      a real one); None: a simulated link refuses nothing by size;
+    - ``piece_bytes``: what an S100 holds at a time without flow control (longer frames cross in pieces
+      of that size); ``flow_control``: the flow control the modem takes (``rtscts``: then whole frames
+      of any size, as the link's ``rtscts: true`` asks);
+    - ``baud``: the modem's serial line by default (its air bit rate is the preset's ``bitrate_bps``,
+      its transmit pool ``fifo_bytes``).
+
+    One :meth:`refusal` text serves the driver, the emulator's host-side checks and the simulated link,
+    so an application sees the same error whichever backend the scene gives its link."""
+
+    modem: str
+    modes: tuple[tuple[str, int], ...] = ()
+    send_as: str | None = None
+    piece_bytes: int | None = None
+    flow_control: str | None = None
+    baud: int | None = None
+
+    def most(self, mode: str) -> int | None:
+        """The largest payload of one message of ``mode`` (None: the modem has no such mode)."""
+        for name, size in self.modes:
+            if name == mode:
+                return size
+        return None
+
+    def refusal(self, size: int, mode: str | None = None) -> str | None:
+        """Why ``size`` bytes cannot go as one message of ``mode`` (default ``send_as``), or None if they can."""
+        mode = mode or self.send_as
+        most = self.most(mode) if mode is not None else None
+        if most is None or size <= most:
+            return None
+        title = DRIVERS[self.modem].title if self.modem in DRIVERS else self.modem
+        hint = "use a smaller packet class"
+        larger = [(name, n) for name, n in self.modes if n >= size and name in SEND_AS]
+        if larger:
+            name, n = larger[0]
+            hint += f" or {PLURALS.get(name, name)} (at most {n})"
+        return f"{size} bytes on air do not fit {MODES.get(mode, mode)} of the {title} (at most {most}); {hint}"
+
+    def describe(self) -> str:
+        """One line for ``hilgate check``."""
+        parts = []
+        if self.modes:
+            parts.append(", ".join(f"{name} {n} B" for name, n in self.modes))
+        if self.piece_bytes is not None:
+            parts.append(f"pieces of {self.piece_bytes} B without flow control"
+                         + (f", whole frames with {self.flow_control}" if self.flow_control else ""))
+        if self.baud is not None:
+            parts.append(f"serial {self.baud} baud")
+        return "; ".join(parts)
+
+
 # -- the drivers ---------------------------------------------------------------------------------------
 
 
@@ -82,7 +162,7 @@ class EvologicsOptions:
 
     port: str = option(Option("port", hint="a device such as /dev/ttyUSB0, or socket://HOST:9200"))
     baud: int = option(Option("integer", 50, 4_000_000), 19200)
-    im: bool = option(BOOLEAN, True)
+    im: bool = option(BOOLEAN, True)  # instant messages; false: bursts (their sizes: ``limits``)
     ack: bool = option(BOOLEAN, True)
     source_level: int | None = option(Option("integer", 0, 3), None)
     gain: int | None = option(Option("integer", 0, 1), None)
@@ -92,6 +172,7 @@ class EvologicsOptions:
     delivery_timeout_s: float = option(Option("number", above=0), 30.0)
     queue_frames: int = option(Option("integer", 0, 100_000), 50)
     eol: str = option(Option("choice", choices=("auto", "cr", "lf", "crlf")), "auto")
+    limits: "ModemLimits | None" = from_limits(None)  # None: EVOLOGICS_LIMITS
 
     def eol_bytes(self) -> bytes:
         if self.eol == "auto":
@@ -108,6 +189,7 @@ class S100Options:
     rtscts: bool = option(BOOLEAN, False)
     air_bitrate_bps: float = from_link("bitrate_bps", 1800.0)  # pacing without RTS/CTS: the link's bitrate
     queue_frames: int = option(Option("integer", 0, 100_000), 50)
+    limits: "ModemLimits | None" = from_limits(None)  # None: S100_LIMITS
 
 
 @dataclass(frozen=True)
@@ -171,18 +253,37 @@ class Driver:
     emulator: str | None = None  # "module:Class" of the emulated device, if there is one
     emulator_tcp: bool = False   # the emulated device also listens on a loopback TCP port
     emulator_options: type | None = None  # the emulated device's own ``emulate:`` keys (option() fields)
+    limits: ModemLimits | None = None  # what the modem accepts when the link's preset does not say
 
+
+EVOLOGICS_LIMITS = ModemLimits("evologics", (("im", 64), ("ims", 64), ("pbm", 64), ("burst", 1024)),
+                               send_as="im", baud=19200)
+"""The S2C's sizes as public drivers agree on them (shared/protocols/evologics-at.md, "Size limits");
+``models/evologics-*.yaml`` state them with their sources."""
+
+S100_LIMITS = ModemLimits("s100", piece_bytes=45, flow_control="rtscts", baud=9600)
+"""The Seatooth S100 as dccomms_utils' bridge drives it (shared/protocols/s100-mavlink-aruco.md);
+``models/s100.yaml`` states it with its source."""
 
 DRIVERS: dict[str, Driver] = {driver.name: driver for driver in (
     Driver("evologics", "EvoLogics modem", EvologicsOptions, "hilgate.drivers.evologics:EvologicsBackend",
-           "hilgate.drivers.emulators:EvologicsEmulator", emulator_tcp=True),
+           "hilgate.drivers.emulators:EvologicsEmulator", emulator_tcp=True, limits=EVOLOGICS_LIMITS),
     Driver("s100", "S100", S100Options, "hilgate.drivers.s100:S100Backend",
-           "hilgate.drivers.emulators:S100Emulator", emulator_options=S100EmulatorOptions),
+           "hilgate.drivers.emulators:S100Emulator", emulator_options=S100EmulatorOptions, limits=S100_LIMITS),
     Driver("m64", "Modem-M64", M64Options, "hilgate.drivers.m64:M64Backend",
            "hilgate.drivers.m64_emulator:M64Emulator", emulator_options=M64EmulatorOptions),
     Driver("micromodem", "Micro-Modem", MicromodemOptions, "hilgate.drivers.micromodem:MicromodemBackend",
            "hilgate.drivers.micromodem_emulator:MicromodemEmulator"),
 )}
+
+
+def limits_for(modem: str, limits: ModemLimits | None) -> ModemLimits | None:
+    """The limits a ``modem`` driver or emulator works by: the link's own when they are that modem's,
+    else the driver's (the scene refuses a preset's limits of another modem on a driver link)."""
+    if limits is not None and limits.modem == modem:
+        return limits
+    driver = DRIVERS.get(modem)
+    return driver.limits if driver is not None else None
 
 
 # -- reading the table -----------------------------------------------------------------------------------
@@ -231,6 +332,8 @@ def open_backend(spec: Any, scheduler: Any, trace: Callable[[dict], Any]) -> Any
     for f in fields(driver.options):
         if LINK in f.metadata:
             options.setdefault(f.name, getattr(spec.params, f.metadata[LINK]))
+        elif SPEC in f.metadata:
+            options.setdefault(f.name, limits_for(spec.backend, getattr(spec, f.metadata[SPEC], None)))
     return _resolve(driver.backend)(spec.id, spec.params.address, packet_class(spec.packet),
                                     driver.options(**options), scheduler, trace)
 

@@ -58,7 +58,9 @@ def _queue_budget(scene) -> str:
     warning per limit they exceed; the daemon itself would stop at the first queue it cannot create)."""
     from .gli.limits import budget_problems, describe, read_limits, scene_need
 
-    limits = read_limits()
+    from .gli.limits import queue_names
+
+    limits = read_limits(name for l in scene.links.values() if "mq" in l.gli for name in queue_names(l.id))
     need = scene_need(((l.id, l.gli, l.packet) for l in scene.links.values()), limits)
     lines = [describe(need, limits)]
     lines += [f"warning: the scene exceeds the {problem}" for problem in budget_problems(need, limits)]
@@ -160,12 +162,44 @@ def cmd_status(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_reload(args: argparse.Namespace) -> int:
+    """SIGHUP without knowing the daemon's PID: the RELOAD request, answered once the scene file is
+    applied or refused (the daemon then keeps the scene it had)."""
+    sock, _, request, _ = _control(args)
+    try:
+        sock.settimeout(args.timeout)
+        answer = request({"class": "RELOAD"})
+    finally:
+        sock.close()
+    if not answer.get("ok"):
+        print(f"hilgate: reload refused, the daemon keeps its scene: {answer.get('error')}", file=sys.stderr)
+        return EXIT_SCENE
+    links = _control_request(args, {"class": "STATUS"}).get("links", [])
+    listed = ", ".join(f"{link['id']}={link['backend']}" for link in links)
+    print(f"reloaded: {len(links)} links ({listed})")
+    return 0
+
+
+def _control_request(args: argparse.Namespace, request_obj: dict) -> dict:
+    sock, _, request, _ = _control(args)
+    try:
+        return request(request_obj)
+    finally:
+        sock.close()
+
+
 def _link_note(link: dict) -> str:
     """Why a link is down, else what it lost by cause (the table has one line per link)."""
     if link.get("reason"):
         return link["reason"]
     causes = link.get("drop_causes") or {}
     return ", ".join(f"{cause} {n}" for cause, n in sorted(causes.items()))
+
+
+def _since(link: dict) -> str:
+    """Since when (model time, as ``t`` above) the link has had its backend; counts are over the run."""
+    since = link.get("since_s")
+    return "-" if since is None else f"{since:.1f}"
 
 
 def _print_network(answer: dict, as_json: bool) -> None:
@@ -212,9 +246,10 @@ def _print_status(status: dict, as_json: bool) -> None:
     from .report.tables import _render
 
     print(f"t = {status.get('time', 0):.3f} s")
-    print(_render(["link", "backend", "state", "tx", "rx", "drops", "unread", "fifo B", "note"],
-                  [[l["id"], l["backend"], l["state"], str(l["tx_packets"]), str(l["rx_packets"]), str(l["drops"]),
-                    str(l.get("unread", 0)), str(l["fifo_bytes"]), _link_note(l)] for l in status["links"]]))
+    print(_render(["link", "backend", "state", "since s", "tx", "rx", "drops", "unread", "fifo B", "note"],
+                  [[l["id"], l["backend"], l["state"], _since(l), str(l["tx_packets"]), str(l["rx_packets"]),
+                    str(l["drops"]), str(l.get("unread", 0)), str(l["fifo_bytes"]), _link_note(l)]
+                   for l in status["links"]], left=3))
     print()
     print(_render(["vehicle", "source", "x", "y", "z", "age s"],
                   [[v["name"], v["source"], *(f"{c:.3f}" for c in (v["position"] or [float("nan")] * 3)),
@@ -234,10 +269,15 @@ def cmd_pose(args: argparse.Namespace) -> int:
     """Follow the vehicles' poses live, one line per vehicle per update."""
     import json
 
-    sock, reader, _, _ = _control(args)
-    sock.settimeout(None)
-    sock.sendall((json.dumps({"class": "WATCH", "interval_s": args.interval}) + "\n").encode())
+    sock, reader, request, _ = _control(args)
     try:
+        if args.vehicle:
+            known = [v["name"] for v in request({"class": "STATUS"}).get("vehicles", [])]
+            for name in args.vehicle:
+                if name not in known:
+                    raise SceneError("pose", 0, "", _unknown_vehicle(name, known))
+        sock.settimeout(None)
+        sock.sendall((json.dumps({"class": "WATCH", "interval_s": args.interval}) + "\n").encode())
         for line in reader:
             status = json.loads(line)
             for v in status.get("vehicles", []):
@@ -252,30 +292,68 @@ def cmd_pose(args: argparse.Namespace) -> int:
     return 0
 
 
+def _unknown_vehicle(name: str, known: list[str]) -> str:
+    import difflib
+
+    close = difflib.get_close_matches(name, known, n=1)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    return f"no vehicle {name!r} in the running scene{hint}; its vehicles: {', '.join(known) or 'none'}"
+
+
+def _zenoh_option(args: argparse.Namespace):
+    """``--zenoh ENDPOINT`` (repeatable) and ``--zenoh-prefix`` as the client's ``zenoh=``; None without."""
+    if not args.zenoh:
+        if args.zenoh_prefix:
+            raise SceneError("--zenoh-prefix", 0, "", "names the key prefix of a Zenoh network: give --zenoh "
+                                                      "ENDPOINT too (a daemon of that network)")
+        return None
+    if args.tcp:
+        raise SceneError("--zenoh", 0, "", "give --tcp or --zenoh, not both")
+    return {"connect": args.zenoh, **({"prefix": args.zenoh_prefix} if args.zenoh_prefix else {}),
+            **({"credentials": args.zenoh_credentials} if args.zenoh_credentials else {})}
+
+
 def _open_link(args: argparse.Namespace):
     from .gli.client import Link
     from .daemon.service import parse_tcp
 
     return Link.open(args.link, tcp=parse_tcp(args.tcp) if args.tcp else None, runtime_dir=args.runtime_dir,
-                     token_file=args.token_file)
+                     token_file=args.token_file, zenoh=_zenoh_option(args))
 
 
 def cmd_send(args: argparse.Namespace) -> int:
     """Each frame is followed by a round trip to the daemon: an ERROR it answered the frame with
-    arrives first, so a refused frame is reported (and the exit status is 1), not lost silently."""
+    arrives first, so a refused frame is reported (and the exit status is 1), not lost silently.
+    A frame it took is confirmed in one line, with its destination as the channel model reads it
+    (on a link whose packet class carries no address on air and that has no MAC, a frame reaches
+    every modem in range whatever its destination: UWSim-NET's behaviour, ``addressing: auto``)."""
     from .gli.client import GliError
 
     refused = 0
     with _open_link(args) as link:
         frames = [" ".join(args.text)] if args.text else (line.rstrip("\n") for line in sys.stdin)
-        for text in frames:
-            link.send(text.encode(), args.to)
+        for number, text in enumerate(frames, 1):
+            data = text.encode()
+            link.send(data, args.to)
             try:
-                link.command({"class": "STATUS"})
+                answer = link.command({"class": "STATUS"})
             except GliError as exc:
                 refused += 1
-                print(f"hilgate: {link.id}: frame refused: {exc}", file=sys.stderr)
+                print(f"hilgate: {link.id}: frame {number} refused: {exc}", file=sys.stderr)
+                continue
+            print(f"{link.id}: frame {number} sent, {len(data)} bytes to {_destination(args.to, answer)}", flush=True)
     return 1 if refused else 0
+
+
+def _destination(dst: int, answer: dict) -> str:
+    """Where a frame sent to ``dst`` goes, as the model reads it (the daemon's STATUS of the link says)."""
+    if dst == 255:
+        return "255 (broadcast)"
+    reach = (answer.get("link") or {}).get("app_dst")
+    if reach == "everyone in range":
+        return (f"{dst}, which reaches everyone in range (addressing: auto, and the link's packet class "
+                f"carries no address on air)")
+    return str(dst)
 
 
 def cmd_app(args: argparse.Namespace) -> int:
@@ -306,13 +384,9 @@ def cmd_app(args: argparse.Namespace) -> int:
         # read as a scene's values are, within the same limits: 20 000 nested brackets or a number of
         # 100 000 digits is one line (not a RecursionError after 16 s, nor a ValueError)
         params[key] = parse_value(value, f"--param {key}") if value else ""
-    zenoh = None
-    if args.zenoh:
-        zenoh = {"connect": args.zenoh, **({"prefix": args.zenoh_prefix} if args.zenoh_prefix else {}),
-                 **({"credentials": args.zenoh_credentials} if args.zenoh_credentials else {})}
     return run_application(cls, args.links, params, name=args.name, seed=args.seed, runtime_dir=args.runtime_dir,
-                           tcp=parse_tcp(args.tcp) if args.tcp else None, zenoh=zenoh, until=args.until,
-                           token_file=args.token_file)
+                           tcp=parse_tcp(args.tcp) if args.tcp else None, zenoh=_zenoh_option(args), until=args.until,
+                           token_file=args.token_file, report=lambda line: print(line, file=sys.stderr, flush=True))
 
 
 def _address(value: str) -> int:
@@ -323,6 +397,25 @@ def _address(value: str) -> int:
     if not 0 <= address <= 255:
         raise argparse.ArgumentTypeError(f"{address} is not an address (0..255, 255 broadcasts)")
     return address
+
+
+def _zenoh_prefix(value: str) -> str:
+    from .core.names import zenoh_prefix_problem
+
+    if zenoh_prefix_problem(value):
+        raise argparse.ArgumentTypeError(f"{value[:60]!r}: {zenoh_prefix_problem(value)}")
+    return value
+
+
+def _add_zenoh_args(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--zenoh", action="append", metavar="ENDPOINT", type=_zenoh_endpoint,
+                        help="reach the link over Zenoh through this daemon endpoint, e.g. tcp/192.168.1.10:7447 "
+                             "(repeatable)")
+    parser.add_argument("--zenoh-prefix", type=_zenoh_prefix, metavar="PREFIX",
+                        help="the network's Zenoh key prefix, as its scene's zenoh: prefix: (default: hilgate)")
+    parser.add_argument("--zenoh-credentials", metavar="DIR",
+                        help="this application's credentials on an authenticated network (hilgate network init: "
+                             "DIR/apps/NAME)")
 
 
 def _tcp_address(value: str) -> str:
@@ -345,19 +438,10 @@ def _zenoh_endpoint(value: str) -> str:
     return value
 
 
-def _zenoh_prefix(value: str) -> str:
-    from .scene.hosts import PREFIX
-
-    if not PREFIX.fullmatch(value):
-        raise argparse.ArgumentTypeError(f"{value[:60]!r} is not a key prefix (one to four words of letters, "
-                                         "digits, '_', '.' or '-' joined by '/')")
-    return value
-
-
 def cmd_listen(args: argparse.Namespace) -> int:
     count = 0
     with _open_link(args) as link:
-        print(f"listening on {link.id} (address {link.address}, {link.info['packet']})", file=sys.stderr)
+        print(f"listening on {link.id} (address {link.address}, {link.info['packet']})", file=sys.stderr, flush=True)
         while args.count is None or count < args.count:
             message = link.recv(timeout=args.timeout)
             if message is None:
@@ -414,7 +498,8 @@ def cmd_emulate(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from .report.figures import ReportError, pick_run, report, trace_runs
+    from .report.figures import pick_run, report, trace_runs
+    from .report.tracefile import TraceError
 
     try:
         runs = trace_runs(args.trace)
@@ -425,8 +510,9 @@ def cmd_report(args: argparse.Namespace) -> int:
                   f"{run.start} (scene {run.scene}); choose another with --run ID or --run N", file=sys.stderr)
         formats = tuple(dict.fromkeys(["png", *(args.formats or [])]))
         written = report(args.trace, args.summaries, args.out, args.vehicles, args.csv, args.title,
-                         tuple(args.window) if args.window else None, run if len(runs) > 1 else None, formats)
-    except ReportError as exc:
+                         tuple(args.window) if args.window else None, run if len(runs) > 1 else None, formats,
+                         args.width)
+    except TraceError as exc:  # (ReportError is one): a line that names the file, the line and what is wrong
         print(f"hilgate: {exc}", file=sys.stderr)
         return 1
     print(f"{len(written)} files in {args.out}: open {written[-1]}")
@@ -434,16 +520,20 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_fit(args: argparse.Namespace) -> int:
-    from .fitcmd import FitError, plot_fit, print_fit, run_fit
+    from .fitcmd import plot_fit, print_fit, run_fit
+    from .report.tracefile import TraceError
+
+    import numpy as np
 
     try:
-        result = run_fit(args.trace, args.scene, args.model, args.link, args.simulated, args.run, args.pose_gap,
-                         args.window, tuple(args.overrides))
-        print_fit(result, sys.stdout, args.bins)
+        with np.errstate(all="ignore"):  # degenerate data give infinite intervals, printed as such
+            result = run_fit(args.trace, args.scene, args.model, args.link, args.simulated, args.run, args.pose_gap,
+                             args.window, tuple(args.overrides))
+            print_fit(result, sys.stdout, args.bins)
         if args.plot:
             plot_fit(result, args.plot, args.bins)
             print(f"\nplot: {args.plot}")
-    except FitError as exc:
+    except TraceError as exc:  # (FitError is one)
         print(f"hilgate: fit: {exc}", file=sys.stderr)
         return EXIT_SCENE
     return 0
@@ -467,7 +557,7 @@ def cmd_network(args: argparse.Namespace) -> int:
     except NetworkInitError as exc:
         print(f"hilgate: network init: {exc}", file=sys.stderr)
         return EXIT_SCENE
-    where = result["directory"]
+    where = args.directory.rstrip("/") or "/"  # as the user wrote it: the paths to copy, in their words
     print(f"credentials in {where}: made {', '.join(result['made']) or 'nothing'}"
           f"{'; kept ' + ', '.join(result['kept']) if result['kept'] else ''}")
     print(f"  hosts: {', '.join(f'{where}/hosts/{h}' for h in result['hosts'])}")
@@ -488,6 +578,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "sim": cmd_sim,
     "run": cmd_run,
     "status": cmd_status,
+    "reload": cmd_reload,
     "pose": lambda args: cmd_pose(args),
     "send": cmd_send,
     "listen": cmd_listen,
@@ -626,6 +717,12 @@ def build_parser() -> argparse.ArgumentParser:
                        help="every host of the network: its links, and how the others hear it (over Zenoh)")
         p.add_argument("--runtime-dir")
 
+    p = sub.add_parser("reload", help="make the running daemon read its scene file again (as SIGHUP); links whose "
+                                      "keys changed are reconfigured in place, applications stay connected")
+    p.add_argument("--timeout", type=float, default=60.0, metavar="S",
+                   help="wait at most S seconds for the daemon's answer (default 60)")
+    p.add_argument("--runtime-dir")
+
     p = sub.add_parser("pose", help="follow the vehicles' poses live")
     p.add_argument("vehicle", nargs="*", help="only these vehicles")
     p.add_argument("--interval", type=float, default=0.5, help="seconds between updates (default 0.5)")
@@ -641,6 +738,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--window", type=float, nargs=2, metavar=("START", "END"), help="only these seconds of the trace")
     p.add_argument("--format", dest="formats", action="append", choices=["svg", "pdf"],
                    help="also write each figure as SVG or PDF (vector, for a paper; repeatable)")
+    p.add_argument("--width", type=float, metavar="INCHES",
+                   help="draw the figures this wide, e.g. 3.5 for one column of a paper (default 9, the bars of "
+                        "many flows wider; text keeps its size, tick labels are thinned where they would overlap)")
     p.add_argument("--run", metavar="ID|N", help="a trace the daemon appended to across restarts holds several runs: "
                                                  "this one (its id, or 1 for the first, -1 the last; default the last)")
 
@@ -655,11 +755,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--until", type=float, metavar="S", help="stop after S seconds (default: SIGTERM/SIGINT)")
     p.add_argument("--tcp", metavar="[HOST:]PORT", type=_tcp_address, help="the daemon's TCP GLI listener")
     p.add_argument("--token-file", metavar="FILE", help=TOKEN_HELP)
-    p.add_argument("--zenoh", action="append", metavar="ENDPOINT", type=_zenoh_endpoint,
-                   help="reach the links over Zenoh through this daemon endpoint (repeatable)")
-    p.add_argument("--zenoh-prefix", type=_zenoh_prefix, help="the network's Zenoh key prefix (default: hilgate)")
-    p.add_argument("--zenoh-credentials", metavar="DIR",
-                   help="this application's credentials (hilgate network init: DIR/apps/NAME)")
+    _add_zenoh_args(p)
     p.add_argument("--runtime-dir")
 
     p = sub.add_parser("send", help="send text to a link (arguments, or one frame per stdin line)")
@@ -668,6 +764,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--to", type=_address, default=255, help="destination address (default 255, broadcast)")
     p.add_argument("--tcp", metavar="[HOST:]PORT", type=_tcp_address)
     p.add_argument("--token-file", metavar="FILE", help=TOKEN_HELP)
+    _add_zenoh_args(p)
     p.add_argument("--runtime-dir")
 
     p = sub.add_parser("listen", help="print what a link receives")
@@ -677,6 +774,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--hex", action="store_true", help="print payloads in hex")
     p.add_argument("--tcp", metavar="[HOST:]PORT", type=_tcp_address)
     p.add_argument("--token-file", metavar="FILE", help=TOKEN_HELP)
+    _add_zenoh_args(p)
     p.add_argument("--runtime-dir")
     return parser
 
@@ -695,12 +793,19 @@ def main(argv: list[str] | None = None) -> int:
 
     setup_logging(args.verbose, daemon=args.command in ("run", "emulate"))
     try:
-        return COMMANDS[args.command](args)
+        code = COMMANDS[args.command](args)
+        sys.stdout.flush()  # here, not at exit, so that a reader that has gone is noticed below
+        return code
     except SceneError as exc:
         print(f"hilgate: {exc}", file=sys.stderr)
         return EXIT_SCENE
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError as exc:
+        if _output_closed():
+            return _quiet_after_closed_pipe()
+        print(f"hilgate: {exc}", file=sys.stderr)
+        return 1
     except OSError as exc:
         print(f"hilgate: {exc}", file=sys.stderr)
         return 1
@@ -711,6 +816,38 @@ def main(argv: list[str] | None = None) -> int:
             print(f"hilgate: {exc}", file=sys.stderr)
             return 1
         raise
+
+
+def _output_closed() -> bool:
+    """Whether the reader of stdout (or stderr) has gone, as with ``hilgate pose | head``: the pipe's
+    write end then polls as an error.  A broken socket to the daemon is not that, and is reported."""
+    import select
+
+    poll = select.poll()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            poll.register(stream.fileno(), select.POLLOUT)
+        except (ValueError, OSError, AttributeError):
+            continue
+    try:
+        return any(events & (select.POLLERR | select.POLLHUP) for _, events in poll.poll(0))
+    except OSError:
+        return False
+
+
+def _quiet_after_closed_pipe() -> int:
+    """Nothing more can be said where nobody reads: point stdout at /dev/null so that the interpreter's
+    last flush cannot complain either, and end as a process killed by SIGPIPE would (128 + 13)."""
+    import os
+
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            os.dup2(devnull, stream.fileno())
+        except (ValueError, OSError, AttributeError):
+            pass
+    os.close(devnull)
+    return 141
 
 
 if __name__ == "__main__":

@@ -16,7 +16,8 @@ from typing import Any, TextIO
 import numpy as np
 
 from .report.fit import Z95, Fit, bins, fit_function, fit_logistic, fit_power, fit_rssi, power_parameters
-from .report.observations import FitError, LinkInfo, Observations, observations, read_events
+from .report.observations import FitError, LinkInfo, Observations, links_of_view, observations, read_events
+from .report.tracefile import TraceError, printable
 
 __all__ = ["run_fit", "FitError", "FitResult"]
 
@@ -37,26 +38,45 @@ class FitResult:
         self.size = size
 
 
-def _scene_of(events: list[dict], scene_path: str | None, trace: str) -> str:
-    if scene_path:
-        return scene_path
-    for event in events:
-        if event.get("ev") == "run" and event.get("path"):
-            if os.path.exists(event["path"]):
-                return event["path"]
-            raise FitError(f"the trace's scene {event['path']} is not there any more; give it with --scene")
-    raise FitError(f"{trace} does not name its scene (a hilgate sim trace): give it with --scene SCENE")
+def _links_of_scene(scene: Any) -> dict[str, LinkInfo]:
+    """A scene file's links, as the trace's ``scene_view`` would give them (one way to the fit)."""
+    from .scene.view import scene_view
+
+    return links_of_view(scene_view(scene), scene.path)
 
 
-def _physical_fit(scene: Any, data: Observations) -> tuple[Fit, dict, str]:
+def _physical_model(view: Any) -> Any:
+    """The physical error model a link's error view describes (None: another kind)."""
+    from .models.physical import Acoustic, Environment, PhysicalErrorModel
+
+    if not isinstance(view, dict) or view.get("kind") != "physical":
+        return None
+
+    def front(value: Any) -> Any:
+        fields = dict(value)
+        fields["band_khz"] = tuple(fields["band_khz"])
+        fields["decodes"] = tuple(fields.get("decodes") or ())
+        return Acoustic(**fields)
+
+    try:
+        sender = view.get("sender")
+        rate = view.get("sender_bitrate_bps")
+        return PhysicalErrorModel(Environment(**dict(view["env"])), front(view["acoustic"]), float(view["bitrate_bps"]),
+                                  None if sender is None else front(sender), None if rate is None else float(rate))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise FitError(f"the trace's physical error model is not one hilgate builds ({type(exc).__name__}: "
+                       f"{printable(str(exc))})") from None
+
+
+def _physical_fit(data: Observations) -> tuple[Fit, dict, str]:
     """The effective source level by binomial maximum likelihood, with the spreading factor k from the
     frames' RSSI when at least ``MIN_RSSI`` delivered frames carry it (else the scene's k, held)."""
     from .models.acoustics import ber
-    from .models.physical import PhysicalErrorModel
 
     receivers = sorted({o.dst for o in data.frames})
-    models = [scene.links[r].params.error for r in receivers]
-    if not all(isinstance(m, PhysicalErrorModel) for m in models) or len({m for m in models}) != 1:
+    views = [data.links[r].error for r in receivers]
+    models = [_physical_model(view) for view in views]
+    if not all(m is not None for m in models) or len({repr(v) for v in views}) != 1:
         raise FitError("--model physical needs the receiving links to share one error: {kind: physical} "
                        "(their band, modulation and water are the starting point); fit power or logistic instead")
     model = models[0]
@@ -93,27 +113,38 @@ def _physical_fit(scene: Any, data: Observations) -> tuple[Fit, dict, str]:
 def run_fit(trace: str, scene_path: str | None = None, model: str = "power", links: list[str] | None = None,
             simulated: bool = False, run: str | None = None, pose_gap_s: float = 2.0, window_s: float = 5.0,
             overrides: tuple[str, ...] = ()) -> FitResult:
+    """Which links were real, and where each rode, come from the trace's own ``run`` and ``reload``
+    lines (the scene as it was at each moment); ``scene_path`` (``--scene``) replaces them for the
+    whole trace, and is needed for a trace that carries no scene (``hilgate sim``'s, an older
+    daemon's whose scene file is gone)."""
     from .report.figures import ReportError, pick_run, trace_runs
     from .scene.load import load_scene
 
     if model not in MODELS:
         raise FitError(f"--model must be one of {', '.join(MODELS)}, not {model!r}")
+    if not (math.isfinite(pose_gap_s) and pose_gap_s >= 0 and math.isfinite(window_s) and window_s >= 0):
+        raise FitError("--pose-gap and --window must be seconds (finite, not negative)")
     try:
         chosen = pick_run(trace_runs(trace), run)
     except ReportError as exc:
         raise FitError(str(exc)) from None
-    events = read_events(trace, chosen.first_line, chosen.last_line)
-    scene = load_scene(_scene_of(events, scene_path, trace), list(overrides))
-    infos = {name: LinkInfo(link.vehicle, link.backend, link.params.address, link.params.tx_channel,
-                            link.params.rx_channel) for name, link in scene.links.items()}
-    receivers = None
-    if links:
-        unknown = [name for name in links if name not in infos]
-        if unknown:
-            raise FitError(f"no link {unknown[0]!r} in scene {scene.path}; links: {', '.join(infos)}")
-        receivers = set(links)
-    data = observations(events, infos, simulated=simulated, receivers=receivers, pose_gap_s=pose_gap_s,
-                        window_s=window_s)
+    start: dict[str, LinkInfo] | None = None
+    follow = scene_path is None
+    if scene_path is not None:
+        start = _links_of_scene(load_scene(scene_path, list(overrides)))
+    elif not chosen.has_view:
+        if not chosen.path:
+            raise FitError(f"{trace} does not carry its scene (a hilgate sim trace): give it with --scene SCENE")
+        if not os.path.exists(chosen.path):
+            raise FitError(f"the trace's scene {chosen.path} is not there any more; give it with --scene")
+        start, follow = _links_of_scene(load_scene(chosen.path, list(overrides))), False  # an older daemon's trace
+    receivers = set(links) if links else None
+    try:
+        data = observations(read_events(trace, chosen.first_line, chosen.last_line), start, simulated=simulated,
+                            receivers=receivers, pose_gap_s=pose_gap_s, window_s=window_s, follow_scene=follow,
+                            path=trace)
+    except TraceError as exc:
+        raise FitError(str(exc)) from None
     if len(data.frames) < 2 or all(o.delivered for o in data.frames) or not any(o.delivered for o in data.frames):
         kept = sum(1 for o in data.frames if o.delivered)
         raise FitError(f"nothing to fit: {len(data.frames)} frames ({kept} delivered) after leaving out "
@@ -134,12 +165,12 @@ def run_fit(trace: str, scene_path: str | None = None, model: str = "power", lin
         b0, b1 = fit.theta
         block = f'error: {{unit: packet, expr: "1 / (1 + exp(-({b0:.6g} + {b1:.6g} * d)))"}}'
     else:
-        fit, params, block = _physical_fit(scene, data)
+        fit, params, block = _physical_fit(data)
     return FitResult(model, fit, block, params, data, size)
 
 
 def _excluded(data: Observations) -> str:
-    return ", ".join(f"{cause} {n}" for cause, n in sorted(data.excluded.items()))
+    return ", ".join(f"{printable(cause, 40)} {n}" for cause, n in sorted(data.excluded.items()))
 
 
 FORMS = {
@@ -153,7 +184,7 @@ def print_fit(result: FitResult, out: TextIO, bin_count: int = 10) -> None:
     data, fit = result.data, result.fit
     receivers = sorted({o.dst for o in data.frames})
     lost = sum(1 for o in data.frames if not o.delivered)
-    print(f"{len(data.frames)} frames ({lost} lost) heard or missed by {', '.join(receivers)}; "
+    print(f"{len(data.frames)} frames ({lost} lost) heard or missed by {', '.join(map(printable, receivers))}; "
           f"left out: {_excluded(data) or 'none'}", file=out)
     print(f"model {result.model}: {FORMS[result.model]}", file=out)
     for name, (value, low, high) in result.params.items():

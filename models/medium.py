@@ -33,6 +33,10 @@ from .frame import BROADCAST
 from .path import bind_path
 from .radio import OVERLAP_EPS, Arrival  # noqa: F401  (their home was here; kept importable)
 
+NO_POSE = "no_pose"
+"""The cause of a frame that cannot be judged because the sender or a receiver has no position (a live
+vehicle before its first pose, a stale one dropped): traced at each radio that would have judged it."""
+
 if TYPE_CHECKING:
     from .clock import Clock
     from .frame import Frame
@@ -355,17 +359,18 @@ class Medium:
             else:
                 if sender_position is None:
                     sender_position = sender.pose.position(t)
-                    if sender_position is None:  # a vehicle without a pose is heard by nobody
-                        if dst != BROADCAST:
-                            target = next((n.radio for n in neighbours if n.radio.address == dst), None)
-                            if target is not None:
-                                target.unreachable(frame)
-                        missed += len(neighbours) - neighbours.index(nb)
+                    if sender_position is None:  # a vehicle without a pose is heard by nobody: every
+                        # radio that would have judged the frame is told why it could not (no_pose)
+                        rest = neighbours[neighbours.index(nb):]
+                        for other in rest:
+                            if dst == BROADCAST or other.radio.address == dst:
+                                other.radio.unreachable(frame, NO_POSE)
+                        missed += len(rest)
                         break
                 receiver_position = radio.pose.position(t)
                 if receiver_position is None:
-                    if radio.address == dst:
-                        radio.unreachable(frame)
+                    if dst == BROADCAST or radio.address == dst:  # it cannot be judged: said, with why
+                        radio.unreachable(frame, NO_POSE)
                     missed += 1
                     continue
                 d = math.dist(sender_position, receiver_position)

@@ -60,6 +60,7 @@ class LinkStats:
     rx_packets: int = 0
     fifo_drops: int = 0
     fifo_peak_bytes: int = 0
+    lost: dict[str, int] = field(default_factory=dict)  # arrivals for this modem lost, by cause (prop, no_pose…)
 
 
 class SimModem:
@@ -314,7 +315,9 @@ class SimModem:
         self.medium.detach(self.radio)
 
     def _on_air(self, frame: "Frame") -> None:
-        if self.closed:
+        if self.closed:  # closed during its tx delay: it never went on air, and says so
+            self.stats.fifo_drops += 1
+            self.observer.drop(self.clock.now(), self, frame, "closed")
             return
         t = self.clock.now()
         duration = frame.size * 8.0 / self.bitrate if frame.airtime is None else frame.airtime
@@ -339,12 +342,14 @@ class SimModem:
 
     def heard(self, frame: "Frame", cause: str | None) -> None:
         """An arrival the radio judged has ended, good (``cause`` None) or lost."""
-        if self.closed:
-            return
         address = self.radio.address
         addressed = frame.dst_addr == address or frame.dst_addr == BROADCAST or self.promiscuous
+        if self.closed:  # the link went (removed, or given a real modem) while the frame was arriving
+            if addressed and frame.kind == DATA:
+                self._lost(frame, "closed")
+            return
         if cause is not None and addressed:
-            self.observer.err(self.clock.now(), self, frame, cause)
+            self._lost(frame, cause)
         if addressed and self.on_phy is not None and frame.kind != MODEM_ACK:  # (an ACK: no RECVEND)
             self.on_phy("rx_end", frame, None, self.clock.now(), cause)
         if frame.kind == MODEM_ACK:  # the modem's own: never a MAC's business
@@ -363,8 +368,14 @@ class SimModem:
             self.on_phy("rx_start", frame, start, end, None)
 
     def unreachable(self, frame: "Frame", cause: str = "range") -> None:
-        """A frame for this modem was sent while it was out of the sender's range (or had no pose:
-        ``range``), or outside its band (``band``)."""
+        """A frame for this modem that it cannot judge (``range``: out of the sender's range; ``no_pose``:
+        the sender or this modem had no position; ``band``: outside this modem's band): traced and counted
+        with that cause, never silent."""
+        self._lost(frame, cause)
+
+    def _lost(self, frame: "Frame", cause: str) -> None:
+        lost = self.stats.lost
+        lost[cause] = lost.get(cause, 0) + 1
         self.observer.err(self.clock.now(), self, frame, cause)
 
     def _deliver_now(self, frame: "Frame") -> None:

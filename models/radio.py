@@ -49,8 +49,9 @@ class RadioHost(Protocol):
         or ``modulation`` (a modulation this radio does not decode)."""
 
     def unreachable(self, frame: "Frame", cause: str = "range") -> None:
-        """A frame for this radio was sent while it was out of the sender's range (or had no pose:
-        ``range``), or outside this radio's band (``band``)."""
+        """A frame for this radio that it cannot judge: sent while it was out of the sender's range
+        (``range``), while the sender or this radio had no pose (``no_pose``: a live vehicle whose first
+        pose has not come, or a stale one dropped), or outside this radio's band (``band``)."""
 
 
 class LossModel(Protocol):
@@ -290,8 +291,8 @@ class Radio:
         self._arrival_over(arrival)
 
     def unreachable(self, frame: "Frame", cause: str = "range") -> None:
-        """A frame for this radio that cannot reach it (out of the sender's range, or no pose: ``range``;
-        outside this radio's band: ``band``)."""
+        """A frame for this radio that cannot reach it (``range``: out of the sender's range;
+        ``no_pose``: the sender or this radio has no position; ``band``: outside this radio's band)."""
         self.host.unreachable(frame, cause)
 
     def _arrival_over(self, arrival: Arrival) -> None:

@@ -124,18 +124,20 @@ do_install() {
     if [ -e "$D$PREFIX" ] && ! [ -f "$D$PREFIX/pyvenv.cfg" ] && [ -n "$(ls -A "$D$PREFIX")" ]; then
         die "$D$PREFIX exists and is not a venv: will not install into it"
     fi
+    where=$PREFIX
+    if [ -n "$D" ]; then where="$D$PREFIX (to run as $PREFIX on the target)"; fi
     if ! [ -e "$D$PREFIX/pyvenv.cfg" ]; then
-        say "creating the venv $PREFIX"
+        say "creating the venv $where"
         "$PYTHON" -m venv "$D$PREFIX"
     elif ! "$D$PREFIX/bin/python" -c '' 2>/dev/null; then # its Python is gone (a distribution upgrade)
-        say "recreating the venv $PREFIX: its Python no longer runs"
+        say "recreating the venv $where: its Python no longer runs"
         "$PYTHON" -m venv --clear "$D$PREFIX"
     fi
     mkdir "$WORK/src"
     (cd "$SRC" && tar -cf - --exclude=__pycache__ --exclude='*.pyc' \
         pyproject.toml README.md hilgate models drivers scenes $(ls -d LICEN[CS]E* 2>/dev/null || true)) |
         tar -C "$WORK/src" -xf -
-    say "installing hilgate and its dependencies into $PREFIX"
+    say "installing hilgate and its dependencies into $where"
     compile=--compile
     if [ -n "$D" ]; then compile=--no-compile; fi # compiled below with the target's paths
     # shellcheck disable=SC2086  # PIP_ARGS: several words

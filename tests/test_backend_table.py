@@ -112,7 +112,9 @@ def test_the_s100_paces_at_the_links_bitrate(monkeypatch):
     spec = load_scene_text(scene("backend: s100, port: /dev/ttyUSB0, bitrate_bps: 2400, rtscts: true"),
                            "/tmp/scene.yaml").links["x"]
     options = table.open_backend(spec, None, None).args[3]
-    assert options == table.S100Options(port="/dev/ttyUSB0", rtscts=True, air_bitrate_bps=2400.0)
+    # and the S100's limits (45-byte pieces without flow control), the driver's own without a preset
+    assert options == table.S100Options(port="/dev/ttyUSB0", rtscts=True, air_bitrate_bps=2400.0,
+                                        limits=table.S100_LIMITS)
 
 
 def test_the_built_in_rows_keep_todays_names_keys_and_classes():

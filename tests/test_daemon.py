@@ -282,7 +282,8 @@ def test_status_command_prints_the_documented_json(pair):
     assert list(status) == ["links", "vehicles"]
     assert [list(link) for link in status["links"]] == [
         ["id", "backend", "state", "tx_packets", "rx_packets", "drops", "fifo_bytes", "unread", "drop_causes",
-         "clients", "ready"]] * 2
+         "clients", "ready", "app_dst", "since_s", "since"]] * 2
+    assert all(link["since_s"] == 0.0 and link["since"].endswith("+00:00") for link in status["links"])
     assert all(link["ready"] is True for link in status["links"])  # idle links
     assert status["vehicles"][1] == {"name": "vb", "source": "static", "position": [150.0, 0.0, 0.0], "age_s": 0.0}
     table = subprocess.run([sys.executable, "-m", "hilgate", "status", "--runtime-dir", daemon.runtime],

@@ -109,6 +109,42 @@ def test_acks_lost_to_the_error_model_give_ri_retries_then_failedim_at_the_model
         daemon.close()
 
 
+def test_bursts_are_retried_rc_times_and_ims_ri_times_as_the_model_says(tmp_path):
+    # issue 24 item 6: DUNE sets !RI0 and !RC3; bursts follow !RC, acknowledged IMs !RI.  Every ACK is lost
+    # at a, so each frame is sent 1 + its retries times and then reported failed, at the model's times
+    d, range_max = 300.0, 1500.0
+    daemon, a, b, ca, cb = two_modems(tmp_path, d, a_extra=f", range_m: [0, {range_max}], error: {{expr: '1'}}",
+                                      b_extra=f", range_m: [0, {range_max}]")
+    rc, ri = 2, 1
+    try:
+        assert ca.ask(b"AT!RC%d" % rc) == b"OK" and ca.ask(b"AT!RI%d" % ri) == b"OK"
+        ca.send(b"AT*SEND,5,2,burst")
+        assert ca.expect(b"OK")[0] == b"OK"
+        assert ca.expect(b"FAILED,", timeout=60)[0] == b"FAILED,1,2"
+        assert [cb.expect(b"RECV,")[1] for _ in range(rc + 1)] == [b"burst"] * (rc + 1)
+        ca.send(b"AT*SENDIM,4,2,ack,ping")
+        assert ca.expect(b"OK")[0] == b"OK"
+        assert ca.expect(b"FAILEDIM", timeout=60)[0] == b"FAILEDIM,2"
+        assert [cb.expect(b"RECVIM")[1] for _ in range(ri + 1)] == [b"ping"] * (ri + 1)
+        ca.close(), cb.close()
+        daemon.stop()
+        events = daemon.trace_events()
+        t_ack = ACK_BYTES * 8 / BITRATE
+        wait = 2 * range_max / 1500 + TURN + t_ack + 0.001
+        for (size, retries), enq in zip(((5, rc), (4, ri)), events_of(events, a, "enq")):
+            pkt, t0 = enq["pkt"], enq["t"]
+            attempt = TX_DELAY + size * 8 / BITRATE + wait
+            sent = [e["t"] for e in events_of(events, a, "tx") if e["pkt"] == pkt]
+            assert sent == pytest.approx([t0 + k * attempt + TX_DELAY for k in range(retries + 1)], **EXACT)
+            assert [e["t"] for e in events_of(events, a, "retx") if e["pkt"] == pkt] == pytest.approx(
+                [t0 + k * attempt for k in range(1, retries + 1)], **EXACT)
+            [giveup] = [e for e in events_of(events, a, "giveup") if e["pkt"] == pkt]
+            assert giveup["t"] == pytest.approx(t0 + (retries + 1) * attempt, **EXACT)
+            assert giveup["attempts"] == retries + 1
+    finally:
+        daemon.close()
+
+
 def test_recvim_velocity_is_the_vehicles_radial_speed(tmp_path):
     # b comes towards a at 2 m/s from 600 m: the RECVIM at a says +2.00 m/s, and the distance of the moment
     daemon, a, b, ca, cb = two_modems(

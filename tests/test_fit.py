@@ -265,3 +265,34 @@ def test_plot_draws_the_fit(tmp_path):
     result = run_fit(trace, scene, "power", simulated=True)
     plot_fit(result, str(tmp_path / "fit.png"))
     assert (tmp_path / "fit.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_real_link_traced_with_link_names_does_not_stop_the_fit():
+    """Issue 24: a link's tx traced by the simulated backend (``"dst": "*"`` or a link id) before a swap
+    to a real modem made ``fit`` fail on int('*'); names are read as the addresses they stand for."""
+    events = real_trace()
+    events.insert(1, {"t": 0.5, "ev": "tx", "link": "ea", "dst": "*", "size": 30})   # broadcast: to eb (and sim)
+    events.insert(2, {"t": 0.6, "ev": "tx", "link": "ea", "dst": "eb", "size": 30})  # by name
+    events.insert(3, {"t": 0.7, "ev": "tx", "link": "ea", "dst": "addr:9", "size": 30})  # nobody
+    data = observations(events, REAL_LINKS)
+    assert len(data.frames) == 21 + 2 and sum(not o.delivered for o in data.frames[:2]) == 2
+
+
+def test_the_scene_comes_from_the_trace_as_it_was_at_each_moment():
+    """A run line says ea and eb are simulated, a reload makes them real, another simulated again:
+    only the frames between the two reloads are the real links'."""
+    def view(backend):
+        return {"links": {name: {"vehicle": info.vehicle, "backend": backend if name != "sim" else "sim",
+                                 "address": info.address, "tx_channel": "ac", "rx_channel": "ac"}
+                          for name, info in REAL_LINKS.items()}}
+    events = [{"t": 0.0, "ev": "run", "run": "r", "scene": "x", "scene_view": view("sim")}]
+    body = [e for e in real_trace() if e["ev"] != "run"]
+    events += [e for e in body if e["t"] < 10]
+    events.append({"t": 10.0, "ev": "reload", "scene": "x", "scene_view": view("evologics")})
+    events += [e for e in body if 10 <= e["t"] < 30]
+    events.append({"t": 30.0, "ev": "reload", "scene": "x", "scene_view": view("sim")})
+    events += [e for e in body if e["t"] >= 30]
+    data = observations(events, None)
+    assert [round(o.t) for o in data.frames] == [11, 13, 15, 17, 19, 21, 23, 25, 27, 29]
+    with pytest.raises(FitError, match="no frames sent by real links"):
+        observations([e for e in events if e["ev"] != "reload"], None)

@@ -15,7 +15,7 @@ import sys
 import pytest
 
 from hilgate.client import Link
-from hilgate.gli.limits import Limits, budget_problems, open_failure, scene_need
+from hilgate.gli.limits import Limits, budget_problems, describe, open_failure, probe_queue, queue_names, read_limits, scene_need
 from hilgate.scene import SceneError
 from hilgate.scene.load import load_scene
 from tests.daemon_kit import Daemon, unique
@@ -35,7 +35,8 @@ links:
 
 
 def queue_exists(link: str) -> list[bool]:
-    return [os.path.exists(f"/dev/mqueue/{link}_{d}_dlnk_phy") for d in ("tx", "rx")]
+    """Asked of the queue API, not of /dev/mqueue: the mqueue filesystem is not mounted everywhere."""
+    return [probe_queue(name) is not None for name in queue_names(link)]
 
 
 def test_socket_only_links_create_no_queues_and_still_carry_frames(tmp_path):
@@ -180,3 +181,49 @@ def test_check_reports_the_budget_and_the_limit_a_scene_exceeds(tmp_path):
     result = subprocess.run([sys.executable, "-m", "hilgate", "check", str(path)], capture_output=True, text=True,
                             timeout=60, preexec_fn=_low_queue_budget)
     assert "0 new queues" in result.stdout and "RLIMIT_MSGQUEUE" not in result.stdout
+
+
+# -- what the kernel tells without the mqueue filesystem ----------------------------------------------
+
+def test_budget_without_a_listing_counts_the_scenes_own_queues_and_says_the_rest_is_unknown():
+    blind = limits(user_bytes_used=None, queues_existing=None, present=frozenset({"l0_tx_dlnk_phy", "l0_rx_dlnk_phy"}),
+                   own_bytes=2 * 1290)
+    need = scene_need(links(2), blind)
+    assert need.new_queues == 2  # l0's two exist, asked for by name
+    text = describe(need, blind)
+    assert "819200 bytes (in use: unknown, 2580 by this scene's existing queues)" in text
+    assert "queues_max: 256 (how many exist: unknown)" in text and "mqueue filesystem" in text
+    # what is known still binds: the scene's own queues count against the budget
+    roomy = limits(user_bytes_used=None, queues_existing=None, queues_max=1000, present=blind.present,
+                   own_bytes=blind.own_bytes)
+    assert budget_problems(scene_need(links(317), roomy), roomy) == []  # 632 new × 1290 + 2580 = 817 860
+    problems = budget_problems(scene_need(links(318), roomy), roomy)  # 634 new × 1290 + 2580 = 820 440
+    assert len(problems) == 1 and "this user has at least 2580 in use of 819200" in problems[0]
+    # and a count above queues_max needs no listing to be certain
+    assert budget_problems(scene_need(links(129), blind), blind) == []  # 256 new queues
+    problems = budget_problems(scene_need(links(130), blind), blind)  # 258
+    assert len(problems) == 1 and "258 new queues and those that exist (how many: unknown)" in problems[0]
+
+
+def test_check_sees_the_queues_a_running_daemon_holds(tmp_path):
+    """The issue's case: `hilgate check` said "(0 in use)" while a daemon held four queues, because it
+    looked for them in an unmounted /dev/mqueue.  Asked of the queue API, they are there either way."""
+    a, b = unique("hq"), unique("hq")
+    text = scene({a: ", packet: vl1b", b: ", packet: vl1b"})
+    daemon = Daemon(tmp_path, text, [a, b])
+    try:
+        daemon.wait_for("READY=1")
+        assert queue_exists(a) == [True, True] and queue_exists(b) == [True, True]
+        result = subprocess.run([sys.executable, "-m", "hilgate", "check", str(daemon.scene)], capture_output=True,
+                                text=True, timeout=60)
+        assert result.returncode == 0, result.stderr
+        assert "2 of 2 links with POSIX queues: 0 new queues" in result.stdout
+        held = sum(probe_queue(name)[1] for link in (a, b) for name in queue_names(link))
+        assert held >= 4 * 10 * (1 + 271 + 96)  # at least vl1b's size each (dccomms' 8192 when unlimited)
+        if read_limits().listed:
+            used = int(result.stdout.split(" bytes (")[1].split(" in use)")[0])
+            assert used >= held
+        else:
+            assert f"(in use: unknown, {held} by this scene's existing queues)" in result.stdout
+    finally:
+        daemon.close()

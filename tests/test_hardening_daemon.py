@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from daemon_kit import Daemon, unique
+from daemon_kit import Daemon, peer_events, unique
 
 
 def scene(a: str, b: str, extra_links: str = "", extra: str = "") -> str:
@@ -267,14 +267,41 @@ def test_frames_nobody_was_there_to_read_are_not_counted_as_application_drops(tm
                 time.sleep(0.01)
         status_b, status_c = daemon.link_status(b), daemon.link_status(c)
         assert status_b["drops"] == 0 and status_b["unread"] == 0  # socket-only: every frame delivered
-        # c: its queue (10 messages, BUSY and READY among them) and a 64-message backlog keep 72 frames for
-        # an application that starts late; the other 8 nobody could read
-        assert status_c["drops"] == 0 and status_c["unread"] == 80 and status_c["drop_causes"] == {"no_reader": 8}
+        # c: the daemon holds 64 frames for an application that starts late (not its queue, which dccomms
+        # empties as it starts); the other 16 nobody could read
+        assert status_c["drops"] == 0 and status_c["unread"] == 80 and status_c["drop_causes"] == {"no_reader": 16}
     finally:
         daemon.stop()
         events = daemon.trace_events()
         daemon.close()
-    assert sum(1 for e in events if e.get("cause") == "no_reader" and e["link"] == c) == 8
+    assert sum(1 for e in events if e.get("cause") == "no_reader" and e["link"] == c) == 16
+
+
+def test_frames_held_for_a_dccomms_application_that_starts_late_survive_its_start(tmp_path):
+    """Issue 24 item 7: dccomms empties its input queue when it starts (CommsDeviceService::Init ->
+    ClearInputQueue) and only then says REQ_STATE; frames that came before are held in the daemon until it
+    speaks, so it gets them all, in order (it empties only the daemon's state messages)."""
+    from hilgate.client import Link
+
+    a, b = unique("a"), unique("b")
+    daemon = Daemon(tmp_path, scene(a, b), [a, b])
+    try:
+        daemon.wait_for("READY=1")
+        with Link.open(a, runtime_dir=daemon.runtime) as sender:
+            for i in range(5):
+                sender.send(b"early %d" % i, dst=2)
+        deadline = time.monotonic() + 60
+        while daemon.link_status(b)["unread"] < 5:
+            assert time.monotonic() < deadline, daemon.link_status(b)
+            time.sleep(0.01)
+        late = daemon.peer(b, "--clear", "--receive", "5", "--timeout", "60")
+        events = peer_events(late)
+        [cleared] = [e["types"] for e in events if e["ev"] == "cleared"]
+        assert cleared and set(cleared) == {2}  # only CMD_STATE messages were in its queue
+        assert [e["payload"].rstrip(".") for e in events if e["ev"] == "frame"] == [f"early {i}" for i in range(5)]
+        assert daemon.link_status(b)["drop_causes"] == {}
+    finally:
+        daemon.close()
 
 
 def test_frames_left_in_the_queue_while_no_daemon_ran_are_counted_and_traced_as_stale(tmp_path):

@@ -70,6 +70,12 @@ def installed(tmp_path_factory):
     assert system_state() == before, "the test touched the real /etc or /opt"
 
 
+def test_install_says_where_it_writes(installed):
+    root, output = installed
+    assert f"creating the venv {root}/opt/hilgate (to run as {PREFIX} on the target)" in output
+    assert f"installing hilgate and its dependencies into {root}/opt/hilgate (to run as {PREFIX}" in output
+
+
 def test_install_writes_the_unit_env_scene_and_logrotate(installed):
     root, output = installed
     for name in (UNIT, ENV, SCENE, LOGROTATE, MANIFEST):
@@ -256,8 +262,8 @@ def test_license_is_an_spdx_expression_without_setuptools_banner():
 
 
 def test_make_targets_run_what_the_readme_says():
-    def last_line(target: str) -> str:
-        result = subprocess.run(["make", "--no-print-directory", "-n", "-C", str(REPO), target],
+    def last_line(target: str, *variables: str) -> str:
+        result = subprocess.run(["make", "--no-print-directory", "-n", "-C", str(REPO), target, *variables],
                                 capture_output=True, text=True)
         assert result.returncode == 0, result.stderr
         return result.stdout.strip().splitlines()[-1]
@@ -265,6 +271,8 @@ def test_make_targets_run_what_the_readme_says():
     assert last_line("fuzz") == "HILGATE_FUZZ=1 .venv/bin/python -m pytest -q -k fuzz"
     assert last_line("test") == ".venv/bin/python -m pytest -q"
     assert last_line("run") == ".venv/bin/hilgate run scenes/demo.yaml"
+    assert last_line("run", "ARGS=--tcp 4280 --runtime-dir /tmp/x") == ".venv/bin/hilgate run scenes/demo.yaml --tcp 4280 --runtime-dir /tmp/x"
+    assert last_line("sim", "SCENE=lab.yaml", "ARGS=--until 600 --seed 3") == ".venv/bin/hilgate sim lab.yaml --until 600 --seed 3"
 
 
 STUB = """#!/bin/sh

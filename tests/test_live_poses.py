@@ -168,7 +168,7 @@ def test_fake_bluerov_over_mavlink_moves_the_modem_and_goes_stale(tmp_path):
         delays = [round(e["t"] - enq[e["pkt"]], 6) for e in events if e.get("ev") == "rx"]
         # 9 bytes on air = 72 ms, then the distance to the vehicle 5 m deep, 150 m then 300 m away
         assert delays == [round(0.072 + math.hypot(150, 5) / 1500, 6), round(0.072 + math.hypot(300, 5) / 1500, 6)]
-        assert [e["cause"] for e in events if e.get("ev") == "err"] == ["range"]
+        assert [e["cause"] for e in events if e.get("ev") == "err"] == ["no_pose"]  # stale, dropped: no position
     finally:
         vehicle.close()
         daemon.close()

@@ -26,7 +26,10 @@ import serial
 
 from daemon_kit import Daemon, unique  # noqa: E402
 from hilgate.client import Link  # noqa: E402
+from hilgate.core.packets import packet_class  # noqa: E402
 from test_live_poses import FakeBlueRov  # noqa: E402  (pymavlink's ArduSub, as in the one-host test)
+
+VL2B = packet_class("vl2b")
 
 
 CREDS = ""  # the lab's credentials for this module's daemons (hosts A-D and solo, applications app-1, app-2)
@@ -200,7 +203,8 @@ def test_three_hosts_share_one_channel_with_exact_model_times(network):
             seen = time.monotonic() - start
             assert received == (1, b"U\x00\x06A to B" + received[1][-2:])  # the whole vl2b packet, as on air
             assert seen >= airtime(6) + 150 / SLOW_SOUND_MPS - 0.002  # never before the model's time (150 m)
-            at.send_im(1, b"B to A")                          # B -> A, from the AT client
+            at.send_im(1, VL2B.encode(b"B to A"))             # B -> A, from the AT client (a vl2b frame, as on air:
+            #                                                   a simulated link's application gets what a bridge makes of it)
             message = la.recv(timeout=30)
             assert (message.src, message.data) == (2, b"B to A")
             lc.send(b"C to A", dst=1)                         # C -> A (300 m)
@@ -211,7 +215,7 @@ def test_three_hosts_share_one_channel_with_exact_model_times(network):
             message = lc.recv(timeout=30)
             assert (message.src, message.data) == (1, b"everyone")
             assert la.recv(timeout=0.5) is None and lc.recv(timeout=0.2) is None  # nothing else, no echo
-            at.send_im(1, b"ack me", ack=True)                # the acoustic ACK comes back from host A
+            at.send_im(1, VL2B.encode(b"ack me"), ack=True)   # the acoustic ACK comes back from host A
             assert la.recv(timeout=30).data == b"ack me"
             assert at.wait_line(b"DELIVEREDIM") == b"DELIVEREDIM,1", at.buffer[-400:]
         # every host shows every vehicle; status --network lists each host's links
@@ -296,7 +300,7 @@ def test_an_application_reaches_a_link_over_zenoh_from_anywhere(network):
             assert link.command({"class": "POSE"})["position"] == [0.0, 0.0, 0.0]
             link.send(b"over zenoh", dst=2)
             assert at.recvim()[1][3:-2] == b"over zenoh"
-            at.send_im(1, b"and back")
+            at.send_im(1, VL2B.encode(b"and back"))
             message = link.recv(timeout=30)
             assert (message.src, message.data) == (2, b"and back")
             with pytest.raises(Exception, match="do not fit"):

@@ -147,7 +147,8 @@ def test_unreachable_goes_to_the_host():
     radio, host, clock = make()
     radio.unreachable(frame(7))
     radio.unreachable(frame(8), "band")
-    assert host.unreachable_frames == [(7, "range"), (8, "band")]
+    radio.unreachable(frame(9), "no_pose")
+    assert host.unreachable_frames == [(7, "range"), (8, "band"), (9, "no_pose")]
 
 
 def test_an_arrival_it_cannot_decode_interferes_and_ends_lost_with_its_cause():

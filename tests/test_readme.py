@@ -58,3 +58,265 @@ def test_every_docs_page_is_reached_from_the_readme():
                  if not re.match(r"^[a-z]+:", target) and target.partition("#")[0]]
     unreached = [page.name for page in sorted((REPO / "docs").glob("*.md")) if page.resolve() not in seen]
     assert unreached == []
+
+
+# -- the quick start: its length, and every command run as written ------------------------------------
+
+import os  # noqa: E402
+import shlex  # noqa: E402
+import shutil  # noqa: E402
+import signal  # noqa: E402
+import socket  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import threading  # noqa: E402
+import time  # noqa: E402
+import uuid  # noqa: E402
+
+README = REPO / "README.md"
+QUICK_START = "## Quick start"
+HANG_GUARD_S = 90.0  # every wait returns as soon as its condition holds; this only stops a hang
+DEMO_LINKS = ("bluerov_rf", "rov2_rf", "bluerov_ac", "rov2_ac", "auv_ac")
+TWO_HOST_LINKS = ("rov_rf", "rov2_rf", "rov_ac", "boat_ac")
+
+
+def words(text: str) -> int:
+    return len(re.findall(r"\S+", text))
+
+
+def quick_start() -> str:
+    text = README.read_text(encoding="utf-8")
+    start = text.index(f"\n{QUICK_START}\n")
+    end = text.find("\n## ", start + 1)
+    return text[start:end if end >= 0 else len(text)]
+
+
+def test_the_readme_is_short_and_its_quick_start_shorter():
+    assert words(quick_start()) <= 1500
+    assert words(README.read_text(encoding="utf-8")) <= 4000
+
+
+def transcript() -> list[tuple[str, list[str]]]:
+    """Every ``$ command`` of the quick start's code blocks, with the lines the README shows it print."""
+    shown: list[tuple[str, list[str]]] = []
+    fence = None  # the open block's language ("" for a terminal transcript), None outside blocks
+    for line in quick_start().splitlines():
+        if line.startswith("```"):
+            fence = line[3:].strip() if fence is None else None
+        elif fence == "" and line.startswith("$ "):
+            shown.append((line[2:].split("  #")[0].strip(), []))
+        elif fence == "" and shown and line.strip():
+            shown[-1][1].append(line)
+    return shown
+
+
+def _normal(line: str) -> str:
+    """Numbers vary from run to run (times, counters, ports): compared as '#'; spaces as one."""
+    return re.sub(r"\s+", " ", re.sub(r"\d+(\.\d+)?", "#", line)).strip()
+
+
+def shows(actual: str, expected: list[str]) -> bool:
+    """The README's lines appear in the output in that order ('…' standing for anything)."""
+    lines = [_normal(line) for line in actual.splitlines()]
+    position = 0
+    for line in expected:
+        pattern = re.compile(re.escape(_normal(line)).replace("…", ".*"))
+        while position < len(lines) and not pattern.fullmatch(lines[position]):
+            position += 1
+        if position == len(lines):
+            return False
+        position += 1
+    return True
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+class Walk:
+    """The quick start run as a newcomer would, in a directory of its own: the README's commands word
+    for word, except that link ids carry a token of this run (two runs on one machine would share the
+    demo's ids), the runtime directories are this run's, and so is the Zenoh port."""
+
+    def __init__(self, tmp_path):
+        self.dir = tmp_path
+        self.token = uuid.uuid4().hex[:6]
+        self.links = [*DEMO_LINKS, *TWO_HOST_LINKS]
+        self.port = free_port()
+        self.runtime = tmp_path / "rt"
+        self.substitutions = [(r"\b7447\b", str(self.port)), (r"/tmp/tank-pc\b", str(tmp_path / "tank-pc")),
+                              (r"/tmp/pier-pc\b", str(tmp_path / "pier-pc"))]
+        self.substitutions += [(rf"\b{re.escape(link)}\b", f"{link}_{self.token}") for link in dict.fromkeys(self.links)]
+        shutil.copytree(REPO / "scenes", tmp_path / "scenes")  # the checkout's, as a newcomer has them
+        shutil.copytree(REPO / "examples", tmp_path / "examples", ignore=shutil.ignore_patterns("__pycache__"))
+        for scene in (tmp_path / "scenes").glob("*.yaml"):
+            scene.write_text(self.mine(scene.read_text()))
+        self.shown: dict[str, list[list[str]]] = {}  # a command the README shows twice prints two things
+        for command, lines in transcript():
+            self.shown.setdefault(self.mine(command), []).append([self.mine(line) for line in lines])
+        self.checked: dict[str, int] = {}  # how many of each command's outputs were checked
+        self.ran: list[str] = []
+        self.processes: list[Process] = []
+        self.env = dict(os.environ, RUNTIME_DIRECTORY=str(self.runtime), PYTHONUNBUFFERED="1")
+
+    def mine(self, text: str) -> str:
+        for pattern, replacement in self.substitutions:
+            text = re.sub(pattern, replacement, text)
+        return text
+
+    def argv(self, command: str) -> list[str]:
+        words_ = shlex.split(command)
+        if words_[0] == "hilgate":
+            return [sys.executable, "-m", "hilgate", *words_[1:]]
+        if words_[0] == "make":  # the .venv make test installed, not made again here
+            return ["make", "--no-print-directory", "-C", str(REPO), "-o", ".venv/.installed", *words_[1:],
+                    f"SCENE={self.dir / 'scenes' / 'demo.yaml'}", "ARGS=--no-status-line"]
+        return words_
+
+    def start(self, command: str, ready: str | None = None) -> "Process":
+        command = self.mine(command)
+        process = Process(command, self.argv(command), self.dir, self.env)
+        self.ran.append(command)
+        self.processes.append(process)
+        if ready is not None:
+            process.wait_for(ready)
+        return process
+
+    def run(self, command: str, until_shown: bool = False) -> str:
+        """Run to the end and check the output against the README's; ``until_shown``: run again until
+        it shows what the README shows (a status that is still catching up)."""
+        deadline = time.monotonic() + HANG_GUARD_S
+        while True:
+            process = self.start(command)
+            output = process.finish()
+            if shows(output, self.expected(command)) or not until_shown or time.monotonic() > deadline:
+                break
+            time.sleep(0.2)
+        self.check(command, output)
+        assert process.code == 0, f"{command}: exit status {process.code}\n{output}"
+        return output
+
+    def expected(self, command: str) -> list[str]:
+        """What the README shows the command print at this point of the walk (its n-th appearance)."""
+        command = self.mine(command)  # mine() twice changes nothing: a token follows '_', so no \b
+        assert command in self.shown, f"`{command}` is not in the README's quick start"
+        occurrences = self.shown[command]
+        assert self.checked.get(command, 0) < len(occurrences), f"`{command}` run more often than the README shows"
+        return occurrences[self.checked.get(command, 0)]
+
+    def check(self, command: str, output: str) -> None:
+        expected = self.expected(command)
+        assert shows(output, expected), (
+            f"`{command}` printed:\n{output}\nwhere the README shows:\n" + "\n".join(expected))
+        self.checked[self.mine(command)] = self.checked.get(self.mine(command), 0) + 1
+
+    def stop(self, process: "Process", sig: int = signal.SIGINT) -> str:
+        output = process.finish(sig)
+        self.check(process.command, output)
+        return output
+
+    def close(self) -> None:
+        for process in self.processes:
+            process.finish(signal.SIGTERM)
+        from hilgate.gli.queues import unlink_queues
+
+        unlink_queues(f"{link}_{self.token}" for link in self.links)
+
+
+class Process:
+    """One command of the walk, its output (stdout and stderr as a terminal shows them) read as it comes."""
+
+    def __init__(self, command: str, argv: list[str], cwd, env):
+        self.command = command  # as the README has it (with this walk's ids)
+        self.popen = subprocess.Popen(argv, cwd=cwd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                      stderr=subprocess.STDOUT, text=True, start_new_session=True)
+        self.lines: list[str] = []
+        self.reader = threading.Thread(target=self._read, daemon=True)
+        self.reader.start()
+        self.code: int | None = None
+
+    def _read(self) -> None:
+        for line in self.popen.stdout:
+            self.lines.append(line)
+
+    @property
+    def output(self) -> str:
+        return "".join(self.lines)
+
+    def wait_for(self, text: str) -> None:
+        deadline = time.monotonic() + HANG_GUARD_S
+        while text not in self.output:
+            assert self.popen.poll() is None or text in self.output, f"{self.command} ended:\n{self.output}"
+            assert time.monotonic() < deadline, f"no {text!r} from {self.command}:\n{self.output}"
+            time.sleep(0.05)
+
+    def finish(self, sig: int | None = None) -> str:
+        """Wait for the end (after ``sig`` to its process group, as Ctrl-C is); its whole output."""
+        if sig is not None and self.popen.poll() is None:
+            os.killpg(self.popen.pid, sig)
+        try:
+            self.code = self.popen.wait(HANG_GUARD_S)
+        except subprocess.TimeoutExpired:
+            os.killpg(self.popen.pid, signal.SIGKILL)
+            self.code = self.popen.wait()
+        self.reader.join(HANG_GUARD_S)
+        return self.output
+
+
+@pytest.fixture
+def walk(tmp_path):
+    walk = Walk(tmp_path)
+    try:
+        yield walk
+    finally:
+        walk.close()
+
+
+def test_every_quick_start_command_prints_what_the_readme_shows(walk):
+    # (a) an application against simulated modems
+    daemon = walk.start("make run", ready="started: scene")
+    listener = walk.start("hilgate listen rov2_rf", ready="listening on")
+    walk.run("hilgate send bluerov_rf --to 2 hello")
+    listener.wait_for(": hello")
+    walk.stop(listener)
+    walk.run("hilgate status", until_shown=True)
+    pong = walk.start("hilgate app examples/apps/pingpong.py:Pong --link rov2_ac", ready="Pong: link")
+    walk.run("hilgate app examples/apps/pingpong.py:Ping --link bluerov_ac --param period_s=2 --param peer=2 "
+             "--param count=5 --until 12")
+    assert "Pong: stopped after" in walk.stop(pong)  # Ctrl-C: its summary
+    walk.stop(daemon)
+
+    # (b) one link to a real modem, without a restart
+    walk.run("cp scenes/demo.yaml lab.yaml")
+    daemon = walk.start("hilgate run lab.yaml", ready="started: scene")
+    new_line = walk.mine(re.search(r"^```yaml\n(  rov2_ac: .*)\n```", quick_start(), re.M).group(1))
+    lab = walk.dir / "lab.yaml"
+    lab.write_text(re.sub(rf"^  rov2_ac_{walk.token}: .*$", lambda _: new_line, lab.read_text(), flags=re.M))
+    walk.run("hilgate reload")
+    walk.run("hilgate status", until_shown=True)
+    walk.stop(daemon)
+
+    # (c) the experiment in virtual time, with figures
+    walk.run("hilgate sim scenes/demo.yaml --trace demo.jsonl --summary demo.json")
+    walk.run("hilgate report demo.jsonl demo.json --out demo-report")
+    assert (walk.dir / "demo-report" / "index.html").is_file()
+
+    # (d) two PCs, one network of modems (here, two daemons on this one)
+    walk.run("hilgate network init lab-creds --hosts tank-pc,pier-pc --apps 2")
+    tank = walk.start("hilgate run scenes/two-hosts.yaml --host tank-pc --zenoh-credentials lab-creds "
+                      "--zenoh-listen tcp/127.0.0.1:7447 --runtime-dir /tmp/tank-pc", ready="joined the network")
+    pier = walk.start("hilgate run scenes/two-hosts.yaml --host pier-pc --zenoh-credentials lab-creds "
+                      "--zenoh-connect tcp/127.0.0.1:7447 --runtime-dir /tmp/pier-pc", ready="joined the network")
+    tank.wait_for("host pier-pc is up")
+    listener = walk.start("hilgate listen rov_ac --runtime-dir /tmp/tank-pc", ready="listening on")
+    walk.run("hilgate send boat_ac --to 1 hello from the pier --runtime-dir /tmp/pier-pc")
+    listener.wait_for("hello from the pier")
+    walk.stop(listener)
+    walk.run("hilgate status --network --runtime-dir /tmp/tank-pc", until_shown=True)
+    walk.stop(pier)
+    walk.stop(tank)
+
+    # and nothing the README shows was left out
+    assert {command: len(outputs) for command, outputs in walk.shown.items()} == walk.checked

@@ -20,7 +20,7 @@ import serial
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from daemon_kit import Daemon, unique
+from daemon_kit import Daemon, peer_events, unique
 from fuzzkit import examples
 from hilgate.core.packets import packet_class
 from hilgate.core.scheduler import VirtualScheduler
@@ -167,10 +167,13 @@ def test_bytes_that_are_no_frame_pass_through_as_the_real_pipe_would(tmp_path):
         # on air: the text and the bad frame with their CR LF, as written; "hello"; the good frame (its CR LF
         # is the S100's packet end, added back by the far modem)
         assert [e["size"] for e in events if e.get("link") == ea and e["ev"] == "tx"] == [len(text) + 2, 22, 5, 20]
-        # the emulators took everything; the link's dccomms queue door cannot hold more than a SimplePacket's
-        # 17 bytes of payload, so it counts the two longer raw frames as its own loss
-        drops = [(e["link"], e["cause"], e["size"]) for e in events if e["ev"] in ("drop", "err")]
-        assert drops == [(eb, "size", len(text) + 2), (eb, "size", 22)]
+        # the emulators took everything; the far link's applications get what a bridge on the receiving side
+        # makes of the bytes (issue 24 item 5): the good frame, and every byte of the rest counted and traced
+        # as making no frame, with the hunter's reason (the bad frame's CRC costs its preamble byte, then the
+        # rest has none)
+        drops = [(e["link"], e["cause"], e["size"], e.get("reason")) for e in events if e["ev"] in ("drop", "err")]
+        assert drops == [(eb, "not_a_frame", len(text) + 2, "no preamble"), (eb, "not_a_frame", 1, "crc"),
+                         (eb, "not_a_frame", 21, "no preamble"), (eb, "not_a_frame", 5, "no preamble")]
     finally:
         daemon.close()
 
@@ -301,6 +304,7 @@ class _Link:
 
     def __init__(self, name, clock):
         self.id, self.packet, self.address, self.clock = name, packet_class("simple:20"), 1, clock
+        self.limits = None  # the S100's own (45-byte pieces)
         self.free, self.peer, self.lost_bytes = 0.0, None, 0
 
     def airtime(self, size):
@@ -374,3 +378,52 @@ def test_hilgate_emulate_takes_the_line_options_and_the_scene_checks_them(tmp_pa
         result = subprocess.run([sys.executable, "-m", "hilgate", "emulate", protocol, str(scene_file), "--link", "x",
                                  "--pty", str(tmp_path / "tty"), *extra], capture_output=True, text=True, timeout=60)
         assert result.returncode == 2 and message in result.stderr, result.stderr
+
+
+@pytest.mark.parametrize("packet", ["vl2b", "dlf16", "simple:100"])
+def test_a_simulated_links_applications_get_the_frames_an_s100_sent_in_pieces(tmp_path, packet):
+    """Issue 24 item 5: hilgate's S100 driver (as dccomms' bridge) writes 100-byte frames to an emulated S100
+    without flow control, which puts each on air as 45 + 45 + 12 bytes; a *simulated* link receives the
+    pieces, and its applications (a dccomms one on the queues, a socket one) get whole frames of their packet
+    class, as a bridge on the receiving side hunts them.  Nothing is counted as no frame."""
+    from hilgate.client import Link
+    from hilgate.core.packets import packet_class
+    from test_modems_e2e import wait_up
+
+    d, e, s = unique("drv"), unique("emu"), unique("sim")
+    daemon = Daemon(tmp_path, f"""\
+channels: {{rf: {{speed_mps: 1500}}}}
+vehicles:
+  va: {{pose: {{static: [0, 0, 0]}}}}
+  vb: {{pose: {{static: [3, 0, 0]}}}}
+links:
+  {d}: {{vehicle: va, backend: s100, port: {tmp_path / 'a'}, baud: 19200, address: 1, bitrate_bps: 1800, packet: {packet}}}
+  {e}: {{vehicle: va, address: 1, bitrate_bps: 1800, packet: {packet}, emulate: {{protocol: s100, pty: {tmp_path / 'a'},
+        baud: 19200}}}}
+  {s}: {{vehicle: vb, address: 2, bitrate_bps: 1800, packet: {packet}}}
+""", [d, e, s])
+    try:
+        daemon.wait_for("READY=1")
+        wait_up(daemon, [d])
+        wire = packet_class(packet)
+        size = max(n for n in range(wire.max_payload + 1) if wire.real_length(n) == 100)  # 100 bytes on air
+        payloads = [(bytes([i]) + b"\r\n+++AT" + bytes(range(40, 40 + size)))[:size] for i in range(3)]
+        dccomms = daemon.peer(s, "--receive", "3", "--timeout", "60") if packet == "vl2b" else None
+        with Link.open(d, runtime_dir=daemon.runtime) as ld, Link.open(s, runtime_dir=daemon.runtime) as ls:
+            if dccomms is not None:
+                daemon.wait_clients(s, 1)  # (the socket client; the dccomms peer says REQ_STATE as it starts)
+            for payload in payloads:
+                ld.send(payload, dst=2)
+            got = [ls.recv(timeout=60) for _ in payloads]
+            assert [m.data for m in got if m is not None] == payloads
+            assert all(m.src == 1 for m in got)
+        if dccomms is not None:
+            frames = [ev for ev in peer_events(dccomms) if ev["ev"] == "frame"]
+            assert [ev["payload"].encode("latin-1") for ev in frames] == payloads and all(ev["crc_ok"] for ev in frames)
+        daemon.stop()
+        events = daemon.trace_events()
+        assert [ev["size"] for ev in events if ev.get("link") == e and ev["ev"] == "tx"] == [45, 45, 12] * 3
+        assert [ev["size"] for ev in events if ev.get("link") == s and ev["ev"] == "rx"] == [45, 45, 12] * 3
+        assert not [ev for ev in events if ev["ev"] in ("drop", "err")]
+    finally:
+        daemon.close()

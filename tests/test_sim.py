@@ -92,7 +92,13 @@ def test_summary_has_exactly_the_design_fields():
         "from", "to", "offered", "fifo_drops", "tx_packets", "tx_bytes", "rx_packets", "rx_bytes", "lost",
         "throughput_Bps", "efficiency", "delay_mean_s", "delay_p50_s", "delay_p95_s", "jitter_s"]
     assert list(summary["flows"][0]["lost"]) == ["prop", "col", "mult", "range"]
-    assert list(summary["links"][0]) == ["id", "tx_packets", "rx_packets", "fifo_drops", "fifo_peak_bytes"]
+    # DESIGN.md's link fields first; then (issue 24) the backend and one segment per backend period, the
+    # same as the daemon's summary writes (here one simulated period over the whole run)
+    link = summary["links"][0]
+    assert list(link) == ["id", "tx_packets", "rx_packets", "fifo_drops", "fifo_peak_bytes", "backend", "segments"]
+    assert link["backend"] == "sim" and link["segments"] == [
+        {"backend": "sim", "start_s": 0.0, "end_s": 10, "tx_packets": link["tx_packets"],
+         "rx_packets": link["rx_packets"], "drops": link["fifo_drops"], "fifo_peak_bytes": link["fifo_peak_bytes"]}]
     assert summary["scene"] == "pair" and summary["seed"] == 5 and summary["sim_time_s"] == 10
 
 
@@ -144,3 +150,23 @@ def test_demo_scene_shows_every_kind_of_outcome():
     assert {"prop", "col", "range"} <= causes
     assert all(f["offered"] > 0 for f in summary["flows"])
     assert sum(f["rx_packets"] for f in summary["flows"]) > 100
+
+
+def test_demo_scene_is_true_to_its_comments():
+    """The demo's comments: `hilgate sim` runs two minutes; the AUV flies its lawn-mower pattern over and
+    over (130 s a round), the second ROV comes back about every 70 s: under `hilgate run` they keep moving."""
+    from hilgate.scene.load import load_scene
+    from hilgate.sim.pose_sources import build_pose
+
+    text = open(DEMO).read()
+    assert "duration_s: two minutes" in text and "130 s a round" in text and "about 70 s a round" in text
+    scene = load_scene(DEMO)
+    assert scene.duration_s == 120
+    auv, rov2 = build_pose(scene.vehicles["auv"]), build_pose(scene.vehicles["rov2"])
+    for t in (0.0, 17.5, 60.0, 111.0, 125.0):
+        assert auv.position(t + 130) == pytest.approx(auv.position(t))
+    assert auv.position(111.0) != pytest.approx(auv.position(125.0))  # still moving past its last row
+    assert all(40 <= auv.position(t)[0] <= 50 for t in range(0, 261, 5))
+    period = 10 + 5 / 0.25 + 15 + 10 + ((5 ** 2 + 3 ** 2) ** 0.5) / 0.4
+    assert 65 <= period <= 75
+    assert rov2.position(3.0 + period) == pytest.approx(rov2.position(3.0))

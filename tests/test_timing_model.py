@@ -183,6 +183,32 @@ def test_out_of_range_means_no_arrival_at_all():
     assert net.medium.arrivals == 3
 
 
+def test_a_frame_that_cannot_be_judged_for_want_of_a_pose_is_traced_at_each_radio_that_would_judge_it():
+    # issue 24 item 7: before a live vehicle's first pose its frames are heard by nobody and frames to it
+    # reach it nowhere; each is an err with cause no_pose, broadcast or not, never silence
+    from hilgate.sim.live_vehicle import LiveVehicle
+
+    rov = LiveVehicle("rov")  # no pose yet
+    net = Net(Channel("ac", 1500.0))
+    net.modem("top", (0, 0, 0), bitrate_bps=1000)
+    net.modem("rov", rov, bitrate_bps=1000)
+    net.modem("buoy", (100, 0, 0), bitrate_bps=1000)
+    net.send("top", "rov", 10)          # unicast to the vehicle without a pose
+    net.send("top", None, 10, at=1.0)   # broadcast: buoy hears it, rov cannot be judged
+    net.send("rov", None, 10, at=2.0)   # from the vehicle without a pose: neither top nor buoy can judge it
+    net.send("rov", "buoy", 10, at=3.0)
+    net.clock.at(4.0, lambda: rov.update("mavlink", 4.0, {"x": 150.0, "y": 0.0, "z": 0.0}))
+    net.send("top", "rov", 10, at=5.0)  # its pose came: heard
+    net.run()
+    errors = [(round(t), link, cause) for t, _, link, _, cause in net.of("err")]
+    assert errors == [(0, "rov", "no_pose"), (1, "rov", "no_pose"), (2, "top", "no_pose"), (2, "buoy", "no_pose"),
+                      (3, "buoy", "no_pose")]
+    assert [(round(t), link) for t, _, link, *_ in net.of("rx")] == [(1, "buoy"), (5, "rov")]
+    # and counted, per link and cause
+    assert {name: modem.stats.lost for name, modem in net.modems.items()} == \
+        {"top": {"no_pose": 1}, "rov": {"no_pose": 2}, "buoy": {"no_pose": 2}}
+
+
 def test_range_is_the_senders():
     net = Net(Channel("rf", 2.25e7))
     net.modem("far_reaching", (0, 0, 0), range_m=(0.0, 100.0), channel="rf")

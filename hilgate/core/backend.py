@@ -74,6 +74,11 @@ class Backend(ABC):
     def idle(self) -> bool:
         """Nothing queued or on air: the GLI says READY."""
 
+    def admit(self, frame: AppFrame) -> None:
+        """Raise :class:`~hilgate.core.packets.PacketError` if the modem would refuse ``frame`` (too large
+        for it): called before :meth:`send`, when the application sends, so the application is told at
+        once, by a real modem's driver and a simulated link alike."""
+
     @abstractmethod
     def send(self, frame: AppFrame) -> bool:
         """Queue a frame for transmission; False if it was refused (and counted as dropped)."""

@@ -52,6 +52,10 @@ class LinkPort(Protocol):
     def emulate(self) -> dict[str, Any]:
         """The scene's ``emulate:`` options for this link (empty when it emulates no modem)."""
 
+    @property
+    def limits(self) -> Any:
+        """What the link's modem accepts (``drivers.table.ModemLimits``, its ``limits:``), None if not stated."""
+
     def send(self, frame: AppFrame) -> None:
         """Hand a frame to the backend; :class:`~hilgate.core.packets.PacketError` if it cannot carry it."""
 

@@ -98,6 +98,11 @@ def _lock_name(link_id: str) -> bytes:
     return b"\0" + name.encode()
 
 
+HOLDER_COMMAND_MAX = 2000
+"""Characters of the holder's command line an error shows: whole for any real command line (its scene
+path is at the end), bounded for one another local user made up."""
+
+
 def holder_of(link_id: str) -> str:
     """Which process holds ``link_id``'s lock, for the error message."""
     probe = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -107,7 +112,12 @@ def holder_of(link_id: str) -> str:
         pid, uid, _gid = struct.unpack("3i", probe.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED, 12))
         try:
             with open(f"/proc/{pid}/cmdline", "rb") as handle:
-                command = handle.read().replace(b"\0", b" ").decode(errors="replace").strip()[:120]
+                raw = handle.read(HOLDER_COMMAND_MAX + 1)
+            command = raw[:HOLDER_COMMAND_MAX].replace(b"\0", b" ").decode(errors="replace").strip()
+            if not command.isprintable():  # one line, whatever another local user put in its arguments
+                command = command.encode("unicode_escape").decode("ascii")
+            if len(raw) > HOLDER_COMMAND_MAX:  # whole, unless another local user made it absurdly long
+                command += " …"
         except OSError:
             command = "?"
         return f"process {pid} of {_describe_owner(uid)}: {command}"

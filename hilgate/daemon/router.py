@@ -17,15 +17,18 @@ from collections import Counter
 from typing import Any, Callable
 
 from .access import LinkLock
+from .accounts import Counters, LinkAccount
 from ..core.backend import AppFrame, Backend, PhyEvent
 from ..core.endpoint import ABSENT, KEPT, TAKEN, Door, Endpoint
 from ..core.packets import Decoded, PacketClass, packet_class
+from ..drivers.bridge import ReceivingBridge, from_emulator
 from ..drivers.table import DRIVERS, open_backend
 from ..models.frame import BROADCAST
 from ..models.link_budget import Reception, SimpleLinkBudget, reception
 from ..models.usbl import UsblFix, fix as usbl_fix
 from ..scene import LinkSpec, Scene
-from ..scene.diff import diff
+from ..scene.diff import SceneDiff, diff
+from ..scene.view import link_changes, link_view as scene_view_link, scene_view, view_hash
 from ..sim.backend import SimBackend
 from ..sim.recorder import Recorder
 from ..sim.world import World
@@ -39,8 +42,9 @@ class RoutedLink:
     """One DCComms id: its backend and the endpoints in front of it.  To its endpoints it is a
     :class:`~hilgate.core.endpoint.LinkPort`; it never imports their classes."""
 
-    def __init__(self, spec: LinkSpec, router: "Router"):
+    def __init__(self, spec: LinkSpec, router: "Router", account: LinkAccount | None = None):
         self.router = router
+        self.account = account if account is not None else LinkAccount(spec.id)
         self.spec = spec
         self.id = spec.id
         self.packet: PacketClass = packet_class(spec.packet)
@@ -51,6 +55,7 @@ class RoutedLink:
         self.seq = 0
         self.lock: LinkLock | None = None
         self.unread_kept = 0  # frames nobody took, kept in the queue for an application that starts late
+        self.bridge: ReceivingBridge | None = None  # made for the first bytes an emulated modem sends here
         self._state_pending = False
         self._usbl_rng: random.Random | None = None
         self.readdressed: int | None = None  # the address an emulated modem's AT!AL gave the link
@@ -62,10 +67,17 @@ class RoutedLink:
         for door in doors:
             self.doors.append((door, door.open(self)))  # (a handle of None: nothing to open yet)
 
-    def set_backend(self, backend: Backend) -> None:
+    def set_backend(self, backend: Backend, kind: str | None = None) -> None:
+        """Put ``backend`` (of ``kind``, the scene's name for it) behind the endpoints: the old one is
+        closed first, and its period of the link's account ends with what it counted."""
+        now = self.router.scheduler.now()
+        first = self.backend is None
         if self.backend is not None and self.backend is not backend:
             self.backend.close()
+            self.account.close(now)
         self.backend = backend
+        if self.account.current is None:
+            self.account.open(now, kind or self.spec.backend, self.counters, from_zero=first)
         backend.on_receive = self.deliver
         backend.on_idle = self.state_changed
         backend.on_state = lambda state: self.state_changed()
@@ -73,6 +85,8 @@ class RoutedLink:
         self.state_changed()
 
     def update(self, spec: LinkSpec, endpoints_changed: bool) -> None:
+        if spec.packet != self.spec.packet:
+            self._flush_bridge()
         self.spec = spec
         self.packet = packet_class(spec.packet)
         if self.readdressed is not None:  # a reload that changes the link gives it its scene address again
@@ -144,6 +158,11 @@ class RoutedLink:
     @property
     def emulate(self) -> dict[str, Any]:
         return dict(self.spec.emulate)
+
+    @property
+    def limits(self) -> Any:
+        """What the link's modem accepts (its ``limits:``, from its preset; None: not stated)."""
+        return self.spec.limits
 
     @property
     def ready(self) -> bool:
@@ -243,6 +262,7 @@ class RoutedLink:
         if backend is None:
             self.lost("no_backend", len(frame.real), src="app")
             return
+        backend.admit(frame)  # PacketError: too large for the modem (its limits)
         if (isinstance(backend, SimBackend) and not backend.everyone_in_range
                 and self.router.addressed_to_nobody(self.spec.params.tx_channel, frame.dst)):
             # it still goes on air (and may spoil others' frames), but nobody will ever take it
@@ -270,9 +290,44 @@ class RoutedLink:
         """A frame the link received, to every endpoint.  One that no application at all was there to
         take is counted and traced (``no_reader``); one an application could not take is a loss of
         that application's (``app_full``, ``client_slow``)."""
+        if frame.meta is not None and from_emulator(frame):
+            self._from_emulator(frame)
+            return
+        self._hand(frame, self.endpoints)
+
+    def _from_emulator(self, frame: AppFrame) -> None:
+        """An emulated modem's bytes (an EvoLogics message, an S100's piece): this link's emulated
+        modems print them as they are, its applications get the frames a bridge on the receiving side
+        makes of them (:mod:`hilgate.drivers.bridge`), and bytes that make none are counted and traced."""
         t = self.router.scheduler.now()
-        taken = kept = False
-        for endpoint in list(self.endpoints):
+        emulators = [endpoint for endpoint in self.endpoints if endpoint.kind == "emulator"]
+        for endpoint in emulators:
+            outcome = endpoint.deliver(frame, t)
+            if outcome not in (TAKEN, KEPT, ABSENT):
+                self.lost(outcome, len(frame.real))
+        if self.bridge is None:
+            self.bridge = ReceivingBridge(self.packet)
+        frames, losses = self.bridge.take(frame)
+        sender = self.router.link_name(self.spec.params.rx_channel, frame.src)
+        for loss in losses:
+            self.lost("not_a_frame", loss.size, ev="err", src=sender, reason=loss.reason)
+        others = [endpoint for endpoint in self.endpoints if endpoint.kind != "emulator"]
+        for whole in frames:
+            self._hand(whole, others, taken=bool(emulators))
+        if frame.on_delivered is not None and frame.dst == self.address:
+            frame.on_delivered(frame, self)
+
+    def _flush_bridge(self) -> None:
+        """Bytes held for a frame that can no longer be completed (the link closes, its class changes)."""
+        if self.bridge is not None:
+            for loss in self.bridge.flush():
+                self.lost("not_a_frame", loss.size, ev="err", reason=loss.reason)
+            self.bridge = None
+
+    def _hand(self, frame: AppFrame, endpoints: list[Endpoint], taken: bool = False) -> None:
+        t = self.router.scheduler.now()
+        kept = False
+        for endpoint in list(endpoints):
             outcome = endpoint.deliver(frame, t)
             if outcome == TAKEN:
                 taken = True
@@ -303,31 +358,51 @@ class RoutedLink:
 
     # -- operations ------------------------------------------------------------------------------
 
+    def counters(self) -> Counters:
+        """What the backend and the GLI in front of it counted so far (read at the edges of a period
+        of the link's account, and by ``hilgate status``; never per frame)."""
+        backend = self.backend
+        figures = backend.status() if backend is not None else {}
+        return {"tx_packets": figures.get("tx_packets", 0), "rx_packets": figures.get("rx_packets", 0),
+                "drops": figures.get("drops", 0), "unread_kept": self.unread_kept,
+                "drop_causes": {cause: n for cause, n in self.gli_drops.items() if n},
+                "fifo_peak_bytes": figures.get("fifo_peak_bytes")}
+
     def status(self) -> dict[str, Any]:
         backend = self.backend
-        figures = backend.status() if backend else {"tx_packets": 0, "rx_packets": 0, "drops": 0, "fifo_bytes": 0}
-        causes = {cause: n for cause, n in self.gli_drops.items() if n}
+        figures = backend.status() if backend else {"fifo_bytes": 0}
+        totals = self.account.totals()  # over every backend the link has had in this run
+        causes = totals["drop_causes"]
+        current = self.account.current
         status = {
             "id": self.id,
             "backend": self.spec.backend,
             "state": backend.state if backend else "down",
-            "tx_packets": figures["tx_packets"],
-            "rx_packets": figures["rx_packets"],
+            "tx_packets": totals["tx_packets"],
+            "rx_packets": totals["rx_packets"],
             # what an application lost; a frame no application was there to read is counted apart
-            "drops": figures["drops"] + sum(n for cause, n in causes.items() if cause not in UNREAD_CAUSES),
+            "drops": totals["drops"] + sum(n for cause, n in causes.items() if cause not in UNREAD_CAUSES),
             "fifo_bytes": figures["fifo_bytes"],
-            "unread": causes.get("no_reader", 0) + self.unread_kept,
+            "unread": causes.get("no_reader", 0) + totals["unread_kept"],
             "drop_causes": causes,
             "clients": self.clients,
             # what the link's applications are told (READY/BUSY): false while a frame is still in the
             # modem's hands, e.g. a real modem's IM until its DELIVEREDIM or FAILEDIM
             "ready": self.ready,
+            # whom a frame from an application reaches: its destination, or everyone in range where the
+            # packet class carries no address on air and no MAC needs one (addressing: auto)
+            "app_dst": ("everyone in range" if isinstance(backend, SimBackend) and backend.everyone_in_range
+                        else "as addressed"),
+            # since when the link has had this backend: model time, and the wall clock (UTC)
+            "since_s": round(current.start, 6) if current is not None else None,
+            "since": current.since if current is not None else None,
         }
         if figures.get("reason"):
             status["reason"] = figures["reason"]
         return status
 
     def close(self) -> None:
+        self._flush_bridge()
         for endpoint in list(self.endpoints):
             if endpoint.kind == "socket":
                 endpoint.close()
@@ -337,6 +412,7 @@ class RoutedLink:
         self.endpoints = []
         if self.backend is not None:
             self.backend.close()
+        self.account.close(self.router.scheduler.now())
         if self.lock is not None:
             self.lock.release()
             self.lock = None
@@ -355,6 +431,7 @@ class Router:
         self.doors: list[Door] = list(doors or [])
         self.max_link_clients = max_link_clients
         self.links: dict[str, RoutedLink] = {}
+        self.accounts: dict[str, LinkAccount] = {}  # every link this daemon served in the run, even removed ones
         self.world: World | None = None
         self.scene: Scene | None = None
         self._names: dict[tuple[str, int], str] = {}
@@ -370,7 +447,7 @@ class Router:
 
     def _sim_backend(self, spec: LinkSpec) -> Backend:
         assert self.world is not None
-        return SimBackend(self.world.modems[spec.id], self.link_name, spec.everyone_in_range)
+        return SimBackend(self.world.modems[spec.id], self.link_name, spec.everyone_in_range, spec.limits)
 
     def addressed_to_nobody(self, channel: str, address: int) -> bool:
         return address != BROADCAST and (channel, address) not in self._names
@@ -388,8 +465,48 @@ class Router:
         return open_backend(spec, self.scheduler, self.recorder.event)
 
     def apply(self, scene: Scene) -> None:
-        """Build the first scene, or change the running one into ``scene`` (already validated)."""
-        changes = diff(self.scene, scene)
+        """Build the first scene, or change the running one into ``scene`` (already validated).  A
+        reload is traced once applied (a ``reload`` line: :meth:`_trace_reload`), even in part."""
+        before = self.scene
+        changes = diff(before, scene)
+        if before is None:
+            self._apply(scene, changes)
+            return
+        try:
+            self._apply(scene, changes)
+        except BaseException:
+            self._trace_reload(before, scene, changes, partial=True)
+            raise
+        self._trace_reload(before, scene, changes, partial=False)
+
+    def _trace_reload(self, before: Scene, after: Scene, changes: SceneDiff, partial: bool) -> None:
+        """The ``reload`` line: when, the new scene's hash and the scene itself (as the ``run`` line has
+        it, so that ``hilgate fit`` and ``report`` know what each link was from here on), and per link
+        what changed (backend before/after, parameters).  Events before it belong to the old scene."""
+        view = scene_view(after)
+        changed = {}
+        for link_id in changes.links:
+            old = before.links.get(link_id)
+            changed[link_id] = link_changes(None if old is None else scene_view_link(old), view["links"].get(link_id))
+        line: dict[str, Any] = {"t": round(self.scheduler.now(), 9), "ev": "reload", "scene": after.name,
+                                "scene_hash": view_hash(view), "changes": changed}
+        if changes.vehicles or changes.vehicles_removed:
+            line["vehicles"] = sorted(changes.vehicles | changes.vehicles_removed)
+        if changes.channels_changed:
+            line["channels_changed"] = True
+        if changes.flows_changed:
+            line["flows_changed"] = True
+        if partial:
+            line["partial"] = True  # applying failed half-way: the daemon's log says why
+        line["scene_view"] = view
+        self.recorder.event(line)
+
+    def summary(self) -> list[dict[str, Any]]:
+        """Every link this daemon served during the run, with its totals and its backend periods."""
+        now = self.scheduler.now()
+        return [account.summary(now) for account in self.accounts.values()]
+
+    def _apply(self, scene: Scene, changes: SceneDiff) -> None:
         self._names = {(l.params.rx_channel, l.params.address): l.id for l in scene.links.values()}
         self._names.update({(l.params.rx_channel, BROADCAST): "*" for l in scene.links.values()})
         for link in self.links.values():  # links an AT!AL readdressed keep their address if unchanged
@@ -421,10 +538,11 @@ class Router:
             link.update(spec, change.endpoints_changed)
             if change.backend_changed:
                 log.info("link %s: backend %s -> %s", spec.id, change.before.backend, spec.backend)
-                link.set_backend(self.backend_factories[spec.backend](spec))
+                link.set_backend(self.backend_factories[spec.backend](spec), spec.backend)
             elif isinstance(link.backend, SimBackend):
                 link.backend.rebind(self.world.modems[spec.id])
                 link.backend.everyone_in_range = spec.everyone_in_range
+                link.backend.limits = spec.limits
                 link._watch_phy()
                 log.info("link %s reconfigured", spec.id)
             link.state_changed()
@@ -433,7 +551,8 @@ class Router:
 
     def _add(self, spec: LinkSpec, announce: bool) -> None:
         lock = LinkLock(spec.id)  # one daemon per link id on this host, or refused here
-        link = RoutedLink(spec, self)
+        account = self.accounts.get(spec.id) or LinkAccount(spec.id)  # a link re-added goes on counting
+        link = RoutedLink(spec, self, account)
         link.lock = lock
         try:
             link.open_doors(self.doors)
@@ -441,7 +560,8 @@ class Router:
             link.close()
             raise
         self.links[spec.id] = link
-        link.set_backend(self.backend_factories[spec.backend](spec))
+        self.accounts[spec.id] = account
+        link.set_backend(self.backend_factories[spec.backend](spec), spec.backend)
         if announce:
             log.info("link %s added (%s)", spec.id, spec.backend)
 

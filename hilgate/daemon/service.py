@@ -30,6 +30,7 @@ from ..gli.zenoh_auth import CredentialError, Identity, load_identity
 from ..scene import Scene, SceneError, load_scene
 from ..scene.hosts import HOST_NAME, ZenohSpec
 from ..scene.links import require_narrow_addresses
+from ..scene.view import scene_view, view_hash
 from ..scene.worker import SceneJob, request_for
 from ..core.notify import notify, watchdog_interval
 from ..core.outputs import OutputError, open_output, output_problem
@@ -50,6 +51,31 @@ def _link_list(scene: Scene, host: str | None, limit: int = 12) -> str:
     parts = [f"{link.id}={link.backend}" for link in scene.links.values() if host is None or link.host == host]
     if len(parts) > limit:
         parts = parts[:limit] + [f"… {len(parts) - limit} more"]
+    return ", ".join(parts)
+
+
+def _links(n: int) -> str:
+    return f"{n} link" if n == 1 else f"{n} links"
+
+
+def _endpoint_list(scene: Scene, host: str | None, runtime_dir: str, tcp: str | None) -> str:
+    """The endpoints this daemon opened, for its start line: only the kinds its links use."""
+    served = [link for link in scene.links.values() if host is None or link.host == host]
+    parts = []
+    queues = sum("mq" in link.gli for link in served)
+    if queues:
+        parts.append(f"POSIX queues /ID_{{tx,rx}}_dlnk_phy ({_links(queues)})")
+    sockets = sum("socket" in link.gli for link in served)
+    if sockets:
+        parts.append(f"sockets {runtime_dir}/gli/ID.sock ({_links(sockets)})")
+    if tcp:
+        parts.append(f"TCP {tcp}")
+    for link in served:
+        emulate = dict(link.emulate)
+        if emulate:
+            where = f"pty {emulate['pty']}" if emulate.get("pty") else f"TCP port {emulate.get('tcp')}"
+            parts.append(f"{link.id} as an emulated {emulate.get('protocol')} modem at {where}")
+    parts.append(f"control {runtime_dir}/control.sock")
     return ", ".join(parts)
 
 
@@ -89,6 +115,7 @@ class Daemon:
         self.scene: Scene | None = None
         self.trace = None
         self.stopping = False
+        self.started = time.monotonic()
         self._reload_job: SceneJob | None = None
         self._reload_again = False
         self._reload_waiting: list[Callable[[bool, str], Any]] = []
@@ -117,13 +144,15 @@ class Daemon:
         self.group = group
         self.trace = (open_output(trace_path, "trace", append=True, group=group, buffering=1 << 16)
                       if trace_path else None)
+        self.started = time.monotonic()  # the summary's wall_time_s (before model time 0)
         self.scheduler = scheduler = RealtimeScheduler(self.speed)
         self.recorder = Recorder(self.trace)
         self.run_id = uuid.uuid4().hex[:12]
+        view = scene_view(scene)  # the scene as it is now: the trace must not depend on the file later
         self.recorder.event({"t": 0.0, "ev": "run", "run": self.run_id,
                              "start": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="milliseconds"),
                              "scene": scene.name, "path": os.path.abspath(self.scene_path), "version": __version__,
-                             "speed": self.speed})
+                             "speed": self.speed, "scene_hash": view_hash(view), "scene_view": view})
         self.router = Router(scheduler, self.recorder, max_link_clients=self.max_link_clients, host=host)
         self.clients = ClientLimits(self.max_clients, self.max_link_clients)
         self.router.doors = [
@@ -162,11 +191,9 @@ class Daemon:
             self._periodic()
             gc.collect()
             gc.freeze()  # everything built so far is long-lived: keep it out of the collector's walks
-            log.info("hilgate %s started: scene %r (%s), %d links (%s), endpoints: POSIX queues /ID_{tx,rx}_dlnk_phy, "
-                     "sockets %s/gli/ID.sock%s, control %s/control.sock; run %s",
-                     __version__, scene.name, os.path.abspath(self.scene_path), len(self.router.links),
-                     _link_list(scene, host), self.runtime_dir,
-                     f", TCP {self.tcp}" if self.tcp else "", self.runtime_dir, self.run_id)
+            log.info("hilgate %s started: scene %r (%s), %s (%s), endpoints: %s; run %s",
+                     __version__, scene.name, os.path.abspath(self.scene_path), _links(len(self.router.links)),
+                     _link_list(scene, host), _endpoint_list(scene, host, self.runtime_dir, self.tcp), self.run_id)
         except BaseException:
             removed = unlink_created()  # it never said READY: its queues would only cost the user's budget
             if removed:
@@ -350,8 +377,8 @@ class Daemon:
             sys.stderr.write("\n")
         router = getattr(self, "router", None)
         if self.summary_path and router is not None and router.world is not None:
-            summary = self.recorder.summary(self.scene, router.world.seed, self.scheduler.now(), 0.0,
-                                            router.world.modems.values())
+            summary = self.recorder.summary(self.scene, router.world.seed, self.scheduler.now(),
+                                            time.monotonic() - self.started, links=router.summary())
             try:
                 write_summary(summary, self.summary_path, getattr(self, "group", None))
             except OSError as exc:

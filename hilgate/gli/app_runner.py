@@ -15,9 +15,10 @@ import logging
 import random
 import signal
 from collections import deque
-from typing import Any
+from typing import Any, Callable
 
 from ..core.application import Application, ContextBase, Message
+from ..core.paths import client_runtime_dir
 from ..core.realtime import RealtimeScheduler
 from .client import GliError, Link
 
@@ -53,6 +54,39 @@ class _Vehicle:
         self._ask({"class": "STOP"})
 
 
+class _CountedLink:
+    """What ``ctx.link(id)`` returns in real time: the link, counting what the application sent on it
+    for the summary ``hilgate app`` prints at exit."""
+
+    def __init__(self, link: Any):
+        self._link = link
+        self.sent = 0
+        self.received = 0
+        self.refused = 0
+
+    def send(self, payload: bytes, dst: int = 255) -> None:
+        self._link.send(payload, dst)
+        self.sent += 1
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._link, name)
+
+
+def _attached(link_id: str, link: Any, runtime_dir: str | None, tcp: tuple[str, int] | None) -> str:
+    """One line about a link just opened: its address, its backend (asked of the daemon), and the way in."""
+    try:
+        backend = link.command({"class": "STATUS"}).get("link", {}).get("backend", "?")
+    except (GliError, OSError):
+        backend = "?"
+    if getattr(link, "sock", None) is None:
+        via = f"Zenoh, prefix {link.prefix}" + (f", host {link.info['host']}" if link.info.get("host") else "")
+    elif tcp is not None:
+        via = f"TCP {tcp[0]}:{tcp[1]}"
+    else:
+        via = f"socket {client_runtime_dir(runtime_dir)}/gli/{link_id}.sock"
+    return f"link {link_id}: address {link.address}, backend {backend}, {link.info.get('packet', '?')}; through {via}"
+
+
 class RealtimeContext(ContextBase):
     def __init__(self, scheduler: RealtimeScheduler, name: str, links: dict[str, Any], params: dict[str, Any],
                  seed: int | None):
@@ -78,15 +112,23 @@ class RealtimeContext(ContextBase):
 
 def run_application(cls: type[Application], link_ids: list[str], params: dict[str, Any], *, name: str | None = None,
                     seed: int | None = None, runtime_dir: str | None = None, tcp: tuple[str, int] | None = None,
-                    zenoh: Any = None, until: float | None = None, token_file: str | None = None) -> int:
-    """Open the links, run the application until SIGTERM/SIGINT (or ``until`` seconds), then stop it."""
+                    zenoh: Any = None, until: float | None = None, token_file: str | None = None,
+                    report: Callable[[str], None] | None = None) -> int:
+    """Open the links, run the application until SIGTERM/SIGINT (or ``until`` seconds), then stop it.
+    ``report`` is told, in one line each, every link once it is open and what was sent and received
+    on each at the end (``hilgate app`` prints them: an application that prints nothing itself still
+    shows that it ran)."""
     links: dict[str, Any] = {}
+    name = name or cls.__name__
     try:
         for link_id in link_ids:
             links[link_id] = Link.open(link_id, runtime_dir=runtime_dir, tcp=tcp, zenoh=zenoh, token_file=token_file)
+            if report is not None:
+                report(f"{name}: {_attached(link_id, links[link_id], runtime_dir, tcp)}")
         scheduler = RealtimeScheduler()
         app = cls()
-        context = RealtimeContext(scheduler, name or cls.__name__, links, params, seed)
+        counted = {link_id: _CountedLink(link) for link_id, link in links.items()}
+        context = RealtimeContext(scheduler, name, counted, params, seed)
 
         def drain(link_id: str) -> None:
             link = links[link_id]
@@ -94,16 +136,19 @@ def run_application(cls: type[Application], link_ids: list[str], params: dict[st
             while True:
                 if isinstance(inbox, deque):  # a socket link: filled by _pump on this thread
                     while link.errors:  # a frame the daemon refused: said, not raised into the loop
+                        counted[link_id].refused += 1
                         context.log.warning("link %s: %s", link_id, link.errors.popleft())
                     message = inbox.popleft() if inbox else None
                 else:  # a Zenoh link: filled by Zenoh's threads
                     try:
                         message = link.recv(timeout=0)
                     except GliError as exc:
+                        counted[link_id].refused += 1
                         context.log.warning("link %s: %s", link_id, exc)
                         continue
                 if message is None:
                     return
+                counted[link_id].received += 1
                 app.on_receive(context, Message(link_id, message.src, message.dst, message.t, message.data))
 
         for link_id, link in links.items():
@@ -140,6 +185,10 @@ def run_application(cls: type[Application], link_ids: list[str], params: dict[st
         scheduler.at(0.0, app.on_start, context)
         scheduler.run(until if until is not None else float("inf"))
         app.on_stop(context)
+        if report is not None:
+            report(f"{name}: stopped after {context.now():.1f} s; " + "; ".join(
+                f"link {link_id}: {c.sent} frames sent, {c.received} received"
+                + (f", {c.refused} refused by the daemon" if c.refused else "") for link_id, c in counted.items()))
         scheduler.close()
         return 0
     finally:

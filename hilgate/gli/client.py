@@ -9,6 +9,7 @@
 
     Link.open("rov0_rf", tcp=("topside", 4280), token_file="tcp.token")  # the daemon's --tcp listener
     Link.open("rov0_rf", zenoh="tcp/topside:7447")  # from any host of a network of daemons (Zenoh)
+    Link.open("rov0_rf", zenoh="tcp/topside:7447", prefix="lab2")  # a network whose scene sets zenoh: prefix
 
 Blocking and single-threaded on purpose: one object per link per thread.  The framing is
 documented in :mod:`hilgate.gli.wire` for applications in other languages.
@@ -26,6 +27,7 @@ from typing import Any
 from . import wire
 from .token import TOKEN_FILE, TokenError, proof, read_token
 from ..core.packets import BROADCAST
+from ..core.names import zenoh_prefix_problem
 from ..core.paths import client_runtime_dir
 
 TOKEN_FILE_VARIABLE = "HILGATE_TCP_TOKEN_FILE"
@@ -45,6 +47,15 @@ class Message:
     data: bytes
 
 
+def zenoh_options(zenoh: Any) -> dict[str, Any]:
+    """``zenoh=`` as a dict: an endpoint, a list of them, or the dict itself."""
+    if isinstance(zenoh, str):
+        return {"connect": [zenoh]}
+    if isinstance(zenoh, (list, tuple)):
+        return {"connect": list(zenoh)}
+    return dict(zenoh)
+
+
 class Link:
     def __init__(self, sock: socket.socket, link_id: str):
         self.sock = sock
@@ -59,7 +70,7 @@ class Link:
 
     @classmethod
     def open(cls, link_id: str, *, tcp: tuple[str, int] | None = None, runtime_dir: str | None = None,
-             timeout: float = 5.0, zenoh: Any = None, token: str | bytes | None = None,
+             timeout: float = 5.0, zenoh: Any = None, prefix: str | None = None, token: str | bytes | None = None,
              token_file: str | None = None) -> "Link":
         """``tcp``: the daemon's ``--tcp`` listener, where the application proves that it holds the
         daemon's token (:mod:`hilgate.gli.token`): ``token``, else the file ``token_file``, else
@@ -67,10 +78,17 @@ class Link:
 
         ``zenoh``: reach the link over Zenoh from any host of a network of daemons (an endpoint
         such as ``"tcp/10.0.0.5:7447"``, a list, or ``{"connect": [...], "prefix": ...}``); the object
-        returned has the same methods (:class:`hilgate.gli.zenoh_client.ZenohLink`)."""
+        returned has the same methods (:class:`hilgate.gli.zenoh_client.ZenohLink`).  ``prefix``: the
+        network's Zenoh key prefix, as its scene's ``zenoh: prefix:`` (default ``hilgate``)."""
+        if prefix is not None and zenoh is None:
+            raise ValueError("prefix= is the key prefix of a Zenoh network: give zenoh= too")
+        if prefix is not None and zenoh_prefix_problem(prefix):
+            raise ValueError(f"prefix={prefix!r}: {zenoh_prefix_problem(prefix)}")
         if zenoh is not None:
             from .zenoh_client import ZenohLink
 
+            if prefix is not None:
+                zenoh = {**zenoh_options(zenoh), "prefix": prefix}
             return ZenohLink.open(link_id, zenoh, timeout)  # type: ignore[return-value]
         secret = None
         if tcp is not None:

@@ -75,8 +75,9 @@ def plan_message_size(links: int) -> bool:
     soft = resource.getrlimit(resource.RLIMIT_MSGQUEUE)[0]
     if soft == resource.RLIM_INFINITY:
         return True
-    _note_compact(soft, f"{links} links would need {2 * links * queue_cost(MAX_MESSAGE_SIZE)} bytes of POSIX "
-                        f"queues at dccomms' 10 × {MAX_MESSAGE_SIZE} bytes")
+    full = 2 * links * queue_cost(MAX_MESSAGE_SIZE)
+    if full > soft:  # said only where it matters: dccomms' size would not even fit an empty budget
+        _note_compact(soft, f"{links} links at dccomms' 10 × {MAX_MESSAGE_SIZE} bytes would need {full}")
     return False
 
 
@@ -84,9 +85,8 @@ def _note_compact(limit: int, why: str) -> None:
     global _warned
     if not _warned:
         _warned = True
-        log.info("%s and this user's queue budget is %d bytes (ulimit -q), shared by all its processes: queues "
-                 "are created just large enough for each link's packet class (dccomms uses an existing queue as "
-                 "it is). LimitMSGQUEUE=infinity (the systemd unit) gives dccomms' default size.", why, limit)
+        log.info("POSIX queues are sized for each link's packet class: %s of this user's %d-byte queue budget "
+                 "(ulimit -q; LimitMSGQUEUE=infinity, as in the systemd unit, gives dccomms' size)", why, limit)
 
 
 def open_queue(name: str, needed_size: int = MAX_MESSAGE_SIZE, full_size: bool = True,
@@ -140,7 +140,8 @@ def _create_queue(name: str, needed_size: int, full_size: bool) -> posix_ipc.Mes
                 error = exc
                 if size != needed_size and is_user_budget(exc):
                     _note_compact(resource.getrlimit(resource.RLIMIT_MSGQUEUE)[0],
-                                  "the POSIX queue budget is exhausted")
+                                  f"a queue at dccomms' 10 × {MAX_MESSAGE_SIZE} bytes no longer fits in what "
+                                  f"is left")
     finally:
         os.umask(old)
     raise QueueError(open_failure(name, error))
@@ -226,18 +227,21 @@ def drain(queue: posix_ipc.MessageQueue, limit: int = 100_000) -> list[bytes]:
 
 
 UNATTENDED_BACKLOG = 64
-"""Messages kept for a link's queue before any application has shown itself on it: enough for a burst
-while a listener starts reading, little memory for the many links nobody opens."""
+"""Frames held for a link's queue before any application has shown itself on it: enough for a burst
+while a listener starts, little memory for the many links nobody opens.  They are held in the daemon,
+not in the queue: dccomms empties its input queue when it starts (``CommsDeviceService::Init`` →
+``ClearInputQueue``), then says REQ_STATE, and only then are they put in the queue."""
 
 
 class MqEndpoint:
     """One link's pair of queues, attached to the real-time scheduler's loop: an endpoint of the link.
 
     Whether an application is there is known once it speaks (:class:`QueueProtocol`), or once it
-    takes messages from its queue (an application that only listens).  Until then frames are kept in
-    the queue and a short backlog (:data:`UNATTENDED_BACKLOG`) for an application that starts late,
-    and what does not fit is not an application's loss but a frame nobody was there to read (see
-    :meth:`deliver`).
+    takes messages from its queue (an application that only listens).  Until then frames are held in
+    the daemon (at most :data:`UNATTENDED_BACKLOG`) for an application that starts late, and put in
+    its queue when it shows itself: a dccomms application empties its queue as it starts, so frames
+    already in it would be lost.  What does not fit is not an application's loss but a frame nobody
+    was there to read (see :meth:`deliver`).
     Frames that an application left in the queues while no daemon ran are drained at start and
     reported (``stale``), never sent on air."""
 
@@ -270,6 +274,7 @@ class MqEndpoint:
                         port.id, self.stale)
         self.backlog_limit = backlog
         self.backlog: deque[bytes] = deque()
+        self.held: list[AppFrame] = []  # frames for an application that has not shown itself yet
         self._queued = 0  # messages put in the application's queue since it was last looked at
         self._tell(self.protocol.state_message(False))  # BUSY until the link is up
         scheduler.add_reader(self.from_app.mqd, self._readable)
@@ -301,7 +306,10 @@ class MqEndpoint:
                 return
 
     def _handle(self, message: bytes) -> None:
-        match self.protocol.receive(message):
+        event = self.protocol.receive(message)
+        if self.held:  # the application's first word (dccomms: REQ_STATE, after emptying its queue)
+            self._release()
+        match event:
             case FrameIn(decoded=decoded):
                 try:
                     self.port.send_decoded(decoded)
@@ -331,21 +339,43 @@ class MqEndpoint:
     def deliver(self, frame: AppFrame, t: float) -> str:
         """Hand a received frame to the application: ``taken`` (in its queue, or the backlog while it is
         slow to read) or ``app_full`` (the queue and the backlog are full).  Before any application has
-        shown itself, the frame is ``kept`` for one that starts late (in the queue and a short backlog:
-        nobody may ever come), or is ``absent``."""
+        shown itself, the frame is ``kept`` for one that starts late (held in the daemon, at most
+        :data:`UNATTENDED_BACKLOG`: nobody may ever come), or is ``absent``."""
+        message = self._message(frame)
+        if message is None:
+            return "size"
+        if not self.protocol.attended and self._someone_reads():
+            self.protocol.attended = True  # an application that only reads: it took what was queued
+        if not self.protocol.attended:
+            if len(self.held) >= UNATTENDED_BACKLOG:
+                return ABSENT
+            self.held.append(frame)
+            return KEPT
+        if self.held:
+            self._release()
+        return TAKEN if self._put(message) else "app_full"
+
+    def _message(self, frame: AppFrame) -> bytes | None:
+        """The FRAME message of ``frame`` in the link's packet class (None: it does not fit the class)."""
         real = frame.real
         packet = self.protocol.packet
         if frame.packet.name != packet.name:
             try:
                 real = packet.encode(frame.payload, src=frame.src, dst=frame.dst)
             except PacketError:
-                return "size"
-        message = self.protocol.frame_message(real, frame.seq, frame.src, frame.dst)
-        if not self.protocol.attended and self._someone_reads():
-            self.protocol.attended = True  # an application that only reads: it took what was queued
-        if not self.protocol.attended:
-            return KEPT if self._put(message, UNATTENDED_BACKLOG) else ABSENT
-        return TAKEN if self._put(message) else "app_full"
+                return None
+        return self.protocol.frame_message(real, frame.seq, frame.src, frame.dst)
+
+    def _release(self) -> None:
+        """The application has shown itself: the frames held for it go to its queue, oldest first (one
+        that no longer fits, after a reload changed the class, or finds the backlog full is counted)."""
+        held, self.held = self.held, []
+        for frame in held:
+            message = self._message(frame)
+            if message is None:
+                self.port.lost("size", len(frame.real))
+            elif not self._put(message):
+                self.port.lost("app_full", len(frame.real))
 
     def _someone_reads(self) -> bool:
         """Whether messages this endpoint put in the application's queue have been taken since it last
@@ -358,9 +388,9 @@ class MqEndpoint:
         self._queued = waiting
         return taken
 
-    def _put(self, message: bytes, limit: int | None = None) -> bool:
-        """Send now, or keep in the backlog (at most ``limit`` messages, default ``--gli-backlog``);
-        False if the backlog is full too."""
+    def _put(self, message: bytes) -> bool:
+        """Send now, or keep in the backlog (at most ``--gli-backlog`` messages); False if the backlog
+        is full too."""
         if not self.backlog:
             try:
                 self.to_app.send(message)
@@ -371,7 +401,7 @@ class MqEndpoint:
             except (ValueError, posix_ipc.Error, OSError) as exc:  # checked at open; kept for safety
                 log.warning("link %s: cannot write %s: %s", self.port.id, self.to_app_name, exc)
                 return False
-        if len(self.backlog) >= min(self.backlog_limit, limit if limit is not None else self.backlog_limit):
+        if len(self.backlog) >= self.backlog_limit:
             return False
         self.backlog.append(message)
         return True

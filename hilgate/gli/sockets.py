@@ -169,7 +169,10 @@ class GliClient:
 
     def _too_slow(self) -> None:
         if not self.connection.closed:
-            log.info("GLI client on %s stopped reading: disconnected", self.port.id if self.port else "?")
+            if self.connection.write_failed:  # it closed its end (hilgate send does, once done): not slow
+                log.debug("GLI client on %s has gone", self.port.id if self.port else "?")
+            else:
+                log.info("GLI client on %s stopped reading: disconnected", self.port.id if self.port else "?")
             self.connection.close()
 
     def _on_close(self) -> None:

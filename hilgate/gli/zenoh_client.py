@@ -25,6 +25,7 @@ import time
 import uuid
 from typing import Any
 
+from ..core.names import zenoh_prefix_problem
 from ..core.packets import BROADCAST
 from .zenoh_auth import Identity, load_identity, session_config
 from .zenoh_door import link_key
@@ -41,6 +42,8 @@ def _session(zenoh_option: Any) -> tuple[Any, str, Identity | None]:
         zenoh_option = {"connect": list(zenoh_option)}
     options = dict(zenoh_option or {})
     prefix = str(options.get("prefix", "hilgate"))
+    if zenoh_prefix_problem(prefix):
+        raise ValueError(f"Zenoh prefix {prefix!r}: {zenoh_prefix_problem(prefix)}")
     identity = load_identity(str(options["credentials"]), role="app") if options.get("credentials") else None
     # (an application listens nowhere unless told: it connects to daemons, and learns of the others from them)
     config = session_config(listen=list(options.get("listen", [])), connect=list(options.get("connect", [])),
@@ -57,6 +60,27 @@ def _session(zenoh_option: Any) -> tuple[Any, str, Identity | None]:
     while options.get("connect") and time.monotonic() < deadline and not list(session.info.peers_zid()):
         time.sleep(0.02)
     return session, prefix, identity
+
+
+def _prefix_hint(session: Any, link_id: str, prefix: str) -> str:
+    """Where the link is served instead, if a daemon holds its liveliness token under another prefix
+    (``<prefix>/alive/<host>/link/<link>/<zid>``): the usual cause is a scene's ``zenoh: prefix:``.  An
+    application's credentials may not ask for liveliness: on an authenticated network only the generic
+    advice is given."""
+    found = set()
+    try:
+        for reply in session.liveliness().get(f"**/alive/*/link/{link_id}/**", timeout=1.0):
+            if reply.ok is not None:
+                key = str(reply.ok.key_expr)
+                found.add(key[:key.rfind("/alive/", 0, key.rfind(f"/link/{link_id}/"))])
+    except Exception:  # a hint only: the error it decorates says what matters
+        pass
+    found.discard(prefix)
+    if found:
+        return (f"; it is served under {', '.join(repr(p) for p in sorted(found))}: give that prefix "
+                f"(Link.open(..., prefix=...), --zenoh-prefix)")
+    return ("; a network whose scene sets zenoh: prefix: needs the same prefix here (Link.open(..., prefix=...), "
+            "--zenoh-prefix)")
 
 
 class ZenohLink:
@@ -107,7 +131,8 @@ class ZenohLink:
                     if isinstance(info, dict) and info.get("link") == link_id:
                         answers[host] = info
             if not answers:
-                raise GliError(f"no daemon on the network serves link {link_id!r}")
+                raise GliError(f"no daemon on the network serves link {link_id!r} under the Zenoh prefix "
+                               f"{prefix!r}{_prefix_hint(session, link_id, prefix)}")
             if len(answers) > 1:  # (with credentials each answers under its own name: both are hosts of the lab)
                 raise GliError(f"link {link_id!r} is served by several hosts ({', '.join(sorted(answers))})")
             host, info = next(iter(answers.items()))

@@ -182,10 +182,15 @@ def fit_power(d, size, delivered) -> tuple[Fit, float]:
             return -np.expm1(8 * ss * np.log1p(-np.minimum(r, 1 - 1e-16)))
 
     lost = 1 - np.mean(np.asarray(delivered, dtype=float))
-    mean_bits = 8 * float(np.mean(np.asarray(size, dtype=float)))
+    mean_bits = max(8.0, 8 * float(np.mean(np.asarray(size, dtype=float))))  # (frames of 0 bytes: one byte)
     c0 = math.log(max(min(-math.log1p(-min(max(lost, 1e-4), 0.9999)) / mean_bits, 0.5), 1e-12))
     fit = fit_function("power", ("c", "b"), per, (c0, 5.0), (1.0, 2.0), d_arr, size, delivered)
     return fit, d0
+
+
+def _exp(x: float) -> float:
+    """exp, infinite beyond a float's range (an interval the data cannot bound) instead of an error."""
+    return math.exp(x) if x < 709.0 else math.inf
 
 
 def power_parameters(fit: Fit, d0: float) -> dict[str, tuple[float, float, float]]:
@@ -195,7 +200,7 @@ def power_parameters(fit: Fit, d0: float) -> dict[str, tuple[float, float, float
     jac = np.array([1.0, -math.log(d0)])
     se_log_a = math.sqrt(max(float(jac @ fit.cov @ jac), 0.0))
     lo_b, hi_b = fit.interval(1)
-    return {"a": (math.exp(log_a), math.exp(log_a - Z95 * se_log_a), math.exp(log_a + Z95 * se_log_a)),
+    return {"a": (_exp(log_a), _exp(log_a - Z95 * se_log_a), _exp(log_a + Z95 * se_log_a)),
             "b": (float(b), lo_b, hi_b), "log_a": (log_a, log_a - Z95 * se_log_a, log_a + Z95 * se_log_a)}
 
 

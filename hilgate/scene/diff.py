@@ -30,10 +30,11 @@ class LinkChange:
 
     @property
     def backend_changed(self) -> bool:
-        """Another kind of backend, or a real modem's options (port, baud…): a new backend is opened."""
+        """Another kind of backend, or a real modem's options (port, baud…, its limits): a new backend is
+        opened."""
         b, a = self.before, self.after
         return b is not None and a is not None and (
-            b.backend != a.backend or (a.backend != "sim" and b.options != a.options))
+            b.backend != a.backend or (a.backend != "sim" and (b.options != a.options or b.limits != a.limits)))
 
     @property
     def modem_changed(self) -> bool:

@@ -19,6 +19,7 @@ import re
 from dataclasses import dataclass, replace
 from typing import Any
 
+from ..core.names import zenoh_prefix_problem
 from .checks import Fields, boolean, describe, items, number, path_value, text
 from .yaml_nodes import Node
 
@@ -26,7 +27,6 @@ __all__ = ["ZenohSpec", "HOST_NAME", "host_name", "zenoh_spec", "resolve_hosts"]
 
 HOST_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}")
 ENDPOINT = re.compile(r"(tcp|udp|tls|quic|unixsock-stream|ws)/[^\s]{1,200}")
-PREFIX = re.compile(r"[A-Za-z0-9_.-]{1,64}(/[A-Za-z0-9_.-]{1,64}){0,3}")
 ZENOH_KEYS = ("connect", "listen", "multicast_scouting", "prefix", "lease_s", "pose_rate_hz", "config", "credentials",
               "insecure")
 LOOPBACK = ("tcp/127.0.0.1:0",)
@@ -69,8 +69,9 @@ def _endpoints(node: Node, path: str) -> tuple[str, ...]:
 
 def _prefix(node: Node, path: str) -> str:
     value = text(node, path)
-    if not PREFIX.fullmatch(value):
-        raise node.error(path, "a key prefix is one to four words of letters, digits, '_', '.' or '-' joined by '/'")
+    problem = zenoh_prefix_problem(value)
+    if problem:
+        raise node.error(path, problem)
     return value
 
 

@@ -21,6 +21,7 @@ from ..models.usbl import UsblParams
 from .backends import SIM, backend_names, driver_keys, driver_options, emulated_device
 from .hosts import host_name
 from .checks import Fields, boolean, choice, describe, integer, join_path, number, text
+from .limits import modem_limits
 from .mac import mac_spec
 from .physics import ERROR_KEYS, acoustic_params, error_kind, physical_environment
 from .plugins import Plugin
@@ -126,6 +127,8 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
             emulate += (("firmware", firmware),)
     elif "firmware" in f:
         f.get("firmware", _firmware)  # checked (a preset gives it to every link), used only when emulating
+    protocol = dict(emulate).get("protocol")
+    limits = f.get("limits", lambda n, p: modem_limits(n, p, backend, protocol), None)
     addressing = f.get("addressing", choice(*ADDRESSING), "auto")
     usbl = f.get("usbl", _usbl, None)
     if usbl is not None and dict(emulate).get("protocol") != "evologics":
@@ -141,7 +144,7 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
             raise child.error(f.sub("address"), f"{params.address} is wider than 8 bits (0..{NARROW_MAX}): {problem}")
     gli = f.get("gli", _gli_endpoints, GLI_ENDPOINTS)
     return LinkSpec(link_id, vehicle, backend, model, params, mac, packet, node.file, node.line, options, emulate,
-                    addressing, host=host, usbl=usbl, address_line=address_line, gli=gli)
+                    addressing, host=host, usbl=usbl, address_line=address_line, gli=gli, limits=limits)
 
 
 NARROW_MAX = BROADCAST - 1
@@ -171,6 +174,17 @@ def _wide_problem(backend: str, emulate: tuple, packet: str) -> str:
     if packet_class(packet).addresses_on_air:
         return f"packet class {packet} carries a one-byte address on air"
     return ""
+
+
+def _no_free_address(link: LinkSpec) -> str:
+    """Automatic addresses stop at 254; say how to go on, as far as this link allows."""
+    text = ("no free address left (1..254 are taken); give links an address: of their own (it need only differ "
+            "among the links of one channel)")
+    problem = _wide_problem(link.backend, link.emulate, link.packet)
+    if problem:
+        return f"{text}; this link cannot take one above {NARROW_MAX}: {problem}"
+    return (f"{text}, up to {WIDE_MAX} under hilgate sim (this link's packet class keeps addresses off the air; "
+            f"hilgate run takes 0..{NARROW_MAX} only)")
 
 
 def require_narrow_addresses(links: Any) -> None:
@@ -236,7 +250,7 @@ def assign_addresses(links: dict[str, LinkSpec], nodes: dict[str, Node]) -> dict
             while next_free in used:
                 next_free += 1
             if next_free >= BROADCAST:
-                raise nodes[link_id].error(f"links.{link_id}", "no free address left (0..254)")
+                raise nodes[link_id].error(f"links.{link_id}", _no_free_address(link))
             used.add(next_free)
             link = _replace_params(link, address=next_free)
         key = (link.params.rx_channel, link.params.address)

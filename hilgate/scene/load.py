@@ -20,6 +20,7 @@ from .checks import Fields, base_dir, integer, items, join_path, mapping, number
 from .apps import app_specs
 from .flows import flow_spec
 from .hosts import resolve_hosts, zenoh_spec
+from .limits import describe_limits
 from .links import Context, assign_addresses, link_spec
 from .overrides import apply_override
 from .plugins import Plugin, PluginError, load_plugin
@@ -157,6 +158,19 @@ def scene_summary(scene: Scene) -> str:
         p = link.params
         channel = p.tx_channel if p.tx_channel == p.rx_channel else f"{p.tx_channel}->{p.rx_channel}"
         model = f" ({link.model})" if link.model else ""
-        lines.append(f"  {link.id}: {link.backend}{model} on {link.vehicle}, addr {p.address}, {channel}, "
-                     f"{p.bitrate_bps:g} bit/s, mac {link.mac.protocol}, packet {link.packet}")
+        line = (f"  {link.id}: {link.backend}{model} on {link.vehicle}, addr {p.address}, {channel}, "
+                f"{p.bitrate_bps:g} bit/s, mac {link.mac.protocol}, packet {link.packet}")
+        emulate = dict(link.emulate)
+        if emulate:
+            where = f"pty {emulate['pty']}" if emulate.get("pty") else f"TCP port {emulate.get('tcp')}"
+            line += f", emulates {emulate.get('protocol')} at {where}"
+        port = dict(link.options).get("port")
+        if port:
+            line += f", port {port}"
+        if link.host:
+            line += f", host {link.host}"
+        lines.append(line)
+        limits = describe_limits(link)
+        if limits is not None:
+            lines.append(f"    {limits}")
     return "\n".join(lines)

@@ -20,7 +20,7 @@ __all__ = ["MODEM_KEYS", "preset_names", "load_preset", "merge"]
 MODEM_KEYS = (
     "bitrate_bps", "tx_delay_s", "rx_delay_s", "tx_jitter_s", "rx_jitter_s", "fifo_bytes", "range_m",
     "error", "mac", "packet", "duplex", "promiscuous", "ack_bytes", "ack_turnaround_s", "acoustic",
-    "firmware",
+    "firmware", "limits",
 )
 PRESET_SUFFIXES = (".yaml", ".yml")
 MAX_PRESET_BYTES = 64 * 1024

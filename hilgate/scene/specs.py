@@ -114,6 +114,7 @@ class LinkSpec:
     usbl: UsblParams | None = None  # the emulated modem is a USBL: it reports fixes of whom it hears
     address_line: int = field(default=0, compare=False)  # where a wide address (> 254) is written
     gli: tuple[str, ...] = ("mq", "socket")  # the GLI endpoints the daemon opens for it (links.py)
+    limits: Any = None  # drivers.table.ModemLimits: what the modem accepts (its preset's limits:), None: unsaid
 
     @property
     def everyone_in_range(self) -> bool:

@@ -11,7 +11,7 @@ from typing import Any, Callable
 
 from ..core.application import Application, ContextBase, Message
 from ..core.backend import AppFrame
-from ..core.packets import packet_class
+from ..core.packets import PacketError, packet_class
 from ..models.controlled import Controlled
 from ..models.frame import BROADCAST
 from .world import World, random_stream
@@ -40,6 +40,10 @@ class _VirtualLink:
             raise ValueError("dst must be 0..255 (255 broadcasts)")
         payload = bytes(payload)
         real = self.packet.encode(payload, src=self.address, dst=dst)  # PacketError if it does not fit
+        limits = self.spec.limits  # what the real modem would take (the preset's limits:), as hilgate run
+        problem = limits.refusal(len(real)) if limits is not None else None
+        if problem is not None:
+            raise PacketError("size", problem)
         self.seq = (self.seq + 1) & 0xFFFFFFFF
         modem, clock = self.modem, self.world.clock
         frame = AppFrame(real, payload, self.packet, self.seq, self.address, dst, clock.now())

@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any, Callable
 
 from ..core.backend import AppFrame, Backend, PhyEvent
+from ..core.packets import PacketError
 from ..models.frame import BROADCAST, Frame
 from ..models.modem import SimModem
 
@@ -14,11 +15,13 @@ class SimBackend(Backend):
 
     kind = "sim"
 
-    def __init__(self, modem: SimModem, link_names: Callable[[str, int], str], everyone_in_range: bool = False):
+    def __init__(self, modem: SimModem, link_names: Callable[[str, int], str], everyone_in_range: bool = False,
+                 limits: Any = None):
         super().__init__()
         self.modem = modem
         self._link_names = link_names
         self.everyone_in_range = everyone_in_range  # see LinkSpec.everyone_in_range
+        self.limits = limits  # LinkSpec.limits: what the real modem would accept (None: anything)
         self.on_phy: Callable[[PhyEvent], Any] | None = None
         modem.on_deliver = self._deliver
         modem.on_idle = self._idle
@@ -61,6 +64,16 @@ class SimBackend(Backend):
     def idle(self) -> bool:
         return self.modem.idle
 
+    def admit(self, frame: AppFrame) -> None:
+        """A GLI frame the real modem would refuse (its preset's ``limits:``, mode ``send_as``) is refused
+        here too, with the driver's words.  An emulated modem's frames (with ``meta``) were checked by
+        the emulator against their own mode."""
+        limits = self.limits
+        if limits is not None and frame.meta is None:
+            problem = limits.refusal(len(frame.real))
+            if problem is not None:
+                raise PacketError("size", problem)
+
     def send(self, frame: AppFrame) -> bool:
         modem = self.modem
         # (an emulated EvoLogics modem's frames, with meta, carry the modem's own acoustic addresses)
@@ -94,7 +107,7 @@ class SimBackend(Backend):
     def status(self) -> dict[str, Any]:
         stats = self.modem.stats
         return {"tx_packets": stats.tx_packets, "rx_packets": stats.rx_packets, "drops": stats.fifo_drops,
-                "fifo_bytes": self.modem.queued_bytes}
+                "fifo_bytes": self.modem.queued_bytes, "fifo_peak_bytes": stats.fifo_peak_bytes, "lost": dict(stats.lost)}
 
     def close(self) -> None:
         self.modem.on_deliver = None

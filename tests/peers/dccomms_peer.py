@@ -6,7 +6,7 @@ hilgate: open ``/X_tx_dlnk_phy`` and ``/X_rx_dlnk_phy`` with O_CREAT, say REQ_ST
 messages of the whole 2065-byte buffer (real packet + virtual area), read FRAME and CMD_STATE.
 Prints one JSON line per event on stdout with CLOCK_MONOTONIC times, so a test can compare them.
 
-    dccomms_peer.py LINK --send N --dst ADDR [--interval S] [--size B] [--receive N] [--timeout S]
+    dccomms_peer.py LINK --send N --dst ADDR [--interval S] [--size B] [--receive N] [--timeout S] [--clear]
 """
 
 import argparse
@@ -53,11 +53,22 @@ def main() -> int:
     p.add_argument("--receive", type=int, default=0)
     p.add_argument("--timeout", type=float, default=10.0)
     p.add_argument("--raw", help="send this hex message as is (after the frames), for bad-input tests")
+    p.add_argument("--clear", action="store_true",
+                   help="empty the input queue before REQ_STATE, as CommsDeviceService::Init's ClearInputQueue does")
     a = p.parse_args()
     old = os.umask(0)
     tx = posix_ipc.MessageQueue(f"/{a.link}_tx_dlnk_phy", posix_ipc.O_CREAT, 0o777, 10, 8192)
     rx = posix_ipc.MessageQueue(f"/{a.link}_rx_dlnk_phy", posix_ipc.O_CREAT, 0o777, 10, 8192)
     os.umask(old)
+    if a.clear:
+        cleared = []
+        while True:
+            try:
+                message, _ = rx.receive(0)
+            except posix_ipc.BusyError:
+                break
+            cleared.append(message[0])
+        emit(ev="cleared", types=cleared)
     tx.send(b"\x01")  # REQ_STATE
     emit(ev="req_state")
     for i in range(a.send):
