@@ -28,7 +28,7 @@ from hilgate.core.packets import BROADCAST, PacketClass, PacketError, Raw
 from .m64_codec import (BadChecksum, BadDatagram, Datagram, Deframer, HostCodec, Malformed, Packet, Refused,
                         Response, frame, packets)
 from .port import Port
-from .table import M64Options  # declared in the backend table, with its scene checks
+from .table import M64_LIMITS, M64Options  # declared in the backend table, with its scene checks
 
 log = logging.getLogger(__name__)
 
@@ -63,6 +63,17 @@ class M64Backend(QueuedBackend):
     @property
     def idle(self) -> bool:
         return not self.queue and self.sending is None and not self.outgoing
+
+    def admit(self, frame: AppFrame) -> None:
+        """A frame larger than a datagram of the link's limits is refused when the application sends it."""
+        limits = self.options.limits or M64_LIMITS
+        problem = limits.refusal(len(frame.real), "datagram")
+        if problem is not None:
+            raise PacketError("size", problem)
+
+    def send(self, frame: AppFrame) -> bool:
+        self.admit(frame)
+        return super().send(frame)
 
     def close(self) -> None:
         self._cancel_timers()

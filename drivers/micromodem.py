@@ -30,7 +30,7 @@ from hilgate.core.packets import BROADCAST, PacketClass, PacketError, Raw
 
 from .micromodem_codec import RATES, BadSentence, HostCodec, Sentence, sentence
 from .port import Port
-from .table import MicromodemOptions  # declared in the backend table, with its scene checks
+from .table import MICROMODEM_LIMITS, MODES, MicromodemOptions  # declared in the backend table, with its scene checks
 
 log = logging.getLogger(__name__)
 
@@ -77,15 +77,19 @@ class MicromodemBackend(QueuedBackend):
     def idle(self) -> bool:
         return not self.queue and self.sending is None and self.awaiting is None
 
-    @property
-    def limit(self) -> int:
-        return self.rate.packet_bytes
+    def admit(self, frame: AppFrame) -> None:
+        """A frame larger than a packet of the link's rate is refused when the application sends it, in the
+        words a simulated link with the same preset uses (``drivers/table.py``, ModemLimits)."""
+        limits = self.options.limits or MICROMODEM_LIMITS
+        mode = f"rate{self.options.rate}"
+        most = min(limits.most(mode) or self.rate.packet_bytes, self.rate.packet_bytes)
+        if len(frame.real) > most:
+            raise PacketError("size", limits.refusal(len(frame.real), mode)
+                              or f"{len(frame.real)} bytes on air do not fit {MODES[mode]} of the Micro-Modem "
+                                 f"(at most {most})")
 
     def send(self, frame: AppFrame) -> bool:
-        if len(frame.real) > self.limit:
-            raise PacketError("size", f"{len(frame.real)} bytes on air do not fit a rate-{self.options.rate} packet "
-                                      f"of the Micro-Modem (at most {self.rate.frames} frames of {self.rate.frame_bytes} "
-                                      f"bytes: {self.limit}); use a smaller packet class or a higher rate")
+        self.admit(frame)
         return super().send(frame)
 
     def close(self) -> None:
