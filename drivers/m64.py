@@ -2,7 +2,8 @@
 
 At start (and after every reconnection) the driver does what ``wlmodem``'s ``connect`` and
 ``cmd_configure`` do: an empty line, ``wcv`` (protocol major version 1), ``wcn`` (the payload size, 8
-on the M64), ``wcs,<role>,<channel>``.  A GLI frame then goes out as a ``WlUDPSocket`` datagram: the
+on the M64), ``wcs,<role>,<channel>``; then ``wcf``, so that what the modem still queues of a frame cut
+short by the reconnection does not go (the frame goes again whole, after a frame end).  A GLI frame then goes out as a ``WlUDPSocket`` datagram: the
 frame's bytes on air, CRC-8, COBS/R, a zero byte, cut into packets of the payload size
 (:mod:`.m64_codec`), so a ``wlmodem`` datagram application on the far modem reads it, and a datagram
 it sends arrives here as a frame.  Like ``WlUDPSocket`` the driver keeps ``queued_packets`` packets in
@@ -56,6 +57,7 @@ class M64Backend(QueuedBackend):
         self.outgoing: deque[bytes] = deque()  # packets of the frames being sent, not yet in the modem
         self.sending: AppFrame | None = None   # the frame whose packets those are
         self.modem_queue = 0
+        self.fresh = True  # the next datagram is the first since a (re)start: it begins with a frame end
         self.last_losses: int | None = None
         self.port = Port(options.port, scheduler, self._on_data, self._on_port, baud=options.baud, name=link_id)
         self.port.open()
@@ -125,6 +127,13 @@ class M64Backend(QueuedBackend):
         if reply is None or not reply.ack:
             self._not_an_m64(f"wcs,{self.options.role},{self.options.modem_channel} was refused")
             return
+        self.command("f", on_reply=self._flushed)
+
+    def _flushed(self, reply: Response | None) -> None:
+        """What the modem still queued of a frame half sent before the port went is dropped (the whole
+        frame goes again), and the next datagram starts with a frame end: whatever the far side holds of
+        that frame ends there, as a damaged datagram, instead of swallowing the new one."""
+        self.fresh = True
         self.set_state("up")
         self.poll_timer = self.scheduler.after_wall(0.0, self._poll)
         if self.options.diagnostic_s > 0:
@@ -178,7 +187,9 @@ class M64Backend(QueuedBackend):
             return
         self.sending = self.queue.popleft()
         real = self.sending.real if not isinstance(self.packet, Raw) else self.sending.payload
-        self.outgoing.extend(packets(frame(real), self.payload_size))
+        framed = (b"\x00" if self.fresh else b"") + frame(real)
+        self.fresh = False
+        self.outgoing.extend(packets(framed, self.payload_size))
 
     def _poll(self) -> None:
         self.poll_timer = self.scheduler.after_wall(self.options.poll_s, self._poll)

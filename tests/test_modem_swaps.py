@@ -9,6 +9,7 @@ Phase 3: simulated again.  The emulated modem the driver talks to exists only in
 plugged in): an M64 of role A transmits every second, and would share the channel with the simulated links.
 """
 
+import json
 import time
 
 import pytest
@@ -44,6 +45,16 @@ links:
 """ + (f"  {ea}: {{vehicle: va, model: {modem}, address: 3, gli: [socket], {mine}}}\n" if real else "")
 
 
+def live_events(daemon):
+    events = []
+    for line in daemon.trace.read_text().splitlines():
+        try:
+            events.append(json.loads(line))
+        except ValueError:
+            pass
+    return events
+
+
 def wait_state(daemon, link, state, timeout=60):
     deadline = time.monotonic() + timeout
     while daemon.link_status(link)["state"] != state:
@@ -67,6 +78,13 @@ def test_a_link_moves_between_simulated_and_real_modem_with_the_application_unto
             message = lf.recv(timeout=60)
             assert message is not None and message.data == b"through the real modem's driver"
             daemon.reload(scene(tmp_path, ap, far, ea, modem, real=False))
+            # what the removed emulated modem had on the air finishes as the physics says: wait (in model time,
+            # from the live trace: the pose samples go on) until it has, or the next frame meets it
+            reloads = [e["t"] for e in live_events(daemon) if e["ev"] == "reload"]
+            deadline = time.monotonic() + 60
+            while not any(e["t"] > reloads[-1] + 3 for e in live_events(daemon)):
+                assert time.monotonic() < deadline, "the model's clock stood still"
+                time.sleep(0.05)
             la.send(b"simulated again", dst=2)
             message = lf.recv(timeout=60)
             assert message is not None and message.data == b"simulated again"
