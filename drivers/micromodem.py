@@ -191,7 +191,8 @@ class MicromodemBackend(QueuedBackend):
             outgoing.echoed = True  # the echo of our $CCCYC
             return
         if src != self.address:  # a packet from another modem is arriving
-            self.incoming = _Incoming(src, dest, max(1, count))
+            most = max(rate.frames for rate in RATES.values())  # a modem's claim of more frames is bounded
+            self.incoming = _Incoming(src, dest, max(1, min(count, most)))
 
     def _request(self, s: Sentence) -> None:
         outgoing = self.sending
