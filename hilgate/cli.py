@@ -694,7 +694,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-link-clients", type=int, default=32, metavar="N",
                    help="socket GLI clients at once on one link (default 32)")
 
-    e = sub.add_parser("emulate", help="run a scene with one simulated link shown as an EvoLogics or S100 device")
+    e = sub.add_parser("emulate", help="run a scene with one simulated link shown as a modem device "
+                                       "(EvoLogics, S100, Modem-M64, Micro-Modem)")
     e.add_argument("protocol", choices=emulated_protocols())
     _add_scene_args(e, optional=True)
     e.add_argument("--link", required=True, help="the simulated link to expose")

@@ -35,6 +35,8 @@ class AppFrame:
     ack_retries: int | None = None  # the simulated modem acknowledges it on the channel, retrying so often
     on_acknowledged: Callable[["AppFrame", bool, "float | None"], Any] | None = field(default=None, repr=False)
     """``(frame, delivered, one_way_tau_s)`` when its acknowledgement came back or the last retry failed."""
+    airtime_s: float | None = None
+    """Seconds on air when the sending modem decides it (a Micro-Modem's rate), not the link's bit rate."""
 
 
 @dataclass(frozen=True)

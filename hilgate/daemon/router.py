@@ -59,6 +59,7 @@ class RoutedLink:
         self._state_pending = False
         self._usbl_rng: random.Random | None = None
         self.readdressed: int | None = None  # the address an emulated modem's AT!AL gave the link
+        self.retuned: tuple[float, float] | None = None  # the band an emulated modem's channel gave the link
 
     # -- set-up ----------------------------------------------------------------------------------
 
@@ -94,6 +95,8 @@ class RoutedLink:
             if modem is not None:
                 modem.set_address(spec.params.address)
             self.router.readdress(self, old, spec.params.address)
+        if self.retuned is not None and hasattr(self.backend, "set_band"):
+            self.backend.set_band(self.retuned)  # the emulated modem keeps its channel across reloads
         if endpoints_changed:
             self.doors = [(door, door.update(handle, self)) for door, handle in self.doors]
 
@@ -114,6 +117,16 @@ class RoutedLink:
         self.readdressed = address
         self.router.readdress(self, old, address)
         log.info("link %s: address %d -> %d (AT!AL)", self.id, old, address)
+
+    def set_band(self, band_khz: tuple[float, float]) -> None:
+        """An emulated modem's channel (an M64's ``wcs``): the simulation has this link send and listen
+        in ``band_khz`` from now on, so that pairs on other channels never meet it."""
+        backend = self.backend
+        if hasattr(backend, "set_band"):
+            backend.set_band(band_khz)
+            self.retuned = (float(band_khz[0]), float(band_khz[1]))
+            self.router.recorder.event({"t": round(self.router.scheduler.now(), 9), "ev": "band", "link": self.id,
+                                        "band_khz": list(self.retuned)})
 
     def withdraw(self, frames: list[AppFrame], cause: str) -> int:
         """Take these frames back from the backend's queue if they are still there (an emulated modem's

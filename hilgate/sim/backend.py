@@ -48,6 +48,9 @@ class SimBackend(Backend):
     def set_address(self, address: int) -> None:
         self.modem.set_address(address)
 
+    def set_band(self, band_khz: tuple[float, float]) -> None:
+        self.modem.set_band(band_khz)
+
     def withdraw(self, frames: list[AppFrame], cause: str) -> int:
         """Take these application frames out of the modem's FIFO if they are still queued."""
         wanted = {id(frame) for frame in frames}
@@ -77,6 +80,8 @@ class SimBackend(Backend):
         dst = BROADCAST if self.everyone_in_range and frame.meta is None else frame.dst
         dst_name = "*" if dst == BROADCAST else self._link_names(modem.tx_channel, dst)
         sim_frame = modem.new_frame(dst_name, dst, len(frame.real), app_frame=frame)
+        if frame.airtime_s is not None:
+            sim_frame.airtime = frame.airtime_s  # a modem with several rates (an emulated Micro-Modem)
         if frame.ack_retries is not None and dst != BROADCAST:
             sim_frame.ack = frame.ack_retries  # the modem acknowledges it on the channel (acoustic_ack.py)
         if modem.send(sim_frame):
