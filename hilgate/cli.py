@@ -241,7 +241,8 @@ def _print_status(status: dict, as_json: bool) -> None:
     import json
 
     if as_json:
-        print(json.dumps({"links": status["links"], "vehicles": status["vehicles"]}), flush=True)
+        print(json.dumps({"links": status["links"], "vehicles": status["vehicles"],
+                          **({"ros2": status["ros2"]} if "ros2" in status else {})}), flush=True)
         return
     from .report.tables import _render
 
@@ -263,6 +264,16 @@ def _print_status(status: dict, as_json: bool) -> None:
         print(_render(["camera", "frames/s", "frames", "problem"],
                       [[c["name"], f"{c['fps']:.1f}", str(c["frames"]), c["error"] or ""] for c in status["cameras"]]),
               flush=True)
+    ros2 = status.get("ros2")
+    if ros2:
+        published = ", ".join(f"{what} {n}" for what, n in ros2.get("published", {}).items() if n) or "nothing"
+        print(f"\nROS 2: domain {ros2['domain_id']} on {', '.join(ros2['interfaces'])}, namespace {ros2['namespace']}; "
+              f"published {published}" + (f"; {ros2['failed']} writes failed" if ros2.get("failed") else ""), flush=True)
+        if ros2["poses_in"]:
+            print(_render(["vehicle", "topic", "messages", "applied", "refused"],
+                          [[p["vehicle"], p["topic"], str(p["messages"]), str(p["applied"]),
+                            ", ".join(f"{cause} {n}" for cause, n in sorted(p["refused"].items())) or "none"]
+                           for p in ros2["poses_in"]]), flush=True)
 
 
 def cmd_pose(args: argparse.Namespace) -> int:

@@ -1,4 +1,4 @@
-"""Starts and stops what feeds the pose board in the daemon: MAVLink links, cameras, feedback.
+"""Starts and stops what feeds the pose board in the daemon: MAVLink links, cameras, ROS 2 topics, feedback.
 
 Each runs in its own thread (or, for feedback, on the loop's timers) and hands measurements to the
 loop with ``scheduler.post``, so the medium reads poses without ever waiting for a device.  A reload
@@ -38,8 +38,10 @@ def _feedback_identity(vehicle: Any) -> Any:
 
 
 class LiveSources:
-    def __init__(self, scheduler: Any):
+    def __init__(self, scheduler: Any, ros2: Any = None):
         self.scheduler = scheduler
+        self.ros2 = ros2  # the daemon's Ros2Bridge: the participant ``ros2`` poses are read on
+        self.ros2_sources: list[Any] = []
         self.mavlink: list[Any] = []
         self.cameras: dict[str, Any] = {}
         self.feedback: list[Any] = []
@@ -56,6 +58,8 @@ class LiveSources:
                 for kind, params in vehicle.pose.params:
                     if kind == "mavlink":
                         self._start_mavlink(name, pose, dict(params))
+                    elif kind == "ros2":
+                        self._start_ros2(name, pose, dict(params))
             if vehicle.feedback:
                 self._start_feedback(name, pose, dict(vehicle.feedback), _feedback_identity(vehicle))
         for camera in scene.cameras.values():
@@ -80,6 +84,19 @@ class LiveSources:
                                heartbeat.get("rate_hz", 1.0))
         source.start()
         self.mavlink.append(source)
+
+    def _start_ros2(self, name: str, vehicle: LiveVehicle, params: dict) -> None:
+        """A ROS 2 topic read on the daemon's participant; Cyclone's thread keeps the latest measurement
+        and the loop applies it (:mod:`hilgate.ros2.poses`), stamped with the model time it is applied at."""
+        from ..ros2.poses import PoseSource
+
+        now = self.scheduler.now
+
+        def apply(position: dict, velocity: dict | None, attitude: tuple) -> None:
+            vehicle.update("ros2", now(), position, velocity, attitude)
+
+        self.ros2_sources.append(PoseSource(name, self.ros2.participant(), params, self.ros2.frame, apply,
+                                            self.scheduler.post))
 
     def _start_feedback(self, name: str, pose: Any, params: dict, identity: Any) -> None:
         from ..drivers.mavlink_source import Feedback
@@ -130,6 +147,9 @@ class LiveSources:
         return [{"name": name, "fps": round(thread.fps, 1), "frames": thread.frames, "error": thread.error}
                 for name, thread in self.cameras.items()]
 
+    def ros2_status(self) -> list[dict]:
+        return [source.status() for source in self.ros2_sources]
+
     def close(self) -> None:
         for source in self.mavlink:
             source.stop()
@@ -137,4 +157,6 @@ class LiveSources:
             thread.stop()
         for feedback in self.feedback:
             feedback.close()
-        self.mavlink, self.cameras, self.feedback = [], {}, []
+        for source in self.ros2_sources:
+            source.close()
+        self.mavlink, self.cameras, self.feedback, self.ros2_sources = [], {}, [], []

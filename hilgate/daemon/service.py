@@ -22,6 +22,7 @@ from ..gli.queues import QueueDoor, forget_created, plan_message_size, raise_que
 from ..gli.sockets import ClientLimits, SocketDoor, tcp_listener
 from ..gli.token import TOKEN_FILE, TokenCheck, load_or_create
 from .live_sources import LiveSources
+from .ros2_bridge import Ros2Bridge
 from ..core.realtime import RealtimeScheduler
 from ..sim.recorder import Recorder
 from .router import Router
@@ -162,9 +163,11 @@ class Daemon:
             SocketDoor(os.path.join(self.runtime_dir, "gli"), scheduler, self.clients, self.router.port, group),
             EmulatorDoor(scheduler),
         ]
+        self.ros2 = Ros2Bridge(scheduler, self.router, self.scene_path)
+        self.router.doors.append(self.ros2)  # opens nothing, and loads no DDS, for links not on ROS 2
         self.tcp_listener = None
         self.control = None
-        self.live = LiveSources(scheduler)
+        self.live = LiveSources(scheduler, self.ros2)
         try:
             if host is not None:
                 spec = scene.zenoh or ZenohSpec()
@@ -173,8 +176,10 @@ class Daemon:
                 self.router.doors.append(self.network.open())
                 self.network.claim(scene)  # before anything opens: a refused daemon touches nothing
                 self.router.network = self.network
+            self.ros2.prepare(scene)
             self.router.apply(scene)
             self.live.apply(scene, self.router.world.poses, self.router.world.local)
+            self.ros2.apply(scene)
             if self.trace is not None and scene.trace_poses_s:
                 self.router.world.sample_poses(scene.trace_poses_s * self.speed, self.recorder.event)
             if self.tcp:
@@ -283,6 +288,9 @@ class Daemon:
 
     def status(self) -> dict[str, Any]:
         status = {**self.router.status(), "cameras": self.live.status()}
+        ros2 = self.ros2.status()
+        if ros2 is not None:  # only once the daemon is on ROS 2
+            status["ros2"] = {**ros2, "poses_in": self.live.ros2_status()}
         if self.tcp_listener is not None:  # what the TCP GLI refused, by cause; how many wait to authenticate
             status["tcp"] = {"refused": dict(self.clients.refused), "waiting": sum(self.clients.pending.values())}
         return status
@@ -332,10 +340,16 @@ class Daemon:
             self._reload_finished(False, str(exc))
             return
         try:
+            self.ros2.prepare(scene)
+        except SceneError as exc:
+            self._reload_finished(False, str(exc))
+            return
+        try:
             self.router.apply(scene)
             if self.network is not None:
                 self.network.apply(scene)
             self.live.apply(scene, self.router.world.poses, self.router.world.local)
+            self.ros2.apply(scene)
             self.scene = scene
         except Exception as exc:  # e.g. a new link's port or queue cannot be opened
             log.debug("reload failed while applying", exc_info=True)
@@ -391,6 +405,11 @@ class Daemon:
                     closer.close()
                 except Exception:
                     log.exception("while closing %r", closer)
+        if getattr(self, "ros2", None) is not None:  # last: the links' and sources' readers are gone
+            try:
+                self.ros2.shutdown()
+            except Exception:
+                log.exception("while leaving ROS 2")
         if self.trace is not None:
             self.recorder.close()
             self.trace.close()
