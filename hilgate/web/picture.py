@@ -90,6 +90,7 @@ def scene_message(view: dict[str, Any], mode: str) -> dict[str, Any]:
             "fifo_bytes": _number(params.get("fifo_bytes"), None),
             "address": link.get("address") if isinstance(link.get("address"), int) else None,
             "host": link.get("host") if isinstance(link.get("host"), str) else None,
+            "emulate": _text(link["emulate"].get("protocol", "modem")) if isinstance(link.get("emulate"), dict) else None,
         }
     raw_vehicles = view.get("vehicles") if isinstance(view.get("vehicles"), dict) else {}
     vehicles = {}
@@ -193,7 +194,7 @@ class Flight:
             frame.outcomes.append((t, link, ev, cause))
             del frame.outcomes[:-MAX_OUTCOMES]
             if cause is not None:
-                self._error(link, t, cause, f"frame {pkt} from {src}")
+                self._error(link, t, cause, f"from {src}")
 
     def line(self, record: dict[str, Any]) -> None:
         """A free-form trace line: a real modem's ``tx``/``rx`` (no frame id: drawn as a wave from its

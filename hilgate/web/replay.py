@@ -79,7 +79,7 @@ class Replay:
                 else:
                     flow["lost:" + (cause or "?")].append(t)
                     self.link_times[link]["drops" if ev == "drop" else "lost"].append(t)
-                    self.errors[link].append((t, cause or "?", f"frame {p.pkt} from {p.src}"))
+                    self.errors[link].append((t, cause or "?", f"from {p.src}"))
             times = p.txs + [o[0] for o in p.outcomes]
             if not times:
                 continue

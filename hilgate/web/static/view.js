@@ -16,7 +16,7 @@ const SEEN_KEPT = 5000;
 
 const view = window.hilgateView = {
   scene: null, state: null, received: 0, connected: false, authed: false, mode: null, error: null,
-  seen: new Map(),     // frame id -> the states it was drawn in, in order ("flight", then fates): for tests
+  seen: new Map(),     // frame id -> {src, dst, states}: what it was drawn as, in order ("flight", then fates)
   bounds: null, drawn: 0, ws: null,
 };
 
@@ -47,14 +47,14 @@ function channelColour(name) {
   return CHANNEL_COLOURS[h % CHANNEL_COLOURS.length];
 }
 
-function seen(id, what) {
-  let states = view.seen.get(id);
-  if (!states) {
-    states = [];
-    view.seen.set(id, states);
+function seen(frame, what) {
+  let entry = view.seen.get(frame.id);
+  if (!entry) {
+    entry = { src: frame.src, dst: frame.dst, states: [] };
+    view.seen.set(frame.id, entry);
     if (view.seen.size > SEEN_KEPT) view.seen.delete(view.seen.keys().next().value);
   }
-  if (!states.includes(what)) states.push(what);
+  if (!entry.states.includes(what)) entry.states.push(what);
 }
 
 // -- the connection --------------------------------------------------------------------------------
@@ -183,7 +183,8 @@ function updateLinks(links) {
     let badge = backend.querySelector(".badge");
     if (!badge) { badge = document.createElement("span"); badge.className = "badge"; backend.appendChild(badge); }
     const kind = link.remote ? "remote" : (info.kind || (link.backend === "sim" ? "sim" : "real"));
-    const label = link.remote ? "on " + link.host : (kind === "sim" ? "sim" : kind + " · " + (link.backend || info.backend));
+    const label = link.remote ? "on " + link.host : kind === "sim" ? "sim"
+      : kind === "emulated" ? "emulated " + (info.emulate || "modem") : "real · " + (link.backend || info.backend);
     if (badge.dataset.kind !== kind) badge.dataset.kind = kind;
     if (badge.textContent !== label) badge.textContent = label;
     const state = cell(row, "state", link.state || "–");
@@ -198,9 +199,19 @@ function updateLinks(links) {
     bar.title = (link.fifo_bytes || 0) + " of " + (capacity || "?") + " bytes";
     fifo.dataset.bytes = link.fifo_bytes || 0;
     for (const key of ["tx", "rx", "drops", "lost"]) cell(row, key, link[key] === undefined ? "–" : link[key]);
-    const errors = (link.errors || []).map((e) => "t=" + Number(e[0]).toFixed(1) + " " + e[1] + (e[2] ? " " + e[2] : ""));
-    if (link.reason) errors.unshift(link.reason);
-    cell(row, "errors", errors.slice(-3).join("; "));
+    const errors = (link.errors || []).map((e) => Number(e[0]).toFixed(1) + " s " + e[1] + (e[2] ? " " + e[2] : ""));
+    if (link.reason) errors.push(link.reason);
+    const box = cell(row, "errors");
+    const text = errors.slice(-2).join("\n");
+    if (box.dataset.text !== text) {
+      box.dataset.text = text;
+      box.replaceChildren(...errors.slice(-2).map((line) => {
+        const div = document.createElement("div");
+        div.textContent = line;
+        div.title = line;
+        return div;
+      }));
+    }
   }
   prune("links", "link", new Set(links.map((l) => l.id)));
 }
@@ -369,7 +380,7 @@ function draw() {
         group.appendChild(el("path", { d: `M${X(at[0]) - 5},${Y(at[1]) - 5}l10,10m0,-10l-10,10`, stroke: colour,
           "stroke-width": 2, "stroke-opacity": opacity }));
       }
-      seen(frame.id, key);
+      seen(frame, key);
     }
     if (radius >= 0 && from) {  // still on its way to the receivers not judged yet
       const targets = new Set();
@@ -384,7 +395,7 @@ function draw() {
         group.appendChild(el("circle", { cx: X(from[0] + (at[0] - from[0]) * w), cy: Y(from[1] + (at[1] - from[1]) * w),
           r: 4, fill: channelColour(link.channel), class: "flight", "data-to": target }));
       }
-      seen(frame.id, "flight");
+      seen(frame, "flight");
     }
     if (group.childNodes.length) layer.appendChild(group);
   }
