@@ -15,7 +15,7 @@ from typing import Any
 
 from ..scene.view import scene_view
 from ..sim.backend import SimBackend
-from ..web.picture import Flight, LINGER_S, scene_message
+from ..web.picture import Flight, LINGER_S, extent_m, scene_message
 
 log = logging.getLogger(__name__)
 
@@ -111,6 +111,7 @@ class WebFeed:
                           "drop_causes": status["drop_causes"], "since_s": status["since_s"],
                           "reason": status.get("reason"), "errors": self.flight.errors_of(status["id"])})
         vehicles = router.vehicle_status()
+        self.flight.extent_m = extent_m(vehicle["position"] for vehicle in vehicles)
         hosts = []
         if router.network is not None:
             for remote in router.network.status()["remote_links"]:  # served by another host: its state only

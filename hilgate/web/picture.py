@@ -16,7 +16,7 @@ import math
 from collections import OrderedDict, deque
 from typing import Any, Iterable
 
-__all__ = ["link_kind", "scene_message", "reach_s", "frame_view", "Flight", "LINGER_S", "MAX_FRAMES",
+__all__ = ["link_kind", "scene_message", "reach_s", "extent_m", "frame_view", "Flight", "LINGER_S", "MAX_FRAMES",
            "MAX_FLIGHT_S", "ERRORS_KEPT"]
 
 LINGER_S = 2.0
@@ -29,7 +29,7 @@ MAX_FLIGHT_S = 30.0
 """The longest a wave is drawn (unbounded range, a slow channel): 45 km of water."""
 
 UNBOUNDED_REACH_M = 10_000.0
-"""How far the wave of a modem without a maximum range is drawn."""
+"""How far a wave is drawn when no vehicle's position is known."""
 
 STALE_S = 5.0
 """Model seconds after it can no longer be drawn that a live frame is forgotten (a late judgement, an rx
@@ -105,12 +105,13 @@ def scene_message(view: dict[str, Any], mode: str) -> dict[str, Any]:
             "vehicles": vehicles, "hosts": hosts}
 
 
-def reach_s(link: dict[str, Any] | None, size: int) -> float:
-    """How long a frame of ``size`` bytes from ``link`` (a SCENE entry) is drawn in flight."""
+def reach_s(link: dict[str, Any] | None, size: int, extent_m: float = UNBOUNDED_REACH_M) -> float:
+    """How long a frame of ``size`` bytes from ``link`` (a SCENE entry) is drawn in flight: until its wave
+    has passed the modem's range, or the farthest vehicle (``extent_m``: the scene's span)."""
     if link is None:
         return LINGER_S
     rmax = link["range_m"][1]
-    distance = rmax if rmax is not None else UNBOUNDED_REACH_M
+    distance = min(rmax, extent_m) if rmax is not None else extent_m
     airtime = size * 8.0 / link["bitrate_bps"] if link.get("bitrate_bps") else 0.0
     return min(MAX_FLIGHT_S, link["min_delay_s"] + distance / link["speed_mps"] + airtime)
 
@@ -140,6 +141,19 @@ def frame_view(pkt: Any, src: str, dst: str, size: int, txs: Iterable[float],
             "tx": None if tx is None else round(tx, 6), "reach_s": round(reach, 6), "out": shown}
 
 
+def extent_m(positions: Iterable[Any]) -> float:
+    """How far a wave must go to pass every vehicle: the diagonal of their positions' box (at least 10 m)."""
+    xs, ys, zs = [], [], []
+    for position in positions:
+        if position is not None:
+            xs.append(position[0])
+            ys.append(position[1])
+            zs.append(position[2])
+    if not xs:
+        return UNBOUNDED_REACH_M
+    return max(10.0, math.dist((min(xs), min(ys), min(zs)), (max(xs), max(ys), max(zs))))
+
+
 class _Frame:
     __slots__ = ("pkt", "src", "dst", "size", "txs", "outcomes", "last")
 
@@ -157,6 +171,7 @@ class Flight:
 
     def __init__(self, links: dict[str, Any] | None = None, max_frames: int = 4 * MAX_FRAMES):
         self.links: dict[str, Any] = links or {}
+        self.extent_m = UNBOUNDED_REACH_M  # the vehicles' span: the daemon sets it with every picture
         self.max_frames = max_frames
         self.frames: OrderedDict[Any, _Frame] = OrderedDict()
         self.errors: dict[str, deque] = {}
@@ -221,16 +236,16 @@ class Flight:
     def visible(self, now: float, linger: float = LINGER_S) -> list[dict[str, Any]]:
         """The frames on the picture at ``now``, newest first (at most ``MAX_FRAMES``); the oldest frames,
         once nothing of them can be drawn any more, are forgotten."""
-        frames, links = self.frames, self.links
+        frames, links, extent = self.frames, self.links, self.extent_m
         while frames:
             frame = frames[next(iter(frames))]
-            if now - frame.last <= reach_s(links.get(frame.src), frame.size) + linger + STALE_S:
+            if now - frame.last <= reach_s(links.get(frame.src), frame.size, extent) + linger + STALE_S:
                 break
             frames.popitem(last=False)
         out = []
         for frame in reversed(frames.values()):
             view = frame_view(frame.pkt, frame.src, frame.dst, frame.size, frame.txs, frame.outcomes, now,
-                              reach_s(links.get(frame.src), frame.size), linger)
+                              reach_s(links.get(frame.src), frame.size, extent), linger)
             if view is not None:
                 out.append(view)
                 if len(out) >= MAX_FRAMES:

@@ -17,12 +17,12 @@ the frames that carry an id (a simulated modem's), as its timeline figure counts
 from __future__ import annotations
 
 import math
-from bisect import bisect_left, bisect_right
+from bisect import bisect_right
 from collections import defaultdict
 from typing import Any
 
 from ..report.tracedata import Trace
-from .picture import LINGER_S, MAX_FLIGHT_S, MAX_FRAMES, ERRORS_KEPT, frame_view, reach_s, scene_message
+from .picture import ERRORS_KEPT, LINGER_S, MAX_FLIGHT_S, MAX_FRAMES, extent_m, frame_view, reach_s, scene_message
 
 __all__ = ["Replay", "SPEEDS", "MIN_SPEED", "MAX_SPEED"]
 
@@ -42,6 +42,8 @@ class Replay:
     """The pictures of one trace (one run of it).  ``scenes``: (t, scene view) in force from t, at least one."""
 
     def __init__(self, trace: Trace, scenes: list[tuple[float, dict]], name: str = ""):
+        if not scenes:
+            raise ValueError("a trace is played with the scene it ran: none given")
         self.name = name
         self.scenes = sorted(((t, scene_message(view, "replay")) for t, view in scenes), key=lambda s: s[0])
         self._scene_times = [t for t, _ in self.scenes]
@@ -52,9 +54,10 @@ class Replay:
         self.link_times: dict[str, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
         self.flow_times: dict[tuple[str, str], dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
         self.errors: dict[str, list[tuple[float, str, str]]] = defaultdict(list)
-        self._index(trace)
-        self.fifo = {link: (_sorted_pairs(points)) for link, points in trace.fifo.items()}
+        self.fifo = {link: _sorted_pairs(points) for link, points in trace.fifo.items()}
         self.poses = {vehicle: _sorted_pairs(points) for vehicle, points in trace.poses.items()}
+        self.extent_m = extent_m(spot for _, spots in self.poses.values() for spot in spots)
+        self._index(trace)
         self.hosts: dict[str, list[tuple[float, str]]] = defaultdict(list)
         for t, host, state in sorted(trace.hosts, key=lambda h: h[0]):
             self.hosts[host].append((t, state))
@@ -84,7 +87,8 @@ class Replay:
             if not times:
                 continue
             begin = min(times)
-            finish = max(max(p.txs) + MAX_FLIGHT_S if p.txs else begin, max((o[0] for o in p.outcomes), default=begin))
+            reach = max(reach_s(scene["links"].get(p.src), p.size, self.extent_m) for _, scene in self.scenes)
+            finish = max(max(p.txs) + reach if p.txs else begin, max((o[0] for o in p.outcomes), default=begin))
             finish = min(finish, begin + 2 * MAX_FLIGHT_S)
             for bucket in range(math.floor(begin / BUCKET_S), math.floor(finish / BUCKET_S) + 1):
                 self.buckets[bucket].append(index)
@@ -126,8 +130,8 @@ class Replay:
         links = scene["links"]
         for index in sorted(chosen, reverse=True):
             p = self.packets[index]
-            view = frame_view(p.pkt, p.src, p.dst, p.size, p.txs, p.outcomes, t, reach_s(links.get(p.src), p.size),
-                              linger)
+            view = frame_view(p.pkt, p.src, p.dst, p.size, p.txs, p.outcomes, t,
+                              reach_s(links.get(p.src), p.size, self.extent_m), linger)
             if view is not None:
                 out.append(view)
         out.sort(key=lambda f: -(f["tx"] if f["tx"] is not None else f["out"][-1][1]))
@@ -187,6 +191,3 @@ def _sorted_pairs(points: list[tuple[float, Any]]) -> tuple[list[float], list[An
     ordered = sorted(points, key=lambda p: p[0])
     return [p[0] for p in ordered], [p[1] for p in ordered]
 
-
-def bisect_time(times: list[float], t: float) -> int:
-    return bisect_left(times, t)
