@@ -446,3 +446,31 @@ def test_a_hostile_scene_view_becomes_a_scene_the_page_can_draw():
     assert link["kind"] == "emulated" and link["speed_mps"] == 1500.0 and link["min_delay_s"] == 0.0
     assert link["range_m"] == [0.0, None] and link["bitrate_bps"] is None and "b" not in message["links"]
     json.dumps(message, allow_nan=False)  # strict JSON: what the page gets parses
+
+
+def test_a_strange_trace_plays_or_is_refused_in_one_line(tmp_path):
+    """Lines a reader lets through but no daemon writes (frames judged before they were sent, a pose
+    unknown, a link no scene names, a scene of odd values) play; a bad line is one line naming it."""
+    view = {"name": "odd", "channels": {"ac": {"speed_mps": 0}}, "vehicles": {"v": {}},
+            "links": {"a": {"vehicle": "v", "backend": "sim", "params": {"range_m": [5, 1]}}}}
+    lines = [{"t": 0.0, "ev": "run", "run": "r1", "scene_view": view},
+             {"t": 1.0, "ev": "pose", "vehicle": "v", "position": None},
+             {"t": 2.0, "ev": "pose", "vehicle": "v", "position": [1, 2, 3]},
+             {"t": 3.0, "ev": "rx", "link": "ghost", "pkt": "x", "src": "a", "dst": "*", "size": 3},
+             {"t": 2.5, "ev": "tx", "link": "a", "pkt": "x", "src": "a", "dst": "*", "size": 3},
+             {"t": 4.0, "ev": "host", "host": "B", "state": "down"},
+             {"t": 5.0, "ev": "drop", "link": "a", "pkt": 9, "src": "a", "dst": "b", "size": 1e3 and 1000,
+              "cause": "fifo", "fifo_bytes": 0}]
+    trace = tmp_path / "odd.jsonl"
+    trace.write_text("".join(json.dumps(line) + "\n" for line in lines))
+    loaded = load_trace(str(trace))
+    replay = Replay(loaded, loaded.scenes)
+    for t in (-5.0, 0.0, 1.5, 2.7, 3.0, 4.5, 5.0, 1e9):
+        state = replay.state(t, 100.0, True)
+        json.dumps(state, allow_nan=False)
+    assert replay.state(5.0)["hosts"] == [{"host": "B", "state": "down"}]
+    assert [f["id"] for f in replay.state(3.0)["frames"]] == ["x"]
+    trace.write_text(trace.read_text() + '{"t": 6, "ev": "host", "host": "B", "state": "sideways"}\n')
+    result = hilgate("view", str(trace))
+    assert result.returncode == 1 and "odd.jsonl:8: 'state' must be" in result.stderr
+    assert "Traceback" not in result.stderr and len(result.stderr.strip().splitlines()) == 1
