@@ -108,6 +108,7 @@ class WebServer:
         self._scene_text: str | None = None
         self._state_text: str | None = None
         self._scheduled = False
+        self._scene_new = False
         self._ioloop: Any = None
         self._thread: threading.Thread | None = None
         self._stopped: asyncio.Event | None = None
@@ -130,10 +131,11 @@ class WebServer:
         dictionaries are the server's from now on: the caller must not change them."""
         if scene is not None:
             self._scene = scene
+            self._scene_new = True
         self._state = state
         if not self._scheduled and self._ioloop is not None:
             self._scheduled = True
-            self._ioloop.add_callback(self._fan_out, scene is not None)
+            self._ioloop.add_callback(self._fan_out)
 
     def close(self) -> None:
         if self._ioloop is not None and self._thread is not None:
@@ -175,8 +177,9 @@ class WebServer:
         if self._stopped is not None:
             self._stopped.set()
 
-    def _fan_out(self, scene_changed: bool) -> None:
+    def _fan_out(self) -> None:
         self._scheduled = False  # first: a picture published from now on schedules another round
+        scene_changed, self._scene_new = self._scene_new, False
         state = self._state
         if scene_changed or self._scene_text is None:
             self._scene_text = json.dumps(self._scene) if self._scene is not None else None
