@@ -605,6 +605,13 @@ class Router:
         return {"class": "ERROR", "error": f"unknown request {kind!r}"}
 
     def status(self) -> dict[str, Any]:
+        status = {"links": [link.status() for link in self.links.values()], "vehicles": self.vehicle_status()}
+        if self.network is not None:
+            status["network"] = self.network.status()
+        return status
+
+    def vehicle_status(self) -> list[dict[str, Any]]:
+        """Every vehicle now: its pose source, position (None: unknown) and the age of its pose."""
         assert self.world is not None and self.scene is not None
         now = self.scheduler.now()
         vehicles = []
@@ -617,10 +624,7 @@ class Router:
                 "position": None if position is None else [round(v, 4) for v in position],
                 "age_s": None if age is None else round(age, 3),
             })
-        status = {"links": [link.status() for link in self.links.values()], "vehicles": vehicles}
-        if self.network is not None:
-            status["network"] = self.network.status()
-        return status
+        return vehicles
 
     def close(self) -> None:
         for link in self.links.values():

@@ -89,7 +89,10 @@ class Daemon:
                  preset_dirs: list[str] | tuple[str, ...] = (), host: str | None = None,
                  zenoh_connect: list[str] | tuple[str, ...] = (), zenoh_listen: list[str] | tuple[str, ...] = (),
                  clock_offset_s: float = 0.0, tcp_token: str | None = None,
-                 zenoh_credentials: str | None = None, zenoh_insecure: bool = False):
+                 zenoh_credentials: str | None = None, zenoh_insecure: bool = False, web: str | None = None):
+        self.web = web
+        self.web_server: Any = None
+        self.web_feed: Any = None
         self.tcp_token = tcp_token
         self.host = host
         self.zenoh_credentials = zenoh_credentials
@@ -132,9 +135,14 @@ class Daemon:
         prepare_private_dir(self.runtime_dir, group)
         prepare_private_dir(os.path.join(self.runtime_dir, "gli"), group)
         token_check = None
-        if self.tcp:  # before anything opens: a token that cannot be used refuses the start
+        if self.tcp or self.web:  # before anything opens: a token that cannot be used refuses the start
             token_path = self.tcp_token or os.path.join(self.runtime_dir, TOKEN_FILE)
             token_check = TokenCheck(load_or_create(token_path, group), token_path)
+        if self.web:  # the port too: one in use refuses the start
+            from ..web.server import WebServer, parse_web
+
+            web_host, web_port = parse_web(self.web)
+            self.web_server = WebServer(web_host, web_port, token_check, token_hint=token_check.path)
         raise_queue_budget()
         raise_descriptor_limit()
         trace_path = self.trace_path or scene.trace_file
@@ -190,6 +198,14 @@ class Daemon:
             self.control = ControlServer(os.path.join(self.runtime_dir, "control.sock"), scheduler,
                                          self.status, self.reload, group=group,
                                          deferred={"NETWORK": self._network_status})
+            if self.web_server is not None:
+                from .webfeed import WebFeed
+
+                self.web_server.start()
+                self.web_feed = WebFeed(scheduler, self.router, self.recorder, self.web_server)
+                self.web_feed.start()
+                log.info("web view on %s: pages prove the token in %s (readable by the daemon's group); "
+                         "`hilgate view` prints the address with it", self.web_server.url, token_check.path)
             scheduler.on_signal(signal.SIGHUP, lambda s: self.reload())  # answered in the log only
             scheduler.on_signal(signal.SIGTERM, self.stop)
             scheduler.on_signal(signal.SIGINT, self.stop)
@@ -293,6 +309,9 @@ class Daemon:
             status["ros2"] = {**ros2, "poses_in": self.live.ros2_status()}
         if self.tcp_listener is not None:  # what the TCP GLI refused, by cause; how many wait to authenticate
             status["tcp"] = {"refused": dict(self.clients.refused), "waiting": sum(self.clients.pending.values())}
+        if self.web_server is not None:  # where the web view is, and the token its pages prove
+            status["web"] = {"url": self.web_server.url, "pages": self.web_server.clients,
+                             "token_file": self.web_server.token_hint}
         return status
 
     def status_text(self) -> str:
@@ -399,7 +418,8 @@ class Daemon:
                 log.error("summary not written: %s", exc)
         if self._reload_job is not None:
             self._reload_job.cancel()
-        for closer in (getattr(self, "live", None), self.control, self.tcp_listener, router, self.network):
+        for closer in (self.web_feed, self.web_server, getattr(self, "live", None), self.control, self.tcp_listener,
+                       router, self.network):
             if closer is not None:
                 try:
                     closer.close()
