@@ -1,12 +1,19 @@
 """The performance section (docs/performance.md) is made from `make bench`'s output only (benchmarks/readme_bench.py):
-every benchmark's lines verbatim under its command line, replaced in place on the next run."""
+every benchmark's lines verbatim under its command line, replaced in place on the next run.  And the latency
+benchmarks run where they say (benchmarks/placement.py): pinned, same CPU and across CPUs, only on CPUs this
+process may use."""
 
+import json
 import os
+import subprocess
 import sys
 
 import pytest
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "benchmarks"))
+BENCHMARKS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "benchmarks")
+sys.path.insert(0, BENCHMARKS)
+from peers import check_python  # noqa: E402
+from placement import Placement, choose, placements, pinned, pinned_command  # noqa: E402
 from readme_bench import BEGIN, END, replace, section  # noqa: E402
 
 OUTPUT = "# make bench, 2026-01-01 00:00 UTC: 2 cores\n== benchmarks/a.py --x ==\nratio 1 / 2 / 3\n== benchmarks/b.py ==\nnot run\n"
@@ -62,3 +69,56 @@ def test_the_command_line_writes_the_page_and_refuses_in_one_line(tmp_path, caps
                                 f"2026-01-01 00:00 UTC: 2 cores\n\n`benchmarks/b.py`:\n\n```\nnot run\n```\n{END}\n")
     assert main([str(output), str(page), "--only", "z.py"]) == 2
     assert capsys.readouterr().err == "readme_bench: no output of z.py in it\n"
+
+
+# -- where the latency benchmarks run -------------------------------------------------------------
+
+
+def test_across_cpus_alternates_along_the_path_so_every_hop_crosses():
+    across = Placement("across CPUs", (3, 5))
+    assert [across.cpu(step) for step in range(4)] == [3, 5, 3, 5]
+    assert across.describe(["client", "daemon A", "daemon B", "echo"]) == "client, daemon B on CPU 3; daemon A, echo on CPU 5"
+    same = Placement("same CPU", (3,))
+    assert [same.cpu(step) for step in range(3)] == [3, 3, 3]
+    assert same.describe(["client", "daemon", "echo"]) == "client, daemon, echo on CPU 3"
+
+
+def test_placements_use_only_the_cpus_this_process_may_use():
+    allowed = sorted(os.sched_getaffinity(0))
+    chosen, why_not = placements()
+    assert chosen[0] == Placement("same CPU", (allowed[0],))
+    if len(allowed) > 1:
+        assert chosen[1:] == [Placement("across CPUs", (allowed[0], allowed[1]))] and why_not is None
+    assert [p.name for p in choose("same")[0]] == ["same CPU"] and choose("same")[1] is None
+
+
+PROBE = ("import json, os, sys; sys.path.insert(0, sys.argv[1]); from placement import placements, choose; "
+         "chosen, why_not = placements(); print(json.dumps([os.getpid(), sorted(os.sched_getaffinity(0)), "
+         "[p.name for p in chosen], why_not, [p.name for p in choose('across')[0]]]))")
+
+
+def test_a_pinned_command_runs_on_its_cpu_as_itself_and_says_across_is_not_run_on_one_cpu():
+    cpu = max(os.sched_getaffinity(0))
+    process = subprocess.Popen(pinned_command([sys.executable, "-c", PROBE, BENCHMARKS], cpu), stdout=subprocess.PIPE,
+                               text=True)
+    out, _ = process.communicate(timeout=60)
+    pid, affinity, names, why_not, across = json.loads(out)
+    assert pid == process.pid  # exec'd, not a child of the trampoline: its id is the one the benchmark waits for
+    assert affinity == [cpu]
+    assert names == ["same CPU"] and why_not == "across CPUs: not run (1 CPU)" and across == []
+
+
+def test_pinned_puts_the_thread_back_where_it_was():
+    before = os.sched_getaffinity(0)
+    cpu = max(before)
+    with pinned(cpu):
+        assert os.sched_getaffinity(0) == {cpu}
+    assert os.sched_getaffinity(0) == before
+    with pinned(None):
+        assert os.sched_getaffinity(0) == before
+
+
+def test_a_peer_python_that_is_absent_or_lacks_the_module_is_not_run_with_the_reason():
+    assert check_python(None, "ns") == "no --ns3-python given"
+    assert check_python("/nonexistent/python", "ns") == "/nonexistent/python is not an executable"
+    assert check_python(sys.executable, "no_such_module_hilgate") == f"{sys.executable} has no 'no_such_module_hilgate' module"
