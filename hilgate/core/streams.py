@@ -92,6 +92,16 @@ class Connection:
             return
         self.on_data(data)
 
+    def hung_up(self) -> bool:
+        """Whether the peer has closed (or reset) the connection, though the loop has not read that yet:
+        a listener at its limit of clients asks before it refuses a newcomer for a place already free."""
+        try:
+            return self.sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) == b""
+        except (BlockingIOError, InterruptedError):
+            return False
+        except OSError:
+            return True
+
     def write(self, data: bytes) -> bool:
         """Queue ``data``; False (nothing queued) if the connection is closed or its buffer is full."""
         if self.closed or self.write_failed:
