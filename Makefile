@@ -77,7 +77,7 @@ install uninstall:
 # trips). NS3_PYTHON=PATH (a Python with the ns3 wheel; .venv-ns3/bin/python when it exists, see
 # docs/performance.md) runs ns-3 UAN alongside the ALOHA ring and its real-time scheduler alongside the
 # lateness benchmark; without it ns-3 is "not run".
-NS3_PYTHON ?= $(abspath $(wildcard .venv-ns3/bin/python))
+NS3_PYTHON ?= $(wildcard .venv-ns3/bin/python)
 
 bench: $(VENV)/.installed
 	NS3_PYTHON='$(NS3_PYTHON)' $(BIN)/python benchmarks/run_all.py --out bench.out

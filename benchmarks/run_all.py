@@ -38,6 +38,14 @@ def benchmarks(ns3_python: str | None) -> list[list[str]]:
     ]
 
 
+def shown_path(path: str | None) -> str | None:
+    """``path`` relative to the repository when it is inside (.venv-ns3/bin/python): no one's home folder in the docs."""
+    if not path:
+        return path
+    relative = os.path.relpath(os.path.abspath(path), os.path.dirname(HERE))
+    return path if relative.startswith("..") else relative
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--ns3-python", default=os.environ.get("NS3_PYTHON") or None,
@@ -51,7 +59,7 @@ def main() -> int:
         cpus = ",".join(str(c) for c in sorted(os.sched_getaffinity(0)))
         out.write(f"# make bench, {started}: {os.cpu_count()} cores (this run may use CPUs {cpus}), load average {load} at the start, "
                   f"Python {platform.python_version()}, {platform.machine()}; "
-                  f"ns-3: {args.ns3_python or 'not installed (no --ns3-python / NS3_PYTHON)'}\n")
+                  f"ns-3: {shown_path(args.ns3_python) or 'not installed (no --ns3-python / NS3_PYTHON)'}\n")
         for argv in benchmarks(args.ns3_python):
             shown = " ".join(argv[:1] + [a if a != args.ns3_python else "NS3_PYTHON" for a in argv[1:]])
             header = f"== {shown} =="
