@@ -159,9 +159,11 @@ class TcpHosts:
         log.info("%s: emulated modem on tcp://%s:%d", name, host, port)
 
     def _accept(self, sock: socket.socket) -> None:
-        if len(self.clients) >= MAX_TCP_CLIENTS:  # clients that left but whose close is still unread go first
-            for client in list(self.clients):
-                client.connection.gone()
+        if len(self.clients) >= MAX_TCP_CLIENTS:
+            # hosts that left but whose end of file the loop has not read yet hold no place: a host that
+            # reconnects at once is not refused for its own old connection (seen on a loaded host)
+            for client in [c for c in self.clients if c.connection.hung_up()]:
+                client.connection.close()
         if len(self.clients) >= MAX_TCP_CLIENTS:
             self.refused += 1
             if self.refused & (self.refused - 1) == 0:  # the 1st, 2nd, 4th, 8th…: a flood costs a few lines

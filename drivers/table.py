@@ -35,7 +35,7 @@ from typing import Any, Callable, Iterator
 
 __all__ = [
     "Option", "Driver", "DRIVERS", "ModemLimits", "MODES", "SEND_AS", "limits_for", "EvologicsOptions", "S100Options", "S100EmulatorOptions", "option", "from_link", "scene_options", "emulator_options",
-    "driver_names", "emulated_protocols", "open_backend", "emulator_for",
+    "M64Options", "M64EmulatorOptions", "MicromodemOptions", "driver_names", "emulated_protocols", "open_backend", "emulator_for",
 ]
 
 KINDS = ("port", "integer", "number", "boolean", "choice")
@@ -87,11 +87,17 @@ MODES = {"im": "an instant message", "ims": "a synchronous instant message", "pb
          "burst": "a burst"}
 """The EvoLogics S2C's ways of sending, as a refusal names them (``AT*SENDIM``, ``AT*SENDIMS``,
 ``AT*SENDPBM``, ``AT*SEND``)."""
-SEND_AS = ("im", "burst")
-"""The modes GLI frames can go as: the driver's ``im: true`` and ``im: false`` (a simulated link's
-``send_as``)."""
+MICROMODEM_RATES = tuple(f"rate{n}" for n in range(6))
+MODES.update({"packet": "a packet", "datagram": "a datagram",
+              **{mode: f"a rate-{mode[4:]} packet" for mode in MICROMODEM_RATES}})
+"""… the Modem-M64's 8-byte packet and the WlUDPSocket datagram its driver sends in them, the Micro-Modem's
+packet of each rate."""
+SEND_AS = ("im", "burst", "datagram", *MICROMODEM_RATES)
+"""The modes GLI frames can go as: the EvoLogics driver's ``im: true`` and ``im: false``, the M64 driver's
+datagrams, the Micro-Modem driver's ``rate`` (a simulated link's ``send_as``)."""
 PLURALS = {"im": "instant messages", "ims": "synchronous instant messages", "pbm": "piggyback messages",
-           "burst": "bursts"}
+           "burst": "bursts", "packet": "packets", "datagram": "datagrams",
+           **{mode: f"rate-{mode[4:]} packets" for mode in MICROMODEM_RATES}}
 
 
 @dataclass(frozen=True)
@@ -202,6 +208,49 @@ class S100EmulatorOptions:
 
 
 @dataclass(frozen=True)
+class M64Options:
+    """``backend: m64`` (:mod:`hilgate.drivers.m64`): a Water Linked Modem-M64.  A pair talks when one is
+    role ``a`` and the other ``b`` on the same ``modem_channel`` (1-7); frames cross as ``WlUDPSocket`` datagrams in
+    8-byte packets, about one a second each way."""
+
+    port: str = option(Option("port", hint="a device such as /dev/ttyUSB0"))
+    role: str = option(Option("choice", choices=("a", "b"), hint="a or b: one modem of a pair is a, the other b"))
+    modem_channel: int = option(Option("integer", 1, 7, hint="the pair's channel, 1 to 7 (Water Linked recommends 2 or 3)"))
+    baud: int = option(Option("integer", 50, 4_000_000), 115200)
+    queued_packets: int = option(Option("integer", 1, 1000), 2)  # kept in the modem's queue (as WlUDPSocket)
+    poll_s: float = option(Option("number", above=0), 0.2)  # how often the queue is asked (wcl), as WlUDPSocket
+    diagnostic_s: float = option(Option("number", minimum=0), 5.0)  # wcd into the trace (0: never)
+    command_timeout_s: float = option(Option("number", above=0), 1.0)
+    queue_frames: int = option(Option("integer", 0, 100_000), 50)
+    limits: "ModemLimits | None" = from_limits(None)  # None: M64_LIMITS
+
+
+@dataclass(frozen=True)
+class M64EmulatorOptions:
+    """``emulate: {protocol: m64}`` (:class:`hilgate.drivers.m64_emulator.M64Emulator`): the role and
+    channel the modem has at power-on (a host's ``wcs`` changes them)."""
+
+    role: str = option(Option("choice", choices=("a", "b")), "a")
+    channel: int = option(Option("integer", 1, 7), 1)
+
+
+@dataclass(frozen=True)
+class MicromodemOptions:
+    """``backend: micromodem`` (:mod:`hilgate.drivers.micromodem`): a WHOI Micro-Modem; each frame is one
+    packet of ``rate`` (its frames sized as the rate allows), with the modem's acknowledgement if ``ack``."""
+
+    port: str = option(Option("port", hint="a device such as /dev/ttyUSB0"))
+    baud: int = option(Option("integer", 50, 4_000_000), 19200)
+    rate: int = option(Option("integer", 0, 5), 1)
+    ack: bool = option(BOOLEAN, False)
+    command_timeout_s: float = option(Option("number", above=0), 2.0)
+    cycle_timeout_s: float = option(Option("number", above=0), 60.0)
+    ack_timeout_s: float = option(Option("number", above=0), 10.0)
+    queue_frames: int = option(Option("integer", 0, 100_000), 50)
+    limits: "ModemLimits | None" = from_limits(None)  # None: MICROMODEM_LIMITS
+
+
+@dataclass(frozen=True)
 class Driver:
     """One row of the table (see the module's docstring)."""
 
@@ -224,11 +273,27 @@ S100_LIMITS = ModemLimits("s100", piece_bytes=45, flow_control="rtscts", baud=96
 """The Seatooth S100 as dccomms_utils' bridge drives it (shared/protocols/s100-mavlink-aruco.md);
 ``models/s100.yaml`` states it with its source."""
 
+M64_LIMITS = ModemLimits("m64", (("packet", 8), ("datagram", 4000)), send_as="datagram", baud=115200)
+"""The Modem-M64: 8-byte packets (its protocol's ``wrn,8``), 115200 baud; a GLI frame goes as one
+WlUDPSocket datagram, at most 4000 bytes (hilgate's bound: its framing stays within the 4096 bytes the
+receiving driver holds; WlUDPSocket has none, and at 8 bytes a second 4000 take eight minutes)."""
+
+MICROMODEM_LIMITS = ModemLimits("micromodem", tuple((f"rate{n}", size) for n, size in
+                                                    enumerate((32, 192, 192, 512, 512, 2048))),
+                                send_as="rate1", baud=19200)
+"""The Micro-Modem's packet of each rate, frames × frame bytes (``drivers/micromodem_codec.py``'s
+RATES, WHOI's software interface guide); 19200 baud, its default serial rate; GLI frames go as one packet
+of the driver's ``rate`` (1 by default)."""
+
 DRIVERS: dict[str, Driver] = {driver.name: driver for driver in (
     Driver("evologics", "EvoLogics modem", EvologicsOptions, "hilgate.drivers.evologics:EvologicsBackend",
            "hilgate.drivers.emulators:EvologicsEmulator", emulator_tcp=True, limits=EVOLOGICS_LIMITS),
     Driver("s100", "S100", S100Options, "hilgate.drivers.s100:S100Backend",
            "hilgate.drivers.emulators:S100Emulator", emulator_options=S100EmulatorOptions, limits=S100_LIMITS),
+    Driver("m64", "Modem-M64", M64Options, "hilgate.drivers.m64:M64Backend",
+           "hilgate.drivers.m64_emulator:M64Emulator", emulator_options=M64EmulatorOptions, limits=M64_LIMITS),
+    Driver("micromodem", "Micro-Modem", MicromodemOptions, "hilgate.drivers.micromodem:MicromodemBackend",
+           "hilgate.drivers.micromodem_emulator:MicromodemEmulator", limits=MICROMODEM_LIMITS),
 )}
 
 

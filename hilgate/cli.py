@@ -114,7 +114,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                     args.max_clients, args.max_link_clients, plugins=args.plugins, preset_dirs=args.preset_dirs,
                     host=args.host, zenoh_connect=args.zenoh_connect, zenoh_listen=args.zenoh_listen,
                     clock_offset_s=args.clock_offset_s, tcp_token=args.tcp_token,
-                    zenoh_credentials=args.zenoh_credentials, zenoh_insecure=args.zenoh_insecure)
+                    zenoh_credentials=args.zenoh_credentials, zenoh_insecure=args.zenoh_insecure, web=args.web)
     return daemon.run()
 
 
@@ -241,7 +241,8 @@ def _print_status(status: dict, as_json: bool) -> None:
     import json
 
     if as_json:
-        print(json.dumps({"links": status["links"], "vehicles": status["vehicles"]}), flush=True)
+        print(json.dumps({"links": status["links"], "vehicles": status["vehicles"],
+                          **({"ros2": status["ros2"]} if "ros2" in status else {})}), flush=True)
         return
     from .report.tables import _render
 
@@ -263,6 +264,16 @@ def _print_status(status: dict, as_json: bool) -> None:
         print(_render(["camera", "frames/s", "frames", "problem"],
                       [[c["name"], f"{c['fps']:.1f}", str(c["frames"]), c["error"] or ""] for c in status["cameras"]]),
               flush=True)
+    ros2 = status.get("ros2")
+    if ros2:
+        published = ", ".join(f"{what} {n}" for what, n in ros2.get("published", {}).items() if n) or "nothing"
+        print(f"\nROS 2: domain {ros2['domain_id']} on {', '.join(ros2['interfaces'])}, namespace {ros2['namespace']}; "
+              f"published {published}" + (f"; {ros2['failed']} writes failed" if ros2.get("failed") else ""), flush=True)
+        if ros2["poses_in"]:
+            print(_render(["vehicle", "topic", "messages", "applied", "refused"],
+                          [[p["vehicle"], p["topic"], str(p["messages"]), str(p["applied"]),
+                            ", ".join(f"{cause} {n}" for cause, n in sorted(p["refused"].items())) or "none"]
+                           for p in ros2["poses_in"]]), flush=True)
 
 
 def cmd_pose(args: argparse.Namespace) -> int:
@@ -428,6 +439,24 @@ def _tcp_address(value: str) -> str:
     return value
 
 
+def _web_address(value: str) -> str:
+    from .web.server import parse_web
+
+    try:
+        parse_web(value)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return value
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    from .viewcmd import live_address, serve_trace
+
+    if args.trace is None:
+        return live_address(args, lambda request: _control_request(args, request))
+    return serve_trace(args)
+
+
 def _zenoh_endpoint(value: str) -> str:
     """``--zenoh``/``--zenoh-connect``/``--zenoh-listen``: checked as a scene's ``zenoh.connect`` is, so
     ``'{"a":'`` is a usage error here rather than a zenoh.ZError from inside the session."""
@@ -572,6 +601,7 @@ def cmd_network(args: argparse.Namespace) -> int:
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "network": cmd_network,
     "report": cmd_report,
+    "view": cmd_view,
     "fit": cmd_fit,
     "emulate": cmd_emulate,
     "queues": cmd_queues,
@@ -650,6 +680,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--tcp-token", metavar="FILE",
                    help="the TCP GLI's secret (default RUNTIME/tcp.token; made 0640 for --group if absent): copy "
                         "it to the hosts whose applications connect over TCP")
+    p.add_argument("--web", metavar="[ADDR:]PORT", type=_web_address,
+                   help="serve the live operator view in a browser (loopback by default; port 0: any free one); "
+                        "pages prove the token of --tcp-token, and `hilgate view` prints the address with it")
     p.add_argument("--runtime-dir", help="where the sockets go (default: $RUNTIME_DIRECTORY, /run/hilgate, "
                                           "$XDG_RUNTIME_DIR/hilgate or /tmp/hilgate-UID)")
     p.add_argument("--trace", help="append the event trace (JSON lines) here")
@@ -684,7 +717,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-link-clients", type=int, default=32, metavar="N",
                    help="socket GLI clients at once on one link (default 32)")
 
-    e = sub.add_parser("emulate", help="run a scene with one simulated link shown as an EvoLogics or S100 device")
+    e = sub.add_parser("emulate", help="run a scene with one simulated link shown as a modem device "
+                                       "(EvoLogics, S100, Modem-M64, Micro-Modem)")
     e.add_argument("protocol", choices=emulated_protocols())
     _add_scene_args(e, optional=True)
     e.add_argument("--link", required=True, help="the simulated link to expose")
@@ -744,6 +778,20 @@ def build_parser() -> argparse.ArgumentParser:
                         "many flows wider; text keeps its size, tick labels are thinned where they would overlap)")
     p.add_argument("--run", metavar="ID|N", help="a trace the daemon appended to across restarts holds several runs: "
                                                  "this one (its id, or 1 for the first, -1 the last; default the last)")
+
+    p = sub.add_parser("view", help="the operator's view in a browser: play a trace (play, pause, speed, a time "
+                                    "slider), or without TRACE print the running daemon's address (hilgate run --web)")
+    p.add_argument("trace", nargs="?", help="a trace of hilgate sim or hilgate run")
+    p.add_argument("--web", metavar="[ADDR:]PORT", type=_web_address, default="0",
+                   help="where to serve it (default: any free port on loopback)")
+    p.add_argument("--run", metavar="ID|N", help="which run of a daemon's trace (its id, or 1 for the first, -1 the "
+                                                 "last; default the last)")
+    p.add_argument("--scene", help="the scene, for a trace that names none (hilgate sim's traces)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY.PATH=VALUE",
+                   help="override a value of --scene, as for sim")
+    p.add_argument("--token-file", metavar="FILE",
+                   help="pages prove this file's token (default: a new one for this run, printed in the address)")
+    p.add_argument("--runtime-dir", help="without TRACE: the daemon's runtime directory")
 
     p = sub.add_parser("app", help="run an application (hilgate.app.Application) against a running daemon")
     p.add_argument("application", metavar="MODULE:CLASS", help="a module name or a .py file, and the class")

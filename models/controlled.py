@@ -64,3 +64,6 @@ class Controlled:
 
     def age(self, t: float) -> float:
         return 0.0
+
+    def stale(self, t: float) -> bool:
+        return False

@@ -23,7 +23,7 @@ class Frame:
     """
 
     __slots__ = ("id", "src_link", "dst_link", "dst_addr", "size", "t0", "flow", "app_frame", "kind", "ref", "seq",
-                 "src_addr", "ack")
+                 "src_addr", "ack", "airtime")
 
     def __init__(
         self,
@@ -52,6 +52,7 @@ class Frame:
         self.seq = seq
         self.src_addr = -1  # set by the sending modem
         self.ack: int | None = None  # retries allowed when the modem acknowledges it (acoustic_ack.py)
+        self.airtime: float | None = None  # seconds on air when its modem says so (a rate of its own), else size / bitrate
 
     def __repr__(self) -> str:
         return f"Frame(#{self.id} {self.kind} {self.src_link}->{self.dst_link} {self.size}B)"

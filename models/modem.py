@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 import random
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Callable
 
 from .acoustic_ack import MODEM_ACK, Acknowledger
@@ -23,6 +23,7 @@ from .errormodel import NO_ERRORS, ErrorModel
 from .frame import BROADCAST, DATA, Frame
 from .mac import Mac, NoMac
 from .observer import NullObserver, Observer
+from .physical import Acoustic
 from .radio import Radio
 
 if TYPE_CHECKING:
@@ -195,6 +196,17 @@ class SimModem:
         self.radio.address = address
         self.medium.topology_changed()
 
+    def set_band(self, band_khz: tuple[float, float]) -> None:
+        """The modem sends and listens in ``band_khz`` from now on (an emulated modem's channel: an M64's
+        ``wcs``); its acoustic front end keeps its level and modulation (a link without one gets a band
+        alone).  Bands that do not overlap never meet: no arrival, no collision (``path.py``)."""
+        band = (float(band_khz[0]), float(band_khz[1]))
+        acoustic = self.params.acoustic
+        if acoustic is not None and tuple(acoustic.band_khz) == band:
+            return
+        acoustic = Acoustic(band, 0.0) if acoustic is None else replace(acoustic, band_khz=band)
+        self.configure(replace(self.params, acoustic=acoustic))
+
     def withdraw(self, wanted: Callable[["Frame"], bool], cause: str) -> int:
         """Take the queued frames ``wanted`` says out of the FIFO (an emulated modem's ``ATZ``): each is
         traced as a drop with ``cause``.  Frames the MAC holds or already on air go on.  Returns how many."""
@@ -309,7 +321,7 @@ class SimModem:
             self.observer.drop(self.clock.now(), self, frame, "closed")
             return
         t = self.clock.now()
-        duration = frame.size * 8.0 / self.bitrate
+        duration = frame.size * 8.0 / self.bitrate if frame.airtime is None else frame.airtime
         self.stats.tx_packets += 1
         self.observer.tx(t, self, frame)
         self.radio.transmit(frame, t, duration)

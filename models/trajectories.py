@@ -39,6 +39,9 @@ class PoseSource(Protocol):
     def age(self, t: float) -> float | None:
         """Seconds since the source last heard of the vehicle (0 for a scripted one; None: never)."""
 
+    def stale(self, t: float) -> bool:
+        """Whether the pose is older than the source trusts (a live one; never a scripted one)."""
+
 
 class Static:
     static = True
@@ -53,6 +56,9 @@ class Static:
 
     def age(self, t: float) -> float:
         return 0.0
+
+    def stale(self, t: float) -> bool:
+        return False
 
     def __repr__(self) -> str:
         return f"Static({self._position})"
@@ -109,6 +115,9 @@ class Piecewise:
 
     def age(self, t: float) -> float:
         return 0.0
+
+    def stale(self, t: float) -> bool:
+        return False
 
     def __repr__(self) -> str:
         return f"Piecewise({len(self.segments)} segments, loop={self.loop})"

@@ -248,6 +248,8 @@ def test_declared_minimums_are_what_runs_here():
     for text in requirements:
         requirement = Requirement(text)
         assert requirement.specifier, f"{text}: pin the minimum version that was tested"
+        if requirement.marker is not None and not requirement.marker.evaluate():
+            continue  # not for this Python (pyasyncore: only from 3.12)
         version = importlib.metadata.version(requirement.name)
         assert requirement.specifier.contains(version, prereleases=True), f"{text}, but {version} is what runs here"
 

@@ -28,16 +28,18 @@ from seamcheck import members, missing
 SEAMS = {
     Endpoint: ["hilgate.gli.queues:MqEndpoint", "hilgate.gli.sockets:GliClient",
                "hilgate.gli.zenoh_door:ZenohEndpoint", "hilgate.drivers.emulators:EvologicsEmulator",
-               "hilgate.drivers.emulators:S100Emulator"],
+               "hilgate.drivers.emulators:S100Emulator", "hilgate.drivers.m64_emulator:M64Emulator",
+               "hilgate.drivers.micromodem_emulator:MicromodemEmulator", "hilgate.ros2.door:Ros2Endpoint"],
     Door: ["hilgate.gli.queues:QueueDoor", "hilgate.gli.sockets:SocketDoor", "hilgate.gli.zenoh_door:ZenohDoor",
-           "hilgate.drivers.emulators:EmulatorDoor"],
+           "hilgate.drivers.emulators:EmulatorDoor", "hilgate.ros2.door:Ros2Door", "hilgate.daemon.ros2_bridge:Ros2Bridge"],
     LinkPort: ["hilgate.daemon.router:RoutedLink"],
     RadioHost: ["hilgate.models.modem:SimModem"],
     MacHost: ["hilgate.models.modem:SimModem"],
     PoseSource: ["hilgate.models.trajectories:Static", "hilgate.models.trajectories:Piecewise",
                  "hilgate.models.controlled:Controlled", "hilgate.sim.live_vehicle:LiveVehicle",
                  "hilgate.sim.live_vehicle:RemoteVehicle"],
-    PoseFeed: ["hilgate.drivers.mavlink_source:MavlinkSource", "hilgate.drivers.aruco:CameraThread"],
+    PoseFeed: ["hilgate.drivers.mavlink_source:MavlinkSource", "hilgate.drivers.aruco:CameraThread",
+               "hilgate.ros2.poses:Ros2PoseFeed"],
     Clock: ["hilgate.core.scheduler:VirtualScheduler", "hilgate.core.realtime:RealtimeScheduler"],
     Scheduler: ["hilgate.core.scheduler:VirtualScheduler", "hilgate.core.realtime:RealtimeScheduler"],
     Loop: ["hilgate.core.realtime:RealtimeScheduler"],
@@ -52,7 +54,8 @@ SEAMS = {
 }
 SEAMS[Propagation] = ["hilgate.models.propagation:StraightLine"]
 BACKENDS = ["hilgate.sim.sim_backend:SimBackend", "hilgate.drivers.evologics:EvologicsBackend",
-            "hilgate.drivers.s100:S100Backend"]
+            "hilgate.drivers.s100:S100Backend", "hilgate.drivers.m64:M64Backend",
+            "hilgate.drivers.micromodem:MicromodemBackend"]
 
 
 def load(name):

@@ -35,6 +35,8 @@ class AppFrame:
     ack_retries: int | None = None  # the simulated modem acknowledges it on the channel, retrying so often
     on_acknowledged: Callable[["AppFrame", bool, "float | None"], Any] | None = field(default=None, repr=False)
     """``(frame, delivered, one_way_tau_s)`` when its acknowledgement came back or the last retry failed."""
+    airtime_s: float | None = None
+    """Seconds on air when the sending modem decides it (a Micro-Modem's rate), not the link's bit rate."""
 
 
 @dataclass(frozen=True)
@@ -109,6 +111,11 @@ class Backend(ABC):
     def watch_phy(self, listener: Callable[[PhyEvent], Any] | None) -> None:
         """Report what the PHY does to ``listener`` (None: stop); a backend without a simulated PHY
         reports nothing."""
+
+    def set_band(self, band_khz: tuple[float, float]) -> bool:
+        """Send and listen in ``band_khz`` from now on (an emulated M64's channel); False: this backend
+        cannot."""
+        return False
 
 
 class QueuedBackend(Backend):

@@ -94,6 +94,9 @@ class LinkPort(Protocol):
     def set_address(self, address: int) -> None:
         """Answer to ``address`` in the simulation from now on (an emulated modem's ``AT!AL``)."""
 
+    def set_band(self, band_khz: tuple[float, float]) -> None:
+        """Send and listen in ``band_khz`` in the simulation from now on (an emulated M64's channel)."""
+
     def withdraw(self, frames: list[AppFrame], cause: str) -> int:
         """Take frames sent earlier back out of the backend's queue (``ATZ``); how many were still there."""
 

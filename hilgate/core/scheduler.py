@@ -41,6 +41,8 @@ class Scheduler(Clock, Protocol):
     """Model seconds per wall-clock second (``--speed``; 1 in virtual time)."""
     input_lateness: float
     """How late (model seconds) the loop read the input being handled; 0 when on time or virtual."""
+    epoch_ns: int
+    """The UNIX clock (ns) at model time 0 once the clock runs (0 in virtual time)."""
 
     def after(self, delay: float, fn: Callable[..., Any], *args: Any) -> Any: ...
 
@@ -75,6 +77,8 @@ class VirtualScheduler:
     """Model seconds per wall-clock second (the real-time scheduler's ``--speed``; 1 in virtual time)."""
     input_lateness = 0.0
     """How late the loop read the input being handled (model seconds): always 0 in virtual time."""
+    epoch_ns = 0
+    """The UNIX clock (ns) at model time 0: 0 in virtual time, which has no wall clock."""
 
     def __init__(self, start: float = 0.0):
         self._now = float(start)

@@ -92,19 +92,15 @@ class Connection:
             return
         self.on_data(data)
 
-    def gone(self) -> bool:
-        """Whether the peer has left, looked at now (a close not yet read by the loop): closes it if so."""
-        if self.closed:
-            return True
+    def hung_up(self) -> bool:
+        """Whether the peer has closed (or reset) the connection, though the loop has not read that yet:
+        a listener at its limit of clients asks before it refuses a newcomer for a place already free."""
         try:
-            if self.sock.recv(1, socket.MSG_PEEK) != b"":
-                return False
+            return self.sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) == b""
         except (BlockingIOError, InterruptedError):
             return False
         except OSError:
-            pass
-        self.close()
-        return True
+            return True
 
     def write(self, data: bytes) -> bool:
         """Queue ``data``; False (nothing queued) if the connection is closed or its buffer is full."""

@@ -1,4 +1,4 @@
-"""Starts and stops what feeds the pose board in the daemon: MAVLink links, cameras, feedback.
+"""Starts and stops what feeds the pose board in the daemon: MAVLink links, cameras, ROS 2 topics, feedback.
 
 Each runs in its own thread (or, for feedback, on the loop's timers) and hands measurements to the
 loop with ``scheduler.post``, so the medium reads poses without ever waiting for a device.  A reload
@@ -18,11 +18,9 @@ log = logging.getLogger(__name__)
 
 
 class PoseFeed(Protocol):
-    """Something that measures vehicles' poses on a thread of its own (a MAVLink link, a camera; a ROS 2
-    subscription would be one more) and hands them to the loop with ``scheduler.post``: started when a
-    scene names it, stopped on a reload or at exit (its sockets or devices released by then)."""
-
-    def start(self) -> None: ...
+    """Something that measures vehicles' poses on a thread of its own (a MAVLink link, a camera, a ROS 2
+    subscription) and hands them to the loop with ``scheduler.post``: made and started here when a scene
+    names it, stopped on a reload or at exit (its sockets, devices or DDS reader released by then)."""
 
     def stop(self) -> None: ...
 
@@ -48,8 +46,10 @@ def _feedback_identity(vehicle: Any) -> Any:
 
 
 class LiveSources:
-    def __init__(self, scheduler: Any):
+    def __init__(self, scheduler: Any, ros2: Any = None):
         self.scheduler = scheduler
+        self.ros2 = ros2  # the daemon's Ros2Bridge: the participant ``ros2`` poses are read on
+        self.ros2_sources: list[PoseFeed] = []
         self.mavlink: list[PoseFeed] = []
         self.cameras: dict[str, Any] = {}  # name → the camera's PoseFeed (drivers.aruco.CameraThread)
         self.feedback: list[Any] = []
@@ -66,6 +66,8 @@ class LiveSources:
                 for kind, params in vehicle.pose.params:
                     if kind == "mavlink":
                         self._start_mavlink(name, pose, dict(params))
+                    elif kind == "ros2":
+                        self._start_ros2(name, pose, dict(params))
             if vehicle.feedback:
                 self._start_feedback(name, pose, dict(vehicle.feedback), _feedback_identity(vehicle))
         for camera in scene.cameras.values():
@@ -90,6 +92,19 @@ class LiveSources:
                                heartbeat.get("rate_hz", 1.0))
         source.start()
         self.mavlink.append(source)
+
+    def _start_ros2(self, name: str, vehicle: LiveVehicle, params: dict) -> None:
+        """A ROS 2 topic read on the daemon's participant; Cyclone's thread keeps the latest measurement
+        and the loop applies it (:mod:`hilgate.ros2.poses`), stamped with the model time it is applied at."""
+        from ..ros2.poses import Ros2PoseFeed
+
+        now = self.scheduler.now
+
+        def apply(position: dict, velocity: dict | None, attitude: tuple) -> None:
+            vehicle.update("ros2", now(), position, velocity, attitude)
+
+        self.ros2_sources.append(Ros2PoseFeed(name, self.ros2.participant(), params, self.ros2.frame, apply,
+                                              self.scheduler.post))
 
     def _start_feedback(self, name: str, pose: Any, params: dict, identity: Any) -> None:
         from ..drivers.mavlink_source import Feedback
@@ -140,11 +155,12 @@ class LiveSources:
         return [{"name": name, "fps": round(thread.fps, 1), "frames": thread.frames, "error": thread.error}
                 for name, thread in self.cameras.items()]
 
+    def ros2_status(self) -> list[dict]:
+        return [source.status() for source in self.ros2_sources]
+
     def close(self) -> None:
-        for source in self.mavlink:
-            source.stop()
-        for thread in self.cameras.values():
-            thread.stop()
+        for feed in [*self.mavlink, *self.cameras.values(), *self.ros2_sources]:
+            feed.stop()
         for feedback in self.feedback:
             feedback.close()
-        self.mavlink, self.cameras, self.feedback = [], {}, []
+        self.mavlink, self.cameras, self.feedback, self.ros2_sources = [], {}, [], []

@@ -59,6 +59,7 @@ class RoutedLink:
         self._state_pending = False
         self._usbl_rng: random.Random | None = None
         self.readdressed: int | None = None  # the address an emulated modem's AT!AL gave the link
+        self.retuned: tuple[float, float] | None = None  # the band an emulated modem's channel gave the link
 
     # -- set-up ----------------------------------------------------------------------------------
 
@@ -94,6 +95,8 @@ class RoutedLink:
             if modem is not None:
                 modem.set_address(spec.params.address)
             self.router.readdress(self, old, spec.params.address)
+        if self.retuned is not None and self.backend is not None:
+            self.backend.set_band(self.retuned)  # the emulated modem keeps its channel across reloads
         if endpoints_changed:
             self.doors = [(door, door.update(handle, self)) for door, handle in self.doors]
 
@@ -115,6 +118,15 @@ class RoutedLink:
         self.readdressed = address
         self.router.readdress(self, old, address)
         log.info("link %s: address %d -> %d (AT!AL)", self.id, old, address)
+
+    def set_band(self, band_khz: tuple[float, float]) -> None:
+        """An emulated modem's channel (an M64's ``wcs``): the simulation has this link send and listen
+        in ``band_khz`` from now on, so that pairs on other channels never meet it."""
+        backend = self.backend
+        if backend is not None and backend.set_band(band_khz):
+            self.retuned = (float(band_khz[0]), float(band_khz[1]))
+            self.router.recorder.event({"t": round(self.router.scheduler.now(), 9), "ev": "band", "link": self.id,
+                                        "band_khz": list(self.retuned)})
 
     def withdraw(self, frames: list[AppFrame], cause: str) -> int:
         """Take these frames back from the backend's queue if they are still there (an emulated modem's
@@ -582,6 +594,13 @@ class Router:
         return {"class": "ERROR", "error": f"unknown request {kind!r}"}
 
     def status(self) -> dict[str, Any]:
+        status = {"links": [link.status() for link in self.links.values()], "vehicles": self.vehicle_status()}
+        if self.network is not None:
+            status["network"] = self.network.status()
+        return status
+
+    def vehicle_status(self) -> list[dict[str, Any]]:
+        """Every vehicle now: its pose source, position (None: unknown) and the age of its pose."""
         assert self.world is not None and self.scene is not None
         now = self.scheduler.now()
         vehicles = []
@@ -594,10 +613,7 @@ class Router:
                 "position": None if position is None else [round(v, 4) for v in position],
                 "age_s": None if age is None else round(age, 3),
             })
-        status = {"links": [link.status() for link in self.links.values()], "vehicles": vehicles}
-        if self.network is not None:
-            status["network"] = self.network.status()
-        return status
+        return vehicles
 
     def close(self) -> None:
         for link in self.links.values():

@@ -22,6 +22,7 @@ from ..gli.queues import QueueDoor, forget_created, plan_message_size, raise_que
 from ..gli.sockets import ClientLimits, SocketDoor, tcp_listener
 from ..gli.token import TOKEN_FILE, TokenCheck, load_or_create
 from .live_sources import LiveSources
+from .ros2_bridge import Ros2Bridge
 from ..core.realtime import RealtimeScheduler
 from ..sim.recorder import Recorder
 from .router import Router
@@ -88,7 +89,10 @@ class Daemon:
                  preset_dirs: list[str] | tuple[str, ...] = (), host: str | None = None,
                  zenoh_connect: list[str] | tuple[str, ...] = (), zenoh_listen: list[str] | tuple[str, ...] = (),
                  clock_offset_s: float = 0.0, tcp_token: str | None = None,
-                 zenoh_credentials: str | None = None, zenoh_insecure: bool = False):
+                 zenoh_credentials: str | None = None, zenoh_insecure: bool = False, web: str | None = None):
+        self.web = web
+        self.web_server: Any = None
+        self.web_feed: Any = None
         self.tcp_token = tcp_token
         self.host = host
         self.zenoh_credentials = zenoh_credentials
@@ -121,6 +125,7 @@ class Daemon:
         self.live: LiveSources | None = None
         self.control: ControlServer | None = None
         self.tcp_listener: Any = None
+        self.ros2: Ros2Bridge | None = None
         self.stopping = False
         self.started = time.monotonic()
         self._reload_job: SceneJob | None = None
@@ -138,9 +143,14 @@ class Daemon:
         prepare_private_dir(self.runtime_dir, group)
         prepare_private_dir(os.path.join(self.runtime_dir, "gli"), group)
         token_check = None
-        if self.tcp:  # before anything opens: a token that cannot be used refuses the start
+        if self.tcp or self.web:  # before anything opens: a token that cannot be used refuses the start
             token_path = self.tcp_token or os.path.join(self.runtime_dir, TOKEN_FILE)
             token_check = TokenCheck(load_or_create(token_path, group), token_path)
+        if self.web:  # the port too: one in use refuses the start
+            from ..web.server import WebServer, parse_web
+
+            web_host, web_port = parse_web(self.web)
+            self.web_server = WebServer(web_host, web_port, token_check, token_hint=token_check.path)
         raise_queue_budget()
         raise_descriptor_limit()
         trace_path = self.trace_path or scene.trace_file
@@ -169,9 +179,11 @@ class Daemon:
             SocketDoor(os.path.join(self.runtime_dir, "gli"), scheduler, self.clients, self.router.port, group),
             EmulatorDoor(scheduler),
         ]
+        self.ros2 = Ros2Bridge(scheduler, self.router, self.scene_path)
+        self.router.doors.append(self.ros2)  # opens nothing, and loads no DDS, for links not on ROS 2
         self.tcp_listener = None
         self.control = None
-        self.live = LiveSources(scheduler)
+        self.live = LiveSources(scheduler, self.ros2)
         try:
             if host is not None:
                 spec = scene.zenoh or ZenohSpec()
@@ -180,8 +192,10 @@ class Daemon:
                 self.router.doors.append(self.network.open())
                 self.network.claim(scene)  # before anything opens: a refused daemon touches nothing
                 self.router.network = self.network
+            self.ros2.prepare(scene)
             self.router.apply(scene)
             self.live.apply(scene, self.router.world.poses, self.router.world.local)
+            self.ros2.apply(scene)
             if self.trace is not None and scene.trace_poses_s:
                 self.router.world.sample_poses(scene.trace_poses_s * self.speed, self.recorder.event)
             if self.tcp:
@@ -192,6 +206,14 @@ class Daemon:
             self.control = ControlServer(os.path.join(self.runtime_dir, "control.sock"), scheduler,
                                          self.status, self.reload, group=group,
                                          deferred={"NETWORK": self._network_status})
+            if self.web_server is not None:
+                from .webfeed import WebFeed
+
+                self.web_server.start()
+                self.web_feed = WebFeed(scheduler, self.router, self.recorder, self.web_server)
+                self.web_feed.start()
+                log.info("web view on %s: pages prove the token in %s (readable by the daemon's group); "
+                         "`hilgate view` prints the address with it", self.web_server.url, token_check.path)
             scheduler.on_signal(signal.SIGHUP, lambda s: self.reload())  # answered in the log only
             scheduler.on_signal(signal.SIGTERM, self.stop)
             scheduler.on_signal(signal.SIGINT, self.stop)
@@ -290,8 +312,14 @@ class Daemon:
 
     def status(self) -> dict[str, Any]:
         status = {**self.router.status(), "cameras": self.live.status()}
+        ros2 = self.ros2.status()
+        if ros2 is not None:  # only once the daemon is on ROS 2
+            status["ros2"] = {**ros2, "poses_in": self.live.ros2_status()}
         if self.tcp_listener is not None:  # what the TCP GLI refused, by cause; how many wait to authenticate
             status["tcp"] = {"refused": dict(self.clients.refused), "waiting": sum(self.clients.pending.values())}
+        if self.web_server is not None:  # where the web view is, and the token its pages prove
+            status["web"] = {"url": self.web_server.url, "pages": self.web_server.clients,
+                             "token_file": self.web_server.token_hint}
         return status
 
     def status_text(self) -> str:
@@ -339,10 +367,16 @@ class Daemon:
             self._reload_finished(False, str(exc))
             return
         try:
+            self.ros2.prepare(scene)
+        except SceneError as exc:
+            self._reload_finished(False, str(exc))
+            return
+        try:
             self.router.apply(scene)
             if self.network is not None:
                 self.network.apply(scene)
             self.live.apply(scene, self.router.world.poses, self.router.world.local)
+            self.ros2.apply(scene)
             self.scene = scene
         except Exception as exc:  # e.g. a new link's port or queue cannot be opened
             log.debug("reload failed while applying", exc_info=True)
@@ -392,12 +426,18 @@ class Daemon:
                 log.error("summary not written: %s", exc)
         if self._reload_job is not None:
             self._reload_job.cancel()
-        for closer in (self.live, self.control, self.tcp_listener, router, self.network):
+        for closer in (self.web_feed, self.web_server, self.live, self.control, self.tcp_listener, router,
+                       self.network):
             if closer is not None:
                 try:
                     closer.close()
                 except Exception:
                     log.exception("while closing %r", closer)
+        if self.ros2 is not None:  # last: the links' and sources' readers are gone
+            try:
+                self.ros2.shutdown()
+            except Exception:
+                log.exception("while leaving ROS 2")
         if self.trace is not None:
             self.recorder.close()
             self.trace.close()

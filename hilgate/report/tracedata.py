@@ -47,6 +47,10 @@ class Trace:
     # link -> [start, end, backend] of each backend period the trace's scene lines name (end None: open)
     backends: dict[str, list[list]] = field(default_factory=lambda: defaultdict(list))
     reloads: list[float] = field(default_factory=list)
+    # (t, scene_view) of every run and reload line that carries the scene, in order (``hilgate view``)
+    scenes: list[tuple[float, dict]] = field(default_factory=list)
+    # (t, host, "up"|"down") of a network of daemons: when this daemon saw another host go or come back
+    hosts: list[tuple[float, str, str]] = field(default_factory=list)
 
     def flows(self) -> list[tuple[str, str]]:
         return sorted({(p.src, p.dst) for p in self.packets.values()})
@@ -181,6 +185,15 @@ def load_trace(path: str, window: tuple[float, float] | None = None, run: Run | 
                     trace.reloads.append(t)
                 if "scene_view" in event:
                     current = _periods(trace, current, _backends_of(event["scene_view"], where), t)
+                    trace.scenes.append((t, event["scene_view"]))
+                continue
+            if ev == "host":
+                t = number(event, "t", where)
+                state = text(event, "state", where)
+                if state not in ("up", "down"):
+                    raise ReportError(f"{where}: 'state' must be \"up\" or \"down\", not {describe(state)}")
+                if window is None or window[0] <= t <= window[1]:
+                    trace.hosts.append((t, text(event, "host", where), state))
                 continue
             if ev == "pose":
                 t = number(event, "t", where)

@@ -26,6 +26,7 @@ from .mac_spec import mac_spec
 from .physics import ERROR_KEYS, acoustic_params, error_kind, physical_environment
 from .plugins import Plugin
 from .presets import MODEM_KEYS, load_preset, merge
+from .ros2 import require_extra
 from .specs import LinkSpec, MacSpec
 from .yaml_nodes import Node
 
@@ -142,7 +143,7 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
         problem = _wide_problem(backend, emulate, packet)
         if problem:
             raise child.error(f.sub("address"), f"{params.address} is wider than 8 bits (0..{NARROW_MAX}): {problem}")
-    gli = f.get("gli", _gli_endpoints, GLI_ENDPOINTS)
+    gli = f.get("gli", _gli_endpoints, GLI_DEFAULT)
     return LinkSpec(link_id, vehicle, backend, model, params, mac, packet, node.file, node.line, options, emulate,
                     addressing, host=host, usbl=usbl, address_line=address_line, gli=gli, limits=limits)
 
@@ -200,13 +201,15 @@ def require_narrow_addresses(links: Any) -> None:
                              f"are for hilgate sim")
 
 
-GLI_ENDPOINTS = ("mq", "socket")
+GLI_ENDPOINTS = ("mq", "socket", "ros2")
+GLI_DEFAULT = ("mq", "socket")
 
 
 def _gli_endpoints(node: Node, path: str) -> tuple[str, ...]:
-    """``gli: [mq, socket]`` (the default), ``[socket]``, ``[mq]`` or ``[]``: which GLI endpoints the link
-    opens.  Every ``mq`` link costs two POSIX queues of a per-user and a system-wide budget; a link only
-    socket applications (or only an emulated modem) use needs none."""
+    """``gli: [mq, socket]`` (the default), ``[socket]``, ``[mq]`` or ``[]``, and ``ros2`` besides: which GLI
+    endpoints the link opens.  Every ``mq`` link costs two POSIX queues of a per-user and a system-wide
+    budget; a link only socket applications (or only an emulated modem) use needs none.  ``ros2`` opens
+    the link's ROS 2 topics (:mod:`hilgate.ros2.door`), and needs the ros2 extra."""
     items = [node] if isinstance(node.value, str) else node.value if node.is_list else None
     if items is None:
         raise node.error(path, f"must be a list of {' and '.join(GLI_ENDPOINTS)} (e.g. [socket]), not {describe(node)}")
@@ -214,6 +217,8 @@ def _gli_endpoints(node: Node, path: str) -> tuple[str, ...]:
     for i, item in enumerate(items):
         item_path = path if item is node else join_path(path, i)
         value = choice(*GLI_ENDPOINTS)(item, item_path)
+        if value == "ros2":
+            require_extra(item, item_path)
         if value in chosen:
             raise item.error(item_path, f"{value} is given twice")
         chosen.append(value)

@@ -24,6 +24,7 @@ from .modem_limits import describe_limits
 from .links import Context, assign_addresses, link_spec
 from .overrides import apply_override
 from .plugins import Plugin, PluginError, load_plugin
+from .ros2 import check_ros2_names, ros2_spec
 from .specs import CameraSpec, Scene, VehicleSpec
 from .vehicles import camera_spec, check_camera_references, vehicle_spec
 from .yaml_nodes import Node, SceneError, load_file, load_text
@@ -33,7 +34,7 @@ __all__ = ["TOP_KEYS", "load_scene", "load_scene_text", "scene_summary"]
 log = logging.getLogger(__name__)
 
 TOP_KEYS = ("name", "seed", "duration_s", "plugins", "channels", "vehicles", "links", "flows", "trace", "cameras",
-            "zenoh", "apps")
+            "zenoh", "apps", "ros2")
 CHANNEL_KEYS = ("speed_mps", "min_delay_s")
 
 
@@ -106,6 +107,9 @@ def _validate(root: Node | None, file: str, plugins: Sequence[str] = (), preset_
     apps = () if apps_node is None or apps_node.value is None else app_specs(apps_node, ctx.plugins, links)
     zenoh_node = f.child("zenoh")
     zenoh = None if zenoh_node is None else zenoh_spec(zenoh_node)
+    ros2_node = f.child("ros2")
+    ros2 = None if ros2_node is None else ros2_spec(ros2_node)
+    check_ros2_names(links, vehicles if ros2 is not None and (ros2.poses or ros2.tf) else {}, root)
 
     flows: list[FlowSpec] = []
     flows_node = f.child("flows")
@@ -121,7 +125,7 @@ def _validate(root: Node | None, file: str, plugins: Sequence[str] = (), preset_
         trace_file = tf.get("file", trace_path, None)
         trace_poses = tf.get("poses_s", number(0), 1.0) or None
     return Scene(name, seed, duration, channels, vehicles, links, flows, trace_file, file, cameras, trace_poses,
-                 hosts, zenoh, apps)
+                 hosts, zenoh, apps, ros2)
 
 
 def load_scene(path: str, overrides: Sequence[str] = (), *, plugins: Sequence[str] = (),

@@ -81,9 +81,14 @@ def describe_limits(link) -> str | None:
         return None
     text = limits.describe()
     if link.backend in DRIVERS:
-        if limits.modes:
-            im = dict(link.options).get("im", True)
+        options = dict(link.options)
+        if limits.modes and link.backend == "evologics":
+            im = options.get("im", True)
             text += f"; GLI frames go as {'im' if im else 'burst'} (im: {'true' if im else 'false'})"
+        elif link.backend == "micromodem":
+            text += f"; GLI frames go as rate{options.get('rate', 1)} (rate: {options.get('rate', 1)})"
+        elif link.backend == "m64":
+            text += "; GLI frames go as datagrams in 8-byte packets"
         text += f"; the driver queues {dict(link.options).get('queue_frames', 50)} frames"
     else:
         if limits.send_as is not None:

@@ -142,6 +142,13 @@ class Scene:
     hosts: tuple[str, ...] = ()  # the hosts the scene names (scene/hosts.py); () for one daemon
     zenoh: Any = None  # the ``zenoh:`` section (a ZenohSpec), None when absent
     apps: tuple = ()  # the ``apps:`` hilgate sim runs in-process (scene/app_spec.py AppSpec)
+    ros2: Any = None  # the ``ros2:`` section (a scene.ros2.Ros2Spec), None when absent
+
+    @property
+    def uses_ros2(self) -> bool:
+        """A ``ros2:`` section, a vehicle's ``ros2`` pose or a link on ROS 2: the daemon needs a participant."""
+        return (self.ros2 is not None or any("ros2" in link.gli for link in self.links.values())
+                or any(kind == "ros2" for v in self.vehicles.values() if v.pose.kind == "live" for kind, _ in v.pose.params))
 
     @property
     def multi_host(self) -> bool:

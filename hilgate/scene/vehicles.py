@@ -1,7 +1,7 @@
 """Vehicles and their pose sources, and the cameras that an ``aruco`` pose source looks through.
 
 A vehicle's ``pose:`` is one scripted source (static, path, waypoints, controlled) or one or more
-live ones (mavlink, aruco) merged axis by axis; :data:`POSE_KINDS` maps each source's key to the
+live ones (mavlink, aruco, ros2) merged axis by axis; :data:`POSE_KINDS` maps each source's key to the
 checker of its parameters.  The checked parameters are hashable tuples, so a reload can tell a
 changed pose from an unchanged one.
 """
@@ -18,6 +18,7 @@ from .checks import (
     unknown_key_message, vector,
 )
 from .hosts import host_name
+from .ros2 import ros2_pose
 from .specs import CameraSpec, PoseSpec, VehicleSpec
 from .yaml_nodes import MAX_FILE_BYTES, Node, SceneError, read_limited
 
@@ -25,7 +26,7 @@ __all__ = ["VEHICLE_KEYS", "CAMERA_KEYS", "LIVE_KINDS", "POSE_KINDS", "vehicle_s
            "check_camera_references", "unknown_pose"]
 
 VEHICLE_KEYS = ("pose", "stale_after_s", "stale", "extrapolate_s", "initial", "feedback", "host")
-LIVE_KINDS = ("mavlink", "aruco")
+LIVE_KINDS = ("mavlink", "aruco", "ros2")
 CAMERA_KEYS = ("source", "calibration", "dictionary", "marker_length_m", "fixed", "onboard", "map", "fps", "host")
 
 
@@ -138,6 +139,7 @@ POSE_KINDS: dict[str, Callable[[Node, str], Any]] = {
     "controlled": _controlled_pose,
     "mavlink": _mavlink_pose,
     "aruco": _aruco_pose,
+    "ros2": ros2_pose,
 }
 
 
@@ -156,7 +158,7 @@ def vehicle_spec(name: str, node: Node, path: str) -> VehicleSpec:
         raise pose_node.error(pose_path, f"give a pose source: {', '.join(POSE_KINDS)}")
     live = [k for k in kinds if k in LIVE_KINDS]
     if len(kinds) > 1 and len(live) != len(kinds):
-        raise pose_node.error(pose_path, "only live sources (mavlink, aruco) can be combined, with merge")
+        raise pose_node.error(pose_path, "only live sources (mavlink, aruco, ros2) can be combined, with merge")
     if len(kinds) > 1 and merge_node is None:
         raise pose_node.error(pose_path, "several sources need 'merge' (e.g. {x: aruco, y: aruco, z: mavlink})")
     merge: tuple = ()
@@ -172,7 +174,7 @@ def vehicle_spec(name: str, node: Node, path: str) -> VehicleSpec:
     if not live:
         for key in ("stale_after_s", "stale", "extrapolate_s", "initial"):
             if key in f:
-                raise f.child(key).error(f.sub(key), "only for vehicles with a live pose (mavlink, aruco)")
+                raise f.child(key).error(f.sub(key), "only for vehicles with a live pose (mavlink, aruco, ros2)")
     feedback: tuple = ()
     if "feedback" in f:
         ff = Fields(f.child("feedback"), f.sub("feedback"), ("url", "message", "rate_hz", "origin", "system_id"))

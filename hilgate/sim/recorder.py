@@ -107,6 +107,10 @@ class Recorder:
         self._json: dict[str, str] = {}
         self.flows: list[FlowStats] = []
         self.mac_events: dict[str, int] = {}
+        self.tap: Any = None
+        """Who else watches the events while someone does (the daemon's web view, :mod:`hilgate.daemon.webfeed`):
+        ``tap.frame(ev, t, link_id, frame, cause)`` for the modems' events, ``tap.line(record)`` for the
+        free-form lines.  None (the rule): one attribute test per event."""
 
     def add_flow(self, spec: FlowSpec) -> FlowStats:
         stats = FlowStats(spec)
@@ -141,6 +145,8 @@ class Recorder:
 
     def event(self, record: dict[str, Any]) -> None:
         """A free-form trace line (drivers and the GLI use it for what is not a modem event)."""
+        if self.tap is not None:
+            self.tap.line(record)
         if self._write is not None:
             try:
                 line = json.dumps(record, allow_nan=False, default=str)
@@ -157,6 +163,8 @@ class Recorder:
         stats = frame.flow
         if stats is not None and frame.kind == DATA:
             stats.offered += 1
+        if self.tap is not None:
+            self.tap.frame("enq", t, modem.id, frame, None)
         if self._write is not None:
             self._line(t, "enq", modem, frame, None, _lateness(frame))
 
@@ -166,6 +174,8 @@ class Recorder:
             stats.offered += 1
             if cause == "fifo":
                 stats.fifo_drops += 1
+        if self.tap is not None:
+            self.tap.frame("drop", t, modem.id, frame, cause)
         if self._write is not None:
             self._line(t, "drop", modem, frame, cause, _lateness(frame))
 
@@ -175,6 +185,8 @@ class Recorder:
             stats.tx_bytes += frame.size
             if frame.kind == DATA:
                 stats.tx_packets += 1
+        if self.tap is not None:
+            self.tap.frame("tx", t, modem.id, frame, None)
         if self._write is not None:
             self._line(t, "tx", modem, frame)
 
@@ -184,6 +196,8 @@ class Recorder:
             frame.dst_addr == modem.address or frame.dst_addr == BROADCAST
         ):
             stats.received(modem.id, t - frame.t0, frame.size)
+        if self.tap is not None:
+            self.tap.frame("rx", t, modem.id, frame, None)
         if self._write is not None:
             self._line(t, "rx", modem, frame)
 
@@ -193,6 +207,8 @@ class Recorder:
             frame.dst_addr == modem.address or frame.dst_addr == BROADCAST
         ):
             stats.lost[cause] = stats.lost.get(cause, 0) + 1  # (no_pose, closed, band, modulation… beside the usual four)
+        if self.tap is not None:
+            self.tap.frame("err", t, modem.id, frame, cause)
         if self._write is not None:
             self._line(t, "err", modem, frame, cause)
 

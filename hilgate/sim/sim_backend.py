@@ -60,6 +60,10 @@ class SimBackend(Backend):
         self.modem.set_address(address)
         return True
 
+    def set_band(self, band_khz: tuple[float, float]) -> bool:
+        self.modem.set_band(band_khz)
+        return True
+
     def withdraw(self, frames: list[AppFrame], cause: str) -> int:
         """Take these application frames out of the modem's FIFO if they are still queued."""
         wanted = {id(frame) for frame in frames}
@@ -87,6 +91,8 @@ class SimBackend(Backend):
         dst = BROADCAST if self.everyone_in_range and frame.meta is None else frame.dst
         dst_name = "*" if dst == BROADCAST else self._link_names(modem.tx_channel, dst)
         sim_frame = modem.new_frame(dst_name, dst, len(frame.real), app_frame=frame)
+        if frame.airtime_s is not None:
+            sim_frame.airtime = frame.airtime_s  # a modem with several rates (an emulated Micro-Modem)
         if frame.ack_retries is not None and dst != BROADCAST:
             sim_frame.ack = frame.ack_retries  # the modem acknowledges it on the channel (acoustic_ack.py)
         if modem.send(sim_frame):

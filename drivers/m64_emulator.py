@@ -1,0 +1,243 @@
+"""A Water Linked Modem-M64 in front of a simulated link, on a pseudo-terminal.
+
+``emulate: {protocol: m64, pty: /tmp/ttyM64a, role: a, channel: 3}`` answers there as the modem does
+(:mod:`.m64_codec`: ``wcv``, ``wcn``, ``wcc``, ``wcs``, ``wcl``, ``wcf``, ``wcd``, ``wcq``; ``wr?``
+and ``wr!`` for what it cannot take) and moves 8-byte packets through the channel model with the
+modem's own timing:
+
+- **Slots.** Role A transmits once every :data:`SLOT_S` (the head of its queue, or an all-zero sync
+  packet when the queue is empty: it always transmits); role B answers each packet it hears from an A
+  once it is in sync, :data:`TURNAROUND_S` after that packet's end, with its own head of queue or a
+  sync packet.  So each direction carries about one packet a second (64 bit/s net), as published.
+  B is in sync after a good packet from A and falls out of it after :data:`SYNC_LOSSES` lost ones in a
+  row, as the modem "goes back to listen mode".
+- **Channels are bands.** Channel 1–7 is Water Linked's band for it (:data:`CHANNEL_BANDS_KHZ`, from
+  its channel table); ``wcs`` moves the link to that band in the simulation, and bands that do not
+  overlap never meet (no arrival, no collision), so pairs on different channels never disturb each other.
+- **What the far modem prints.** A good packet from the other role is printed ``wrp,8,<payload>*xx``
+  when the model delivers it (its ``rx_delay_s`` is the modem's decoding latency); an all-zero packet is
+  the sync packet, counted but never printed (the modem filters it, whoever queued it).
+- **``wcd``.** ``pkt_cnt`` counts the packets received from the other role (sync included),
+  ``pkt_loss_cnt`` those the model lost at this modem (collision, error model: each traced ``err`` by the
+  model with its cause), the link flag says whether a packet came within :data:`LINK_SLOTS` slots; the
+  bit error rate is 0.0 (the model loses packets whole, it draws no bit errors).
+
+Not emulated: the modem's serial line timing (115200 baud: 1.2 ms for a ``wcq``), an A hearing another
+A (only the other role's packets are decoded), the modem's own queue bound (not published: hilgate's
+is :data:`QUEUE_MAX`, beyond which ``wrq,n``).
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from hilgate.core.backend import AppFrame, PhyEvent
+from hilgate.core.endpoint import TAKEN, LinkPort
+from hilgate.core.packets import BROADCAST, Raw
+
+from .emulators import _open_hosts
+from .m64_codec import BadChecksum, Command, Malformed, ModemCodec
+
+log = logging.getLogger(__name__)
+
+PAYLOAD = 8
+VERSION = ("1", "0", "1")  # the protocol version the public document describes (wrv,1,0,1)
+SLOT_S = 1.0         # role A's transmit period: "about one packet a second each way"
+TURNAROUND_S = 0.05  # role B's answer starts this long after A's packet has ended (hilgate's choice)
+SYNC_LOSSES = 3      # B goes back to listening after this many lost packets from A in a row
+LINK_SLOTS = 3       # wcd says the link is up while a packet came within this many slots
+QUEUE_MAX = 1024     # packets the emulated modem queues (the real bound is not published)
+SYNC = bytes(PAYLOAD)
+CHANNEL_BANDS_KHZ = {1: (31.25, 62.25), 2: (62.25, 93.75), 3: (93.75, 125.0), 4: (125.0, 156.0),
+                     5: (156.0, 187.0), 6: (187.0, 218.0), 7: (218.0, 250.0)}
+"""Water Linked's channel table (its public documentation, "Channel overview"): the band of each
+modem channel; neighbouring bands only touch, so they do not overlap."""
+
+
+class M64Emulator:
+    """A Water Linked Modem-M64 (the module's docstring)."""
+
+    kind = "emulator"
+    busy = False
+
+    def __init__(self, port: LinkPort, spec: dict, scheduler: Any):
+        self.port = port
+        self.options = spec
+        self.scheduler = scheduler
+        self.role = str(spec.get("role", "a"))
+        self.channel = int(spec.get("channel", 1))
+        self.queue: list[bytes] = []
+        self.received = 0      # wcd pkt_cnt
+        self.lost_packets = 0  # wcd pkt_loss_cnt
+        self.last_heard: float | None = None
+        self.in_sync = False   # role B: answering A
+        self.losses_in_row = 0
+        self.answer_timer = None
+        self.codecs: dict[Any, ModemCodec] = {}
+        self.slot_timer = None
+        self.started = scheduler.now()
+        self._tune()
+        self._schedule_slot()
+        self.hosts = _open_hosts(spec, scheduler, self._on_data, self._on_connect, port.id,
+                                 lambda host: self.codecs.pop(host, None))
+
+    def _on_connect(self, host: Any) -> None:
+        self.codecs[host] = ModemCodec()
+
+    def close(self) -> None:
+        self.scheduler.cancel(self.slot_timer)
+        self.scheduler.cancel(self.answer_timer)
+        self.slot_timer = self.answer_timer = None
+        self.hosts.close()
+
+    # -- host → modem ----------------------------------------------------------------------------------
+
+    def _on_data(self, host: Any, data: bytes) -> None:
+        codec = self.codecs.setdefault(host, ModemCodec())
+        for event in codec.receive_data(data):
+            match event:
+                case Command():
+                    host.write(self._command(event))
+                case BadChecksum() | Malformed():
+                    host.write(codec.refusal(event))
+
+    def _command(self, command: Command) -> bytes:
+        handler = self.COMMANDS.get(command.letter)
+        if handler is None:
+            return ModemCodec.refusal(command)
+        answer = handler(self, command)
+        if answer is None:
+            return ModemCodec.refusal(command)
+        return ModemCodec.response(command.letter, *answer)
+
+    def _version(self, command: Command) -> tuple[str, ...] | None:
+        return VERSION if not command.options else None
+
+    def _payload_size(self, command: Command) -> tuple[str, ...] | None:
+        return (str(PAYLOAD),) if not command.options else None
+
+    def _get_settings(self, command: Command) -> tuple[str, ...] | None:
+        return (self.role, str(self.channel)) if not command.options else None
+
+    def _set_settings(self, command: Command) -> tuple[str, ...] | None:
+        if len(command.options) != 2:
+            return None
+        role, channel = command.options
+        if role not in ("a", "b") or not channel.isdigit() or int(channel) not in CHANNEL_BANDS_KHZ:
+            return ("n",)
+        changed = (role, int(channel)) != (self.role, self.channel)
+        self.role, self.channel = role, int(channel)
+        if changed:  # a new pairing: the link starts again
+            self.in_sync = False
+            self.losses_in_row = 0
+            self.last_heard = None
+            self.scheduler.cancel(self.answer_timer)
+            self.answer_timer = None
+            self._tune()
+            self._schedule_slot()
+        return ("a",)
+
+    def _queue_length(self, command: Command) -> tuple[str, ...] | None:
+        return (str(len(self.queue)),) if not command.options else None
+
+    def _flush(self, command: Command) -> tuple[str, ...] | None:
+        if command.options:
+            return None
+        for payload in self.queue:
+            self.port.lost("flushed", len(payload), src="app")
+        self.queue.clear()
+        return ("a",)
+
+    def _diagnostic(self, command: Command) -> tuple[str, ...] | None:
+        if command.options:
+            return None
+        return ("y" if self.link_up else "n", str(self.received), str(self.lost_packets), "0.0")
+
+    def _queue_packet(self, command: Command) -> tuple[str, ...] | None:
+        payload = command.payload
+        if payload is None:
+            return None
+        if len(payload) != PAYLOAD or command.options != (str(PAYLOAD),):
+            return ("n",)
+        if len(self.queue) >= QUEUE_MAX:
+            self.port.lost("queue_full", len(payload), src="app")
+            return ("n",)
+        self.queue.append(payload)
+        return ("a",)
+
+    COMMANDS = {"v": _version, "n": _payload_size, "c": _get_settings, "s": _set_settings, "l": _queue_length,
+                "f": _flush, "d": _diagnostic, "q": _queue_packet}
+
+    @property
+    def link_up(self) -> bool:
+        return self.last_heard is not None and self.scheduler.now() - self.last_heard <= LINK_SLOTS * SLOT_S
+
+    # -- the slots -------------------------------------------------------------------------------------
+
+    def _tune(self) -> None:
+        self.port.set_band(CHANNEL_BANDS_KHZ[self.channel])
+
+    def _schedule_slot(self) -> None:
+        """Role A transmits at power-on + k · SLOT_S; role B only answers."""
+        self.scheduler.cancel(self.slot_timer)
+        self.slot_timer = None
+        if self.role == "a":
+            now = self.scheduler.now()
+            k = int((now - self.started) // SLOT_S) + 1
+            self.slot_timer = self.scheduler.at(self.started + k * SLOT_S, self._slot)
+
+    def _slot(self) -> None:
+        self.slot_timer = self.scheduler.at(self.scheduler.now() + SLOT_S, self._slot)
+        self._transmit()
+
+    def _transmit(self) -> None:
+        payload = self.queue.pop(0) if self.queue else SYNC
+        frame = AppFrame(payload, payload, Raw(), 0, self.port.address, BROADCAST, self.scheduler.now())
+        frame.meta = {"m64": "sync" if payload == SYNC else "data", "role": self.role, "channel": self.channel}
+        self.port.send(frame)
+
+    def _answer(self) -> None:
+        self.answer_timer = None
+        if self.role == "b" and self.in_sync:
+            self._transmit()
+
+    def _from_partner(self, frame: AppFrame | None) -> bool:
+        meta = (frame.meta if frame is not None else None) or {}
+        return "m64" in meta and meta.get("role") != self.role and meta.get("channel") == self.channel
+
+    # -- what the simulated PHY does --------------------------------------------------------------------
+
+    def phy(self, event: PhyEvent) -> None:
+        """Arrivals from the other role: their end times B's answer, their losses count in ``wcd``."""
+        if event.kind != "rx_end" or not self._from_partner(event.frame):
+            return
+        if event.cause is not None:
+            self.lost_packets += 1
+            self.losses_in_row += 1
+            if self.losses_in_row >= SYNC_LOSSES:
+                self.in_sync = False
+        else:
+            self.losses_in_row = 0
+            if self.role == "b":
+                self.in_sync = True
+        if self.role == "b" and self.in_sync and self.answer_timer is None:
+            self.answer_timer = self.scheduler.at(event.end + TURNAROUND_S, self._answer)
+
+    # -- medium → host -----------------------------------------------------------------------------------
+
+    def deliver(self, frame: AppFrame, t: float) -> str:
+        if not self._from_partner(frame):
+            return TAKEN  # not a packet this modem decodes (another A, another modem's traffic)
+        self.received += 1
+        self.last_heard = t
+        payload = frame.payload
+        if payload == SYNC or len(payload) != PAYLOAD:
+            return TAKEN  # the sync packet: filtered out by the receiving modem
+        line = ModemCodec.packet(payload)
+        for host in list(self.codecs):
+            host.write(line)
+        return TAKEN
+
+    def state(self, ready: bool) -> None:
+        pass

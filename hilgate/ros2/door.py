@@ -1,0 +1,265 @@
+"""ROS 2 nodes as link applications: a link whose ``gli:`` names ``ros2`` has three topics under the
+scene's namespace (``<ns>/<link>/…``, the link id made a ROS name by :func:`hilgate.scene.ros2.ros_token`):
+
+==========  =========================  ========================================================
+topic       type                       who publishes, what
+==========  =========================  ========================================================
+``send``    ``hilgate_msgs/msg/Frame`` a node: ``dst`` (255 broadcast) and ``data``; the other
+                                       fields are ignored (the link's own address is the source)
+``recv``    ``hilgate_msgs/msg/Frame`` hilgate: every frame the link receives, with ``src``,
+                                       ``dst``, ``model_time`` (s) and ``stamp`` (wall clock)
+``ready``   ``std_msgs/msg/Bool``      hilgate: READY (true) or BUSY, when it changes; transient
+                                       local, so a node that starts late gets the current one
+==========  =========================  ========================================================
+
+``send`` and ``recv`` are reliable unless ``ros2.links.reliability`` says ``best_effort``.
+
+**Bounded per writer**, as the Zenoh door is per client (:mod:`hilgate.gli.zenoh_door`): Cyclone DDS
+calls :meth:`Ros2Endpoint._on_send` on its own thread; it takes every sample there, each DDS writer (a
+node's publisher) has its own queue at the door, filled at most at the Zenoh door's rate, and the loop
+takes one frame of each writer in turn while the link is READY.  What a writer sends beyond is
+dropped and counted (``rate``, ``client_queue``); a sample that does not decode is ``bad_frame``;
+what Cyclone itself could not keep (the reader's history full, a best-effort sample lost on the way)
+is counted too (``dds_rejected``, ``dds_lost``).  At most :data:`MAX_WRITERS` writers per link.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import deque
+from typing import Any
+
+from cyclonedds.core import Listener
+
+from ..core.backend import AppFrame
+from ..core.endpoint import ABSENT, TAKEN, LinkPort
+from ..core.packets import PacketError
+from ..gli.zenoh_door import CLIENT_BURST, CLIENT_QUEUE, CLIENT_RATE_HZ, MAX_CLIENTS, Bucket
+from .idl import message_class
+from .participant import DDSException, Participant, guarded
+from .poses import take_each
+
+log = logging.getLogger(__name__)
+
+__all__ = ["Ros2Door", "Ros2Endpoint", "FRAME", "MAX_WRITERS", "DOOR_BYTES"]
+
+FRAME = "hilgate_msgs/msg/Frame"
+BOOL = "std_msgs/msg/Bool"
+MAX_WRITERS = MAX_CLIENTS
+MAX_PAYLOAD = 65536
+DOOR_BYTES = 16 << 20  # bytes of frames all links' ROS 2 doors hold in all
+READER_SAMPLES = 256   # samples Cyclone keeps for the reader before the listener takes them
+
+
+class Writer:
+    """What the door holds for one DDS writer (a node's publisher) of a link's ``send`` topic."""
+
+    __slots__ = ("name", "queue", "sends", "drops")
+
+    def __init__(self, name: str):
+        self.name = name
+        self.queue: deque[tuple[bytes, int]] = deque()
+        self.sends = Bucket(CLIENT_RATE_HZ, CLIENT_BURST)
+        self.drops: dict[str, int] = {}
+
+
+class Ros2Endpoint:
+    kind = "ros2"
+    busy = False
+    phy = None  # (no PHY reports: hilgate.core.endpoint.Endpoint.phy)
+
+    def __init__(self, door: "Ros2Door", port: LinkPort):
+        self.door = door
+        self.port = port
+        self.ready: bool | None = None
+        self.writers: dict[int, Writer] = {}
+        self.refused: dict[str, int] = {}
+        self.lock = door.lock
+        self.posted = False
+        self.matched = 0  # subscriptions of recv (kept up to date by Cyclone: asking per frame costs more)
+        self.Frame = message_class(FRAME)
+        self.Bool = message_class(BOOL)
+        participant, base = door.participant, door.base(port.id)
+        self.topics = (base + "/send", base + "/recv", base + "/ready")
+        reliability = door.reliability
+        self.recv = participant.writer(self.topics[1], FRAME, reliability, depth=64,
+                                       listener=Listener(on_publication_matched=self._matched))
+        self.state_writer = participant.writer(self.topics[2], BOOL, "reliable", depth=1, durability="transient_local")
+        self.reader = participant.reader(self.topics[0], FRAME, Listener(
+            on_data_available=guarded(f"ros2 link {port.id}")(self._on_send),
+            on_sample_rejected=guarded(f"ros2 link {port.id}")(self._on_rejected),
+            on_sample_lost=guarded(f"ros2 link {port.id}")(self._on_lost)), reliability, keep_all=READER_SAMPLES)
+        port.attach(self)
+
+    def _matched(self, writer: Any, status: Any) -> None:  # (on Cyclone's thread; an int is set in one step)
+        self.matched = status.current_count
+
+    # -- link → nodes (on the loop) ---------------------------------------------------------------
+
+    def deliver(self, frame: AppFrame, t: float) -> str:
+        if not self.matched:
+            return ABSENT  # no node subscribes: nothing to encode or send
+        now = time.time()
+        message = self.Frame()
+        message.stamp.sec, message.stamp.nanosec = int(now), int((now % 1.0) * 1e9)
+        message.src, message.dst, message.model_time = frame.src & 0xFF, frame.dst & 0xFF, t
+        message.data = bytes(frame.payload)
+        try:
+            self.recv.write(message)
+        except DDSException:  # its history is full of frames not yet acknowledged: never wait for them
+            return "ros2_writer"
+        return TAKEN
+
+    def state(self, ready: bool) -> None:
+        if ready != self.ready:
+            self.ready = ready
+            try:
+                self.state_writer.write(self.Bool(data=ready))
+            except DDSException as exc:
+                log.debug("ros2 link %s: READY not published: %s", self.port.id, exc)
+        if ready:
+            self._pump()
+
+    # -- nodes → link (on Cyclone's threads: counted and queued, never waiting) ----------------------
+
+    def _on_send(self, reader: Any) -> None:
+        door = self.door
+        for sample in take_each(reader, self._refuse_decode):
+            if not hasattr(sample, "data"):  # (by name: a DDS sample, or the invalid one of a writer gone)
+                continue  # a writer went away
+            handle = sample.sample_info.publication_handle
+            data = bytes(sample.data)
+            size = len(data)
+            with self.lock:
+                writer = self.writers.get(handle)
+                if writer is None:
+                    if len(self.writers) >= MAX_WRITERS:
+                        self.refused["clients"] = self.refused.get("clients", 0) + 1
+                        continue
+                    writer = self.writers[handle] = Writer(f"{handle:x}")
+                cause = None
+                if size > MAX_PAYLOAD:
+                    cause = "bad_frame"
+                elif not writer.sends.take():
+                    cause = "rate"
+                elif len(writer.queue) >= CLIENT_QUEUE or door.queued + size > DOOR_BYTES:
+                    cause = "client_queue"
+                if cause is None:
+                    writer.queue.append((data, sample.dst))
+                    door.queued += size
+                else:
+                    writer.drops[cause] = writer.drops.get(cause, 0) + 1
+        self._wake()
+
+    def _refuse_decode(self, cause: str) -> None:
+        with self.lock:
+            self.refused["bad_frame"] = self.refused.get("bad_frame", 0) + 1
+
+    def _on_rejected(self, reader: Any, status: Any) -> None:
+        self._count("dds_rejected", status.total_count_change)
+
+    def _on_lost(self, reader: Any, status: Any) -> None:
+        self._count("dds_lost", status.total_count_change)
+
+    def _count(self, cause: str, n: int) -> None:
+        if n > 0:
+            with self.lock:
+                self.refused[cause] = self.refused.get(cause, 0) + n
+            self._wake()
+
+    def _wake(self) -> None:
+        with self.lock:
+            wake, self.posted = not self.posted, True
+        if wake:
+            self.door.post(self._pump)
+
+    def _pump(self) -> None:
+        """On the loop: report what was dropped, then the writers' frames in turn while the link is READY."""
+        door, port = self.door, self.port
+        with self.lock:
+            self.posted = False
+            drops = [(writer.name, writer.drops) for writer in self.writers.values() if writer.drops]
+            for writer in self.writers.values():
+                writer.drops = {}
+            refused, self.refused = self.refused, {}
+        for name, counts in drops:
+            for cause, n in counts.items():
+                port.lost(cause, 0, src=f"ros2:{name}", n=n)
+        for cause, n in refused.items():
+            port.lost(cause, 0, src="ros2", n=n)
+        while port.ready:
+            sent = False
+            for writer in list(self.writers.values()):
+                with self.lock:
+                    if not writer.queue:
+                        continue
+                    data, dst = writer.queue.popleft()
+                    door.queued -= len(data)
+                self._send(data, dst)
+                sent = True
+                if not port.ready:
+                    break
+            if not sent:
+                break
+        with self.lock:  # writers with nothing queued and nothing sent lately are forgotten
+            for handle in [h for h, w in self.writers.items() if not w.queue and w.sends.full()]:
+                del self.writers[handle]
+
+    def _send(self, data: bytes, dst: int) -> None:
+        try:
+            self.port.send_payload(data, dst)
+        except PacketError as exc:
+            self.port.lost("bad_frame", len(data), src="ros2")
+            log.info("ros2 link %s: a frame refused: %s", self.port.id, exc)
+
+    def close(self) -> None:
+        self.port.detach(self)
+        participant = self.door.participant
+        for entity in (self.reader, self.recv, self.state_writer):
+            participant.delete(entity)
+        with self.lock:
+            for writer in self.writers.values():
+                self.door.queued -= sum(len(data) for data, _ in writer.queue)
+                writer.queue.clear()
+
+
+class Ros2Door:
+    """Opens the ROS 2 topics of the links whose ``gli:`` names ``ros2``, on ``node``'s participant
+    (made when the first such link opens)."""
+
+    def __init__(self, node: Any, post: Any, token: Any = None):
+        self.node = node
+        self.post = post
+        self.token = token or (lambda name: name)
+        self.queued = 0
+        self.lock = threading.Lock()
+
+    @property
+    def participant(self) -> Participant:
+        return self.node.participant
+
+    @property
+    def reliability(self) -> str:
+        return self.node.spec.links_reliability
+
+    def base(self, link_id: str) -> str:
+        return f"{self.node.spec.namespace.rstrip('/')}/{self.token(link_id)}"
+
+    def open(self, port: LinkPort) -> Ros2Endpoint | None:
+        if "ros2" not in port.gli:
+            return None
+        return Ros2Endpoint(self, port)
+
+    def update(self, handle: Ros2Endpoint | None, port: LinkPort) -> Ros2Endpoint | None:
+        if handle is None:
+            return self.open(port)
+        if "ros2" not in port.gli:
+            handle.close()
+            return None
+        return handle
+
+    def close(self, handle: Ros2Endpoint | None) -> None:
+        if handle is not None:
+            handle.close()

@@ -1,0 +1,64 @@
+"""WHOI's own ``acomms`` library (unmodified) driving two Micro-Modems, for tests/test_micromodem.py.
+
+Run as ``acomms_peer.py SCENARIO PTY_A PTY_B LOG_DIR``; prints one JSON line per result.  A process of
+its own, because ``acomms``' serial thread never ends (it reopens the port for ever once closed): the
+process's end ends it.  Every wait is a hang guard: it returns as soon as the modem answers.
+"""
+
+import json
+import sys
+from queue import Empty, Queue
+
+from acomms.micromodem import Micromodem
+
+
+def say(**fields):
+    print(json.dumps(fields), flush=True)
+
+
+def frames_of(packet):
+    return [bytes(f.data).hex() for f in packet.frames]
+
+
+def main() -> None:
+    scenario, pty_a, pty_b, logs = sys.argv[1:5]
+    a = Micromodem(name="a", log_path=logs)
+    b = Micromodem(name="b", log_path=logs)
+    a.connect_serial(pty_a, 19200)
+    b.connect_serial(pty_b, 19200)
+    say(event="ids", a=a.id, b=b.id)
+    packets, csts, acks, results = Queue(), Queue(), Queue(), Queue()
+    b.attach_packetrx_queue(packets)
+    b.attach_incoming_cst_queue(csts)
+    a.ack_listeners.append(lambda ack, msg: acks.put((ack.src, ack.dest, ack.frame_num, ack.ack)))
+    if scenario == "exchange":
+        for rate, data in ((1, b"three frames at rate one: " * 7), (5, bytes(range(256)) * 3 + b"tail")):
+            a.send_packet_data(b.id, data, rate_num=rate)
+            packet = packets.get(timeout=60)
+            cst = csts.get(timeout=30)
+            say(event="packet", rate=rate, frames=frames_of(packet), src=packet.cycleinfo.src,
+                dest=packet.cycleinfo.dest, cst={k: cst[k] for k in ("mode", "rate_num", "num_frames", "bad_frames_num",
+                                                                    "mfd_pow", "snr_in", "dqf", "src", "dest")})
+        a.send_packet_data(b.id, b"acknowledge these two frames please" * 3, rate_num=2, ack=True)
+        packet = packets.get(timeout=60)
+        got = [acks.get(timeout=30) for _ in range(2)]
+        say(event="acked", frames=frames_of(packet), acks=got)
+        a.send_ping(b.id)
+        say(event="ping", owtt=a.wait_for_ping_reply(b.id, timeout=60))
+        a.send_packet_data(b.id, b"FH-FSK, rate 0", rate_num=0)
+        say(event="packet", rate=0, frames=frames_of(packets.get(timeout=60)))
+    elif scenario == "lost":
+        a.send_packet_data(b.id, b"lost on the way " * 12, rate_num=1, ack=True)
+        cst = csts.get(timeout=60)
+        say(event="cst", mode=cst["mode"], num_frames=cst["num_frames"], bad_frames_num=cst["bad_frames_num"])
+        try:
+            packets.get(timeout=0.5)
+            say(event="packet")
+        except Empty:
+            pass
+        say(event="acks", count=acks.qsize())
+    say(event="done", a=str(a.state), b=str(b.state))
+
+
+if __name__ == "__main__":
+    main()

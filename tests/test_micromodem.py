@@ -1,0 +1,247 @@
+"""The WHOI Micro-Modem: its codec, the emulator driven by WHOI's own ``acomms`` library (unmodified,
+installed by the test extra, run in a process of its own: tests/peers/acomms_peer.py), and hilgate's
+driver against the emulator.
+
+``acomms``' ``Micromodem`` connects (``$CCCFQ,SRC``), sends multi-frame packets at two PSK rates and at
+rate 0, an acknowledged packet and a ping; the receiving modem's packet, its ``$CACST`` and the ping's
+travel time are checked against the model: the packet's time on the channel is the rate's air time plus
+150 m at 1500 m/s, exactly, in the trace.  Times are the model's, never the wall clock's.
+"""
+
+import json
+import math
+import subprocess
+import sys
+import time
+
+import pytest
+import serial
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+pytest.importorskip("acomms")
+
+from daemon_kit import HERE, Daemon, unique  # noqa: E402
+from fuzzkit import examples  # noqa: E402
+from hilgate.client import Link  # noqa: E402
+from hilgate.drivers.micromodem_codec import (RATES, BadSentence, HostCodec, ModemCodec, Sentence,  # noqa: E402
+                                              checksum, sentence)
+
+SPEED = 4
+PEER = f"{HERE}/peers/acomms_peer.py"
+
+
+# -- the codec, without a port -------------------------------------------------------------------------
+
+
+def test_sentences_carry_the_nmea_checksum_acomms_computes():
+    from acomms.micromodem import Message, nmeaChecksum
+    for kind, fields in (("CACYC", (0, 1, 2, 1, 0, 3)), ("CARXD", (1, 2, 0, 1, "48454C4C4F")), ("CAMPR", (2, 1, "0.1000"))):
+        line = sentence(kind, *fields)
+        body = line[1:line.index(b"*")].decode()
+        assert checksum(body) == nmeaChecksum(body)
+        parsed = Message(line.decode())  # raises on a bad checksum
+        assert parsed["type"] == kind and parsed["params"] == [str(f) for f in fields]
+
+
+def test_the_modem_side_takes_host_sentences_with_or_without_checksum():
+    modem = ModemCodec()
+    events = modem.receive_data(b"$CCCFQ,SRC\r\n" + sentence("CCCYC", 0, 1, 2, 1, 0, 3) + b"$CCCYC,0*00\r\nnoise\n$CATXF\n")
+    assert events == [Sentence("CCCFQ", ("SRC",)), Sentence("CCCYC", ("0", "1", "2", "1", "0", "3"), True),
+                      BadSentence("checksum", b"$CCCYC,0*00"), BadSentence("no sentence", b"noise"),
+                      BadSentence("talker", b"$CATXF")]
+    assert HostCodec().receive_data(sentence("CAACK", 1, 2, 1, 1)) == [Sentence("CAACK", ("1", "2", "1", "1"), True)]
+
+
+@settings(max_examples=examples(300), deadline=None)
+@given(st.lists(st.one_of(st.binary(max_size=80), st.sampled_from([b"$", b"*", b"\r\n", b"\n", b"$CCCYC,"])), max_size=15))
+def test_fuzz_micromodem_codecs_never_fail_and_hold_at_most_a_line(chunks):
+    modem, host = ModemCodec(), HostCodec()
+    for chunk in chunks:
+        for codec in (modem, host):
+            for event in codec.receive_data(chunk):
+                assert isinstance(event, (Sentence, BadSentence))
+            assert len(codec.buffer) <= 1024 + 80
+
+
+def test_rates_are_the_interface_guides_frames():
+    from acomms.messageparams import Rates
+    for number, rate in RATES.items():
+        assert (rate.frames, rate.frame_bytes) == (Rates[number].numframes, Rates[number].framesize)
+
+
+# -- the emulator, driven by acomms ----------------------------------------------------------------------
+
+
+def scene(tmp_path, ea, eb, error_b="0"):
+    return f"""\
+channels: {{ac: {{speed_mps: 1500}}}}
+vehicles:
+  va: {{pose: {{static: [0, 0, 0]}}}}
+  vb: {{pose: {{static: [150, 0, 0]}}}}
+links:
+  {ea}: {{vehicle: va, model: micromodem, address: 1, gli: [socket], emulate: {{protocol: micromodem, pty: {tmp_path / 'a'}}}}}
+  {eb}: {{vehicle: vb, model: micromodem, address: 2, gli: [socket], error: {{unit: packet, expr: "{error_b}"}},
+         emulate: {{protocol: micromodem, pty: {tmp_path / 'b'}}}}}
+"""
+
+
+def run_peer(tmp_path, scenario, timeout=240):
+    result = subprocess.run([sys.executable, PEER, scenario, str(tmp_path / "a"), str(tmp_path / "b"),
+                             str(tmp_path / "acomms_logs")], capture_output=True, text=True, timeout=timeout)
+    assert result.returncode == 0, result.stderr
+    return [json.loads(line) for line in result.stdout.splitlines() if line.startswith("{")]
+
+
+def test_acomms_sends_packets_at_two_rates_an_acknowledged_one_and_a_ping_through_emulated_micromodems(tmp_path):
+    ea, eb = unique("ma"), unique("mb")
+    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb), [ea, eb], "--speed", str(SPEED))
+    try:
+        daemon.wait_for("READY=1")
+        results = run_peer(tmp_path, "exchange")
+        daemon.stop()
+        assert results[0] == {"event": "ids", "a": 1, "b": 2}  # $CCCFQ,SRC -> $CACFG,SRC,<the link's address>
+        packets = [r for r in results if r["event"] == "packet"]
+        rate1 = b"three frames at rate one: " * 7
+        assert [bytes.fromhex(f) for f in packets[0]["frames"]] == [rate1[:64], rate1[64:128], rate1[128:182]]
+        rate5 = bytes(range(256)) * 3 + b"tail"
+        assert [bytes.fromhex(f) for f in packets[1]["frames"]] == [rate5[:256], rate5[256:512], rate5[512:768], b"tail"]
+        rssi = round(-20 - 20 * math.log10(150) - 0.15)  # hilgate.models.link_budget at 150 m; integrity (the
+        # data quality factor) falls from 250 at 0 m to 50 at the preset's 3000 m: 240 at 150 m
+        for packet, rate, count in ((packets[0], 1, 3), (packets[1], 5, 4)):
+            assert (packet["src"], packet["dest"]) == (1, 2)
+            assert packet["cst"] == {"mode": 0, "rate_num": rate, "num_frames": count, "bad_frames_num": 0,
+                                     "mfd_pow": rssi, "snr_in": float(rssi + 100), "dqf": 240, "src": 1, "dest": 2}
+        assert bytes.fromhex(packets[2]["frames"][0]) == b"FH-FSK, rate 0"
+        acked = next(r for r in results if r["event"] == "acked")
+        assert acked["acks"] == [[1, 2, 1, True], [1, 2, 2, True]]
+        ping = next(r for r in results if r["event"] == "ping")
+        assert ping["owtt"] == 0.1  # 150 m at 1500 m/s, measured by the model from the round trip
+        assert results[-1] == {"event": "done", "a": "Idle", "b": "Idle"}  # every cycle finished
+        events = daemon.trace_events()
+        tx = {e["pkt"]: e for e in events if e.get("link") == ea and e["ev"] == "tx" and "kind" not in e}
+        rx = [e for e in events if e.get("link") == eb and e["ev"] == "rx" and e["pkt"] in tx]
+        # on the channel each packet takes its rate's air time (whole frames) and 0.1 s of propagation
+        sizes = {e["size"]: round(e["t"] - tx[e["pkt"]]["t"], 9) for e in rx}
+        assert sizes[3 * 64] == round(0.3 + 3 * 64 * 8 / 525 + 0.1, 9)  # rate 1, 3 frames (and rate 2: 560 bit/s)
+        assert sizes[4 * 256] == round(0.3 + 4 * 256 * 8 / 5400 + 0.1, 9)  # rate 5, 4 frames
+        assert sizes[32] == round(32 * 8 / 80 + 0.1, 9)  # rate 0: FH-FSK, no probe
+        acks = [e for e in events if e.get("link") == eb and e["ev"] == "tx" and e.get("kind") == "modem_ack"]
+        assert len(acks) == 2  # the acknowledged packet's and the ping's reply, on the channel
+    finally:
+        daemon.close()
+
+
+def test_a_packet_the_model_loses_shows_in_the_receivers_statistics_and_in_the_trace(tmp_path):
+    ea, eb = unique("ma"), unique("mb")
+    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb, error_b="1"), [ea, eb], "--speed", str(SPEED))
+    try:
+        daemon.wait_for("READY=1")
+        results = run_peer(tmp_path, "lost")
+        daemon.stop()
+        assert {"event": "cst", "mode": 1, "num_frames": 3, "bad_frames_num": 3} in results
+        assert not [r for r in results if r["event"] == "packet"]
+        assert {"event": "acks", "count": 0} in results  # no acknowledgement for what never arrived
+        assert results[-1] == {"event": "done", "a": "Idle", "b": "Idle"}
+        lost = [e for e in daemon.trace_events() if e["ev"] == "err" and e.get("link") == eb]
+        assert [(e["src"], e["cause"], e["size"]) for e in lost] == [(ea, "prop", 3 * 64)]
+    finally:
+        daemon.close()
+
+
+def test_a_host_that_gives_no_data_gets_a_data_timeout_and_the_cycle_ends(tmp_path):
+    ea, eb = unique("ma"), unique("mb")
+    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb), [ea, eb], "--speed", str(SPEED))
+    try:
+        daemon.wait_for("READY=1")
+        port = serial.Serial(str(tmp_path / "a"), 19200, timeout=30)
+        port.write(b"$CCCYC,0,1,2,1,0,3\r\n")
+        lines = [port.read_until(b"\n") for _ in range(3)]
+        assert lines[0] == sentence("CACYC", 0, 1, 2, 1, 0, 3)
+        assert lines[1].startswith(b"$CADRQ,") and lines[1].split(b",")[2:6] == [b"1", b"2", b"0", b"64"]
+        assert lines[2].startswith(b"$CAERR,") and b",DATA_TIMEOUT,1," in lines[2]
+        port.write(b"$CCCYC,0,1,2,9,0,3\r\n$CCXYZ\r\n$CCCYC,0,1,2,1,0,3*00\r\n")  # a bad rate, unknown, bad checksum
+        errors = [port.read_until(b"\n") for _ in range(3)]
+        assert all(line.startswith(b"$CAERR,") for line in errors), errors
+        port.write(b"$CCCYC,0,1,2,1,0,1\r\n")  # the modem is free again: the cycle ended
+        assert port.read_until(b"\n") == sentence("CACYC", 0, 1, 2, 1, 0, 1)
+        port.close()
+    finally:
+        daemon.close()
+
+
+# -- hilgate's driver against the emulator -----------------------------------------------------------------
+
+
+def driver_scene(tmp_path, da, db, ea, eb, rate=1, ack=True, packet="vl2b"):
+    pa, pb = tmp_path / "a", tmp_path / "b"
+    return f"""\
+channels: {{ac: {{speed_mps: 1500}}}}
+vehicles:
+  va: {{pose: {{static: [0, 0, 0]}}}}
+  vb: {{pose: {{static: [150, 0, 0]}}}}
+links:
+  {da}: {{vehicle: va, backend: micromodem, port: {pa}, address: 1, rate: {rate}, ack: {str(ack).lower()}, packet: {packet},
+         gli: [socket]}}
+  {db}: {{vehicle: vb, backend: micromodem, port: {pb}, address: 2, rate: {rate}, packet: {packet}, gli: [socket]}}
+  {ea}: {{vehicle: va, model: micromodem, address: 1, gli: [socket], emulate: {{protocol: micromodem, pty: {pa}}}}}
+  {eb}: {{vehicle: vb, model: micromodem, address: 2, gli: [socket], emulate: {{protocol: micromodem, pty: {pb}}}}}
+"""
+
+
+def wait_up(daemon, links, timeout=60):
+    deadline = time.monotonic() + timeout
+    while True:
+        states = {l["id"]: l["state"] for l in daemon.status()["links"]}
+        if all(states[l] == "up" for l in links):
+            return
+        assert time.monotonic() < deadline, f"links not up: {states}\n{daemon.output()}"
+        time.sleep(0.05)
+
+
+def test_hilgate_drivers_carry_frames_application_to_application_through_emulated_micromodems(tmp_path):
+    da, db, ea, eb = unique("da"), unique("db"), unique("ea"), unique("eb")
+    daemon = Daemon(tmp_path, driver_scene(tmp_path, da, db, ea, eb), [da, db, ea, eb], "--speed", str(SPEED))
+    try:
+        daemon.wait_for("READY=1")
+        wait_up(daemon, [da, db])
+        sent = [b"short", b"x" * 150]  # one frame; three frames of rate 1 (155 bytes of vl2b on air)
+        with Link.open(da, runtime_dir=daemon.runtime) as la, Link.open(db, runtime_dir=daemon.runtime) as lb:
+            for payload in sent:
+                la.send(payload, dst=2)
+                message = lb.recv(timeout=60)
+                assert message is not None and message.data == payload and message.src == 1
+            lb.send(b"back", dst=1)
+            message = la.recv(timeout=60)
+            assert message is not None and message.data == b"back" and message.src == 2
+            la.send(b"y" * 200, dst=2)  # 205 bytes on air: more than rate 1's 3 x 64
+            with pytest.raises(Exception, match="do not fit a rate-1 packet of the Micro-Modem"):
+                la.recv(timeout=30)
+        deadline = time.monotonic() + 60
+        while sum(e["ev"] == "delivered" for e in _events(daemon) if e.get("link") == da) < 2:
+            assert time.monotonic() < deadline, "acknowledgements never traced"
+            time.sleep(0.05)
+        daemon.stop()
+        events = daemon.trace_events()
+        assert [(e["size"], e["frames"]) for e in events if e.get("link") == da and e["ev"] == "tx"] == [(10, 1), (155, 3)]
+        assert [e["size"] for e in events if e.get("link") == db and e["ev"] == "rx"] == [10, 155]
+        stats = [e for e in events if e.get("link") == db and e["ev"] == "modem_stats"]
+        assert [(e["mode"], e["rate"], e["frames"], e["bad_frames"]) for e in stats] == [(0, 1, 1, 0), (0, 1, 3, 0)]
+        # on the simulated channel each packet took its rate's air time for whole frames plus 0.1 s, exactly
+        tx = {e["pkt"]: e["t"] for e in events if e.get("link") == ea and e["ev"] == "tx" and "kind" not in e}
+        rx = [e for e in events if e.get("link") == eb and e["ev"] == "rx" and e["pkt"] in tx]
+        assert [round(e["t"] - tx[e["pkt"]], 9) for e in rx] == [round(0.3 + n * 64 * 8 / 525 + 0.1, 9) for n in (1, 3)]
+        losses = [(e["link"], e["cause"]) for e in events if e["ev"] in ("drop", "err") and e.get("link") in (da, db)]
+        assert losses == [(da, "size")]  # the 200-byte frame, refused when the application sent it
+    finally:
+        daemon.close()
+
+
+def _events(daemon):
+    events = []
+    for line in daemon.trace.read_text().splitlines():
+        try:
+            events.append(json.loads(line))
+        except ValueError:
+            pass
+    return events
