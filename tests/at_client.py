@@ -46,12 +46,6 @@ def multipath(text: str) -> list[int]:
     return [unsigned(word) for word in words[:16]]
 
 
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
 class Message:
     """A notification: its text up to the payload, and the payload of RECVIM/RECV."""
 

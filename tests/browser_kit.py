@@ -12,12 +12,13 @@ import time
 
 import pytest
 
+from daemon_kit import HANG_GUARD_S
+
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 CHROMEDRIVER = shutil.which("chromedriver") or "/usr/bin/chromedriver"
 FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync",
          "--window-size=1600,900", "--force-device-scale-factor=1"]
-HANG_GUARD_S = 90.0
 
 
 def missing() -> str | None:

@@ -14,12 +14,14 @@ from __future__ import annotations
 
 import json
 import os
+import select
 import signal
 import socket
 import subprocess
 import sys
 import threading
 import time
+import tty
 import uuid
 
 from hilgate.gli.queues import unlink_queues
@@ -33,7 +35,7 @@ vehicles:
   vb: {pose: {static: [150, 0, 0]}}
 """
 """What most daemon tests' scenes start with: one acoustic channel, two vehicles 150 m apart (links follow)."""
-HANG_GUARD_S = 60.0
+HANG_GUARD_S = 90.0
 
 
 def quick_scene(name: str, a: str, b: str) -> str:
@@ -80,6 +82,70 @@ def in_background(loop) -> tuple[threading.Event, threading.Thread]:
     thread = threading.Thread(target=loop, args=(stop,), daemon=True)
     thread.start()
     return stop, thread
+
+
+class PluggablePty:
+    """A serial device on a pty at ``path`` (a symlink, as udev makes one) that a test unplugs and plugs
+    again; what the host writes is handed to :meth:`answer` on a thread of its own, and its answer
+    written back."""
+
+    def __init__(self, path: str):
+        self.path = path
+        self.master: int | None = None
+        self.lock = threading.Lock()
+        self.plug()
+        self.stop, self.thread = in_background(self._serve)
+
+    def plug(self) -> None:
+        master, slave = os.openpty()
+        tty.setraw(slave)
+        if os.path.lexists(self.path):
+            os.unlink(self.path)
+        os.symlink(os.ttyname(slave), self.path)
+        with self.lock:
+            self.master, self.slave = master, slave
+            self.plugged()
+
+    def plugged(self) -> None:
+        """A new device is on the line (a subclass starts its protocol state afresh here)."""
+
+    def unplug(self) -> None:
+        with self.lock:
+            os.unlink(self.path)
+            os.close(self.master)
+            os.close(self.slave)
+            self.master = None
+
+    def write(self, data: bytes) -> None:
+        with self.lock:
+            if self.master is not None:
+                os.write(self.master, data)
+
+    def answer(self, data: bytes) -> bytes:
+        """What the device answers to ``data`` from the host (nothing, here)."""
+        return b""
+
+    def _serve(self, stop: threading.Event) -> None:
+        while not stop.is_set():
+            with self.lock:  # held while the descriptor is used: unplug() must not close it meanwhile, or
+                master = self.master  # its number, reused by the test's next socket, would be read here
+                data = b""
+                if master is not None:
+                    try:
+                        ready, _, _ = select.select([master], [], [], 0.02)
+                        data = os.read(master, 4096) if ready else b""
+                    except (OSError, ValueError):
+                        data = b""
+                if data:
+                    reply = self.answer(data)
+                    if reply:
+                        os.write(master, reply)
+            if not data:
+                time.sleep(0.005)
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join()
 
 
 def free_port(kind: int = socket.SOCK_STREAM) -> int:
@@ -214,6 +280,16 @@ class Daemon:
 
     def trace_events(self) -> list[dict]:
         return [json.loads(line) for line in self.trace.read_text().splitlines()]
+
+    def trace_so_far(self) -> list[dict]:
+        """The trace of a daemon still running: whole lines only (the last may be half written)."""
+        events = []
+        for line in self.trace.read_text().splitlines():
+            try:
+                events.append(json.loads(line))
+            except ValueError:
+                pass
+        return events
 
     def stop(self) -> int:
         if self.process.poll() is None:

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import random
 import threading
-import time
 import uuid
 
 import pytest
@@ -27,6 +26,7 @@ from cyclonedds.core import SampleState, ViewState, InstanceState  # noqa: E402
 
 from hilgate.ros2.idl import message_class  # noqa: E402
 from hilgate.ros2.participant import Participant, qos  # noqa: E402
+from daemon_kit import wait_until
 
 DOMAIN = random.SystemRandom().randrange(0, 233)
 ANY = SampleState.Any | ViewState.Any | InstanceState.Any
@@ -43,17 +43,6 @@ def node() -> Participant:
 
 def namespace() -> str:
     return f"/t{uuid.uuid4().hex[:10]}"
-
-
-def wait_until(predicate, timeout: float = 60.0, what: str = "the condition"):
-    """A hang guard, not a timing bound: returns as soon as ``predicate()`` is true."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value:
-            return value
-        assert time.monotonic() < deadline, f"timed out waiting for {what}"
-        time.sleep(0.02)
 
 
 class Subscription:
@@ -80,7 +69,7 @@ class Subscription:
                     self.samples.append(cls.deserialize(data))
 
     def wait(self, count: int = 1, timeout: float = 60.0) -> list:
-        wait_until(lambda: len(self.samples) >= count, timeout, f"{count} samples of {self.type_name}")
+        wait_until(lambda: len(self.samples) >= count, f"{count} samples of {self.type_name}", timeout)
         with self.lock:
             return list(self.samples)
 

@@ -86,7 +86,7 @@ links:
 
 def three_modems(tmp_path, bitrate: int = 400) -> tuple[Daemon, list[str], list[int]]:
     """Links a (address 1), b (2), c (3, every frame to it lost by its error model), 150 m apart in a row."""
-    from at_client import free_port
+    from daemon_kit import free_port
 
     links = [unique("ea"), unique("eb"), unique("ec")]
     ports = [free_port() for _ in links]

@@ -10,8 +10,8 @@ way DUNE parses it.  The two modems are 150 m apart on a 1500 m/s channel: one-w
 
 from __future__ import annotations
 
-from at_client import DUNE_DELIVERED, DUNE_I1, DUNE_RECV, DUNE_RECVIM, AtClient, free_port, multipath, unsigned
-from daemon_kit import Daemon, unique
+from at_client import DUNE_DELIVERED, DUNE_I1, DUNE_RECV, DUNE_RECVIM, AtClient, multipath, unsigned
+from daemon_kit import Daemon, free_port, unique
 
 TAU_US = 100_000          # 150 m at 1500 m/s
 BITRATE = 1900            # models/evologics-s2cr-7-17.yaml

@@ -14,8 +14,8 @@ import tty
 
 import pytest
 
-from at_client import AtClient, free_port
-from daemon_kit import Daemon, hilgate, unique
+from at_client import AtClient
+from daemon_kit import Daemon, free_port, hilgate, unique
 from hilgate.drivers.emulators import MAX_TCP_CLIENTS
 from hilgate.scene import SceneError, load_scene_text
 from hilgate.scene.flow_spec import MAX_FRAME_BYTES

@@ -8,7 +8,6 @@ padding).  Times are asserted on the model's clock, from the trace, never on the
 runs at ``--speed`` so that the modem's one packet a second costs a quarter of a second here.
 """
 
-import time
 
 import pytest
 from hypothesis import given, settings
@@ -18,7 +17,7 @@ wlmodem = pytest.importorskip("wlmodem")
 from wlmodem import WlModem, WlUDPSocket  # noqa: E402
 from wlmodem import transport as wl_transport  # noqa: E402
 
-from daemon_kit import Daemon, unique  # noqa: E402
+from daemon_kit import SCENE_HEAD, Daemon, unique, wait_until  # noqa: E402
 from fuzzkit import examples  # noqa: E402
 from hilgate.client import Link  # noqa: E402
 from hilgate.drivers import m64_codec as codec  # noqa: E402
@@ -185,36 +184,13 @@ def test_a_wlmodem_datagram_crosses_two_emulated_m64s_both_ways(tmp_path):
         sockets = [sa, sb]
         message = b"a datagram from the surface, \x00 and \n inside"
         assert sa.send(message)
-        assert wait_for(lambda: sb.receive(), 60) == message
+        assert wait_until(lambda: sb.receive()) == message
         assert sb.send(b"and one from the ROV")
-        assert wait_for(lambda: sa.receive(), 60) == b"and one from the ROV"
+        assert wait_until(lambda: sa.receive()) == b"and one from the ROV"
     finally:
         for s in sockets:
             s.stop()
         daemon.close()
-
-
-def daemon_events(daemon):
-    """The trace so far (the recorder writes whole lines; a line still being written is left out)."""
-    import json
-    events = []
-    for line in daemon.trace.read_text().splitlines():
-        try:
-            events.append(json.loads(line))
-        except ValueError:
-            pass
-    return events
-
-
-def wait_for(probe, timeout):
-    """A hang guard: returns as soon as ``probe()`` gives something."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = probe()
-        if value is not None:
-            return value
-        time.sleep(0.02)
-    raise AssertionError(f"nothing within {timeout} s")
 
 
 def test_packets_the_model_loses_show_in_wcd_and_in_the_trace_and_channels_do_not_meet(tmp_path):
@@ -225,13 +201,13 @@ def test_packets_the_model_loses_show_in_wcd_and_in_the_trace_and_channels_do_no
         daemon.wait_for("READY=1")
         a, b = open_modems(tmp_path / "a", tmp_path / "b")
         assert a.cmd_configure("a", 3) and b.cmd_configure("b", 3)
-        wait_for(lambda: (d := b.cmd_get_diagnostic()) and d["pkt_loss_cnt"] >= 2 and d["pkt_cnt"] >= 2 or None, 60)
+        wait_until(lambda: (d := b.cmd_get_diagnostic()) and d["pkt_loss_cnt"] >= 2 and d["pkt_cnt"] >= 2 or None)
         # A moves to channel 5: B hears nothing of it any more (another band), so its figures stop once
         # what was on its way has arrived (the model's time, read from the live trace: 3 s after the move)
         assert a.cmd_configure("a", 5)
-        moved = wait_for(lambda: next((e["t"] for e in daemon_events(daemon) if e["ev"] == "band"
-                                       and e["link"] == ea and e["band_khz"] == [156.0, 187.0]), None), 60)
-        wait_for(lambda: any(e["t"] > moved + 3 for e in daemon_events(daemon)) or None, 60)
+        moved = wait_until(lambda: next((e["t"] for e in daemon.trace_so_far() if e["ev"] == "band"
+                                         and e["link"] == ea and e["band_khz"] == [156.0, 187.0]), None))
+        wait_until(lambda: any(e["t"] > moved + 3 for e in daemon.trace_so_far()) or None)
         final = b.cmd_get_diagnostic()
         close_modems(a, b)
         daemon.stop()
@@ -255,11 +231,7 @@ def driver_scene(tmp_path, da, ea, eb, packet, db=None):
     far = (f"  {db}: {{vehicle: vb, backend: m64, port: {pb}, role: b, modem_channel: 2, address: 2, packet: {packet},"
            f" gli: [socket]}}\n") if db else ""
     return f"""\
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles:
-  va: {{pose: {{static: [0, 0, 0]}}}}
-  vb: {{pose: {{static: [150, 0, 0]}}}}
-links:
+{SCENE_HEAD}links:
   {da}: {{vehicle: va, backend: m64, port: {pa}, role: a, modem_channel: 2, address: 1, packet: {packet}, gli: [socket],
          diagnostic_s: 2}}
 {far}  {ea}: {{vehicle: va, model: m64, address: 1, gli: [socket], emulate: {{protocol: m64, pty: {pa}}}}}
@@ -267,22 +239,12 @@ links:
 """
 
 
-def wait_up(daemon, links, timeout=60):
-    deadline = time.monotonic() + timeout
-    while True:
-        states = {l["id"]: l["state"] for l in daemon.status()["links"]}
-        if all(states[l] == "up" for l in links):
-            return
-        assert time.monotonic() < deadline, f"links not up: {states}\n{daemon.output()}"
-        time.sleep(0.05)
-
-
 def test_hilgate_drivers_carry_frames_application_to_application_through_emulated_m64s(tmp_path):
     da, db, ea, eb = unique("da"), unique("db"), unique("ea"), unique("eb")
     daemon = Daemon(tmp_path, driver_scene(tmp_path, da, ea, eb, "vl2b", db), [da, db, ea, eb], "--speed", str(SPEED))
     try:
         daemon.wait_for("READY=1")
-        wait_up(daemon, [da, db])
+        daemon.wait_up(da, db)
         with Link.open(da, runtime_dir=daemon.runtime) as la, Link.open(db, runtime_dir=daemon.runtime) as lb:
             la.send(b"hello, \x00\n* m64", dst=2)
             message = lb.recv(timeout=60)
@@ -290,7 +252,7 @@ def test_hilgate_drivers_carry_frames_application_to_application_through_emulate
             lb.send(b"back", dst=1)
             message = la.recv(timeout=60)
             assert message is not None and message.data == b"back"
-        wait_for(lambda: [e for e in daemon_events(daemon) if e["ev"] == "modem_stats" and e["link"] == db] or None, 60)
+        wait_until(lambda: [e for e in daemon.trace_so_far() if e["ev"] == "modem_stats" and e["link"] == db] or None)
         daemon.stop()
         events = daemon.trace_events()
         # the frame went as one WlUDPSocket datagram in 8-byte packets, one per slot of A, each reaching the
@@ -317,14 +279,14 @@ def test_a_wlmodem_datagram_application_and_a_dccomms_application_understand_eac
     sockets = []
     try:
         daemon.wait_for("READY=1")
-        wait_up(daemon, [da])
+        daemon.wait_up(da)
         (b,) = open_modems(tmp_path / "b")
         assert b.cmd_configure("b", 2)
         sb = WlUDPSocket(b)
         sockets.append(sb)
         with Link.open(da, runtime_dir=daemon.runtime) as la:
             la.send(b"from a dccomms application", dst=2)
-            assert wait_for(lambda: sb.receive(), 60) == b"from a dccomms application"
+            assert wait_until(lambda: sb.receive()) == b"from a dccomms application"
             assert sb.send(b"from a wlmodem application")
             message = la.recv(timeout=60)
             assert message is not None and message.data == b"from a wlmodem application"

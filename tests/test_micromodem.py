@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 
 pytest.importorskip("acomms")
 
-from daemon_kit import HERE, Daemon, unique  # noqa: E402
+from daemon_kit import SCENE_HEAD, HERE, Daemon, unique  # noqa: E402
 from fuzzkit import examples  # noqa: E402
 from hilgate.client import Link  # noqa: E402
 from hilgate.drivers.micromodem_codec import (RATES, BadSentence, HostCodec, ModemCodec, Sentence,  # noqa: E402
@@ -75,11 +75,7 @@ def test_rates_are_the_interface_guides_frames():
 
 def scene(tmp_path, ea, eb, error_b="0"):
     return f"""\
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles:
-  va: {{pose: {{static: [0, 0, 0]}}}}
-  vb: {{pose: {{static: [150, 0, 0]}}}}
-links:
+{SCENE_HEAD}links:
   {ea}: {{vehicle: va, model: micromodem, address: 1, gli: [socket], emulate: {{protocol: micromodem, pty: {tmp_path / 'a'}}}}}
   {eb}: {{vehicle: vb, model: micromodem, address: 2, gli: [socket], error: {{unit: packet, expr: "{error_b}"}},
          emulate: {{protocol: micromodem, pty: {tmp_path / 'b'}}}}}
@@ -176,11 +172,7 @@ def test_a_host_that_gives_no_data_gets_a_data_timeout_and_the_cycle_ends(tmp_pa
 def driver_scene(tmp_path, da, db, ea, eb, rate=1, ack=True, packet="vl2b"):
     pa, pb = tmp_path / "a", tmp_path / "b"
     return f"""\
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles:
-  va: {{pose: {{static: [0, 0, 0]}}}}
-  vb: {{pose: {{static: [150, 0, 0]}}}}
-links:
+{SCENE_HEAD}links:
   {da}: {{vehicle: va, backend: micromodem, port: {pa}, address: 1, rate: {rate}, ack: {str(ack).lower()}, packet: {packet},
          gli: [socket]}}
   {db}: {{vehicle: vb, backend: micromodem, port: {pb}, address: 2, rate: {rate}, packet: {packet}, gli: [socket]}}
@@ -189,22 +181,12 @@ links:
 """
 
 
-def wait_up(daemon, links, timeout=60):
-    deadline = time.monotonic() + timeout
-    while True:
-        states = {l["id"]: l["state"] for l in daemon.status()["links"]}
-        if all(states[l] == "up" for l in links):
-            return
-        assert time.monotonic() < deadline, f"links not up: {states}\n{daemon.output()}"
-        time.sleep(0.05)
-
-
 def test_hilgate_drivers_carry_frames_application_to_application_through_emulated_micromodems(tmp_path):
     da, db, ea, eb = unique("da"), unique("db"), unique("ea"), unique("eb")
     daemon = Daemon(tmp_path, driver_scene(tmp_path, da, db, ea, eb), [da, db, ea, eb], "--speed", str(SPEED))
     try:
         daemon.wait_for("READY=1")
-        wait_up(daemon, [da, db])
+        daemon.wait_up(da, db)
         sent = [b"short", b"x" * 150]  # one frame; three frames of rate 1 (155 bytes of vl2b on air)
         with Link.open(da, runtime_dir=daemon.runtime) as la, Link.open(db, runtime_dir=daemon.runtime) as lb:
             for payload in sent:
@@ -218,7 +200,7 @@ def test_hilgate_drivers_carry_frames_application_to_application_through_emulate
             with pytest.raises(Exception, match="do not fit a rate-1 packet of the Micro-Modem"):
                 la.recv(timeout=30)
         deadline = time.monotonic() + 60
-        while sum(e["ev"] == "delivered" for e in _events(daemon) if e.get("link") == da) < 2:
+        while sum(e["ev"] == "delivered" for e in daemon.trace_so_far() if e.get("link") == da) < 2:
             assert time.monotonic() < deadline, "acknowledgements never traced"
             time.sleep(0.05)
         daemon.stop()
@@ -237,11 +219,3 @@ def test_hilgate_drivers_carry_frames_application_to_application_through_emulate
         daemon.close()
 
 
-def _events(daemon):
-    events = []
-    for line in daemon.trace.read_text().splitlines():
-        try:
-            events.append(json.loads(line))
-        except ValueError:
-            pass
-    return events

@@ -7,15 +7,11 @@ again (``wcs`` / ``$CCCFG,SRC``) and comes back up; frames sent while it is down
 frame the modem sends amid the noise reaches the application whole.
 """
 
-import os
-import select
-import threading
 import time
-import tty
 
 import pytest
 
-from daemon_kit import Daemon, unique
+from daemon_kit import Daemon, PluggablePty, unique
 from hilgate.client import Link
 from hilgate.drivers import m64_codec, micromodem_codec
 from hilgate.drivers.micromodem_codec import sentence
@@ -23,63 +19,18 @@ from hilgate.drivers.micromodem_codec import sentence
 NOISE = b"\x00\xff\xfe garbage \x1b[0m\r\n\r\n"
 
 
-class FakeModem:
+class FakeModem(PluggablePty):
     """A modem on a pty at ``path``, answering with ``answer(bytes) -> bytes`` after some noise."""
 
     def __init__(self, path: str, answer):
-        self.path = path
-        self.answer = answer
-        self.master = None
-        self.lock = threading.Lock()
-        self.stop = threading.Event()
         self.heard: list[bytes] = []
-        self.plug()
-        self.thread = threading.Thread(target=self._serve, daemon=True)
-        self.thread.start()
+        self._answer = answer
+        super().__init__(path)
 
-    def plug(self) -> None:
-        master, slave = os.openpty()
-        tty.setraw(slave)
-        if os.path.lexists(self.path):
-            os.unlink(self.path)
-        os.symlink(os.ttyname(slave), self.path)
-        with self.lock:
-            self.master, self.slave = master, slave
-
-    def unplug(self) -> None:
-        with self.lock:
-            os.unlink(self.path)
-            os.close(self.master)
-            os.close(self.slave)
-            self.master = None
-
-    def write(self, data: bytes) -> None:
-        with self.lock:
-            if self.master is not None:
-                os.write(self.master, data)
-
-    def _serve(self) -> None:
-        while not self.stop.is_set():
-            with self.lock:
-                master = self.master
-                data = b""
-                if master is not None:
-                    try:
-                        ready, _, _ = select.select([master], [], [], 0.02)
-                        data = os.read(master, 4096) if ready else b""
-                    except (OSError, ValueError):
-                        data = b""
-                if data:
-                    self.heard.append(data)
-                    reply = self.answer(data)
-                    if reply:
-                        os.write(master, NOISE + reply)
-            if not data:
-                time.sleep(0.005)
-
-    def close(self) -> None:
-        self.stop.set()
-        self.thread.join()
+    def answer(self, data: bytes) -> bytes:
+        self.heard.append(data)
+        reply = self._answer(data)
+        return NOISE + reply if reply else b""
 
 
 def m64_answers():

@@ -73,9 +73,10 @@ import threading  # noqa: E402
 import time  # noqa: E402
 import uuid  # noqa: E402
 
+from daemon_kit import HANG_GUARD_S, free_port  # noqa: E402  (every wait: a hang guard)
+
 README = REPO / "README.md"
 QUICK_START = "## Quick start"
-HANG_GUARD_S = 90.0  # every wait returns as soon as its condition holds; this only stops a hang
 DEMO_LINKS = ("bluerov_rf", "rov2_rf", "bluerov_ac", "rov2_ac", "auv_ac")
 TWO_HOST_LINKS = ("rov_rf", "rov2_rf", "rov_ac", "boat_ac")
 
@@ -127,12 +128,6 @@ def shows(actual: str, expected: list[str]) -> bool:
             return False
         position += 1
     return True
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 class Walk:

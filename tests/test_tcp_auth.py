@@ -21,7 +21,7 @@ import textwrap
 
 import pytest
 
-from daemon_kit import Daemon, quick_scene, unique
+from daemon_kit import Daemon, free_port, quick_scene, unique
 from hilgate.client import GliError, Link
 from hilgate.gli import wire
 from hilgate.gli.session import AuthError, Hello, Session
@@ -33,12 +33,6 @@ GROUP = 54323
 
 def scene(a: str, b: str) -> str:
     return quick_scene("tcp-auth", a, b)
-
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 # -- the conversation, without sockets -------------------------------------------------------------------

@@ -6,73 +6,31 @@ back, it makes a new pty at the same path.  The driver must go down, reopen with
 up with no restart, keep (bounded) what was queued meanwhile, and the other link must not notice.
 """
 
-import os
-import select
-import threading
 import time
-import tty
 
-from daemon_kit import Daemon, unique
+from daemon_kit import Daemon, PluggablePty, unique
 from hilgate.client import Link
 from hilgate.drivers.evologics_codec import Command, ModemCodec
 
 
-class FakeModem:
+class FakeModem(PluggablePty):
     """An EvoLogics modem that says OK to everything, on a pty at ``path``; records SENDIMs."""
 
     def __init__(self, path: str):
-        self.path = path
         self.sent: list[bytes] = []
-        self.master = None
-        self.stop = threading.Event()
-        self.lock = threading.Lock()
-        self.thread = threading.Thread(target=self._serve, daemon=True)
-        self.plug()
-        self.thread.start()
+        super().__init__(path)
 
-    def plug(self) -> None:
-        master, slave = os.openpty()
-        tty.setraw(slave)
-        if os.path.lexists(self.path):
-            os.unlink(self.path)
-        os.symlink(os.ttyname(slave), self.path)
-        with self.lock:
-            self.master, self.slave, self.codec = master, slave, ModemCodec()
+    def plugged(self) -> None:
+        self.codec = ModemCodec()
 
-    def unplug(self) -> None:
-        with self.lock:
-            os.unlink(self.path)
-            os.close(self.master)
-            os.close(self.slave)
-            self.master = None
-
-    def _serve(self) -> None:
-        while not self.stop.is_set():
-            with self.lock:  # held while the descriptor is used: unplug() must not close it meanwhile, or
-                master = self.master  # its number, reused by the test's next socket, would be read here
-                if master is None:
-                    data = b""
-                else:
-                    try:
-                        ready, _, _ = select.select([master], [], [], 0.02)
-                        data = os.read(master, 4096) if ready else b""
-                    except (OSError, ValueError):
-                        data = b""
-            if not data:
-                time.sleep(0.005)
-                continue
-            with self.lock:
-                if self.master != master:
-                    continue
-                for event in self.codec.receive_data(data):
-                    if isinstance(event, Command):
-                        if event.name == "*SENDIM":
-                            self.sent.append(event.payload)
-                        os.write(master, self.codec.reply(event, "OK"))
-
-    def close(self) -> None:
-        self.stop.set()
-        self.thread.join()
+    def answer(self, data: bytes) -> bytes:
+        reply = b""
+        for event in self.codec.receive_data(data):
+            if isinstance(event, Command):
+                if event.name == "*SENDIM":
+                    self.sent.append(event.payload)
+                reply += self.codec.reply(event, "OK")
+        return reply
 
 
 def test_unplug_and_replug_twenty_times_while_another_link_carries_traffic(tmp_path):

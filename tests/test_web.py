@@ -18,7 +18,6 @@ import signal
 import socket
 import subprocess
 import sys
-import time
 import uuid
 from collections import Counter
 from pathlib import Path
@@ -26,7 +25,7 @@ from pathlib import Path
 import pytest
 
 from browser_kit import HANG_GUARD_S, browser  # noqa: F401  (the fixture)
-from daemon_kit import Daemon, unique
+from daemon_kit import Daemon, hilgate, unique
 from hilgate.client import Link
 from hilgate.gli.token import proof
 from hilgate.report.tracedata import load_trace
@@ -36,22 +35,6 @@ from hilgate.web.replay import Replay
 REPO = Path(__file__).resolve().parent.parent
 FIGURE = REPO / "docs" / "figures" / "web-live.png"
 pytest.importorskip("tornado", reason="the web view needs tornado: pip install -e '.[test]'")
-
-
-def hilgate(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "hilgate", *args], capture_output=True, text=True, timeout=timeout)
-
-
-def wait_until(predicate, what: str, alive=None, timeout: float = HANG_GUARD_S):
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value:
-            return value
-        if alive is not None:
-            alive()
-        assert time.monotonic() < deadline, f"{what} not within {timeout:.0f} s (a hang guard)"
-        time.sleep(0.05)
 
 
 def page_address(daemon: Daemon) -> str:
