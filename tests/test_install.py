@@ -162,39 +162,43 @@ def test_systemd_analyze_verifies_the_installed_unit(installed, tmp_path):
     assert result.returncode == 0 and complaints == [], result.stdout + result.stderr
 
 
-def test_reinstall_keeps_changed_configuration_and_uninstall_leaves_it_clean(tmp_path):
-    before = system_state()
-    root = tmp_path / "destdir"
-    fast = "PIP_ARGS=--no-deps"  # this test is about the files; the full venv is the fixture's
-    make("install", f"DESTDIR={root}", fast, umask=0o077)  # root's umask may be strict: the daemon must read
-    for path in [root / UNIT, root / SCENE, *(root / "opt/hilgate/lib").rglob("hilgate/*.py")]:
-        assert stat.S_IMODE(path.stat().st_mode) & 0o044 == 0o044, path
-    (root / SCENE).write_text((root / SCENE).read_text() + "# our lab\n")
-    (root / ENV).write_text((root / ENV).read_text() + "HILGATE_LOG_LEVEL=debug\n")
-    unchanged_logrotate = (root / LOGROTATE).read_text()
+class TestReinstall:
+    """(A class of its own: `make test` hands test files and classes to its workers whole, and this test
+    takes a minute and a half: beside the module's installed venv, not after it.)"""
 
-    again = make("install", f"DESTDIR={root}", fast).stdout
-    assert "kept /etc/hilgate/scene.yaml" in again
-    assert (root / SCENE).read_text().endswith("# our lab\n")  # never overwritten
-    assert "kept /etc/hilgate/hilgate.env (changed since it was installed)" in again
-    assert (root / ENV).read_text().endswith("HILGATE_LOG_LEVEL=debug\n")
-    assert (root / (ENV + ".new")).read_text() == (REPO / "systemd" / "hilgate.env").read_text()
-    assert (root / LOGROTATE).read_text() == unchanged_logrotate
+    def test_reinstall_keeps_changed_configuration_and_uninstall_leaves_it_clean(self, tmp_path):
+        before = system_state()
+        root = tmp_path / "destdir"
+        fast = "PIP_ARGS=--no-deps"  # this test is about the files; the full venv is the fixture's
+        make("install", f"DESTDIR={root}", fast, umask=0o077)  # root's umask may be strict: the daemon must read
+        for path in [root / UNIT, root / SCENE, *(root / "opt/hilgate/lib").rglob("hilgate/*.py")]:
+            assert stat.S_IMODE(path.stat().st_mode) & 0o044 == 0o044, path
+        (root / SCENE).write_text((root / SCENE).read_text() + "# our lab\n")
+        (root / ENV).write_text((root / ENV).read_text() + "HILGATE_LOG_LEVEL=debug\n")
+        unchanged_logrotate = (root / LOGROTATE).read_text()
 
-    gone = make("uninstall", f"DESTDIR={root}").stdout
-    assert "kept /etc/hilgate/scene.yaml: changed since it was installed" in gone
-    assert "kept /etc/hilgate/hilgate.env: changed since it was installed" in gone
-    assert files_under(root) == sorted([ENV, SCENE])
+        again = make("install", f"DESTDIR={root}", fast).stdout
+        assert "kept /etc/hilgate/scene.yaml" in again
+        assert (root / SCENE).read_text().endswith("# our lab\n")  # never overwritten
+        assert "kept /etc/hilgate/hilgate.env (changed since it was installed)" in again
+        assert (root / ENV).read_text().endswith("HILGATE_LOG_LEVEL=debug\n")
+        assert (root / (ENV + ".new")).read_text() == (REPO / "systemd" / "hilgate.env").read_text()
+        assert (root / LOGROTATE).read_text() == unchanged_logrotate
 
-    make("uninstall", f"DESTDIR={root}", "PURGE=1")
-    assert not root.exists() or list(root.iterdir()) == []
-    # a scene that was there before install is the user's: never replaced, never removed
-    (root / "etc/hilgate").mkdir(parents=True)
-    (root / SCENE).write_bytes((REPO / "scenes" / "demo.yaml").read_bytes())
-    make("install", f"DESTDIR={root}", fast)
-    make("uninstall", f"DESTDIR={root}")
-    assert files_under(root) == [SCENE]
-    assert system_state() == before
+        gone = make("uninstall", f"DESTDIR={root}").stdout
+        assert "kept /etc/hilgate/scene.yaml: changed since it was installed" in gone
+        assert "kept /etc/hilgate/hilgate.env: changed since it was installed" in gone
+        assert files_under(root) == sorted([ENV, SCENE])
+
+        make("uninstall", f"DESTDIR={root}", "PURGE=1")
+        assert not root.exists() or list(root.iterdir()) == []
+        # a scene that was there before install is the user's: never replaced, never removed
+        (root / "etc/hilgate").mkdir(parents=True)
+        (root / SCENE).write_bytes((REPO / "scenes" / "demo.yaml").read_bytes())
+        make("install", f"DESTDIR={root}", fast)
+        make("uninstall", f"DESTDIR={root}")
+        assert files_under(root) == [SCENE]
+        assert system_state() == before
 
 
 # -- pyproject.toml (item 11) ------------------------------------------------------------------------
@@ -293,51 +297,55 @@ exit 0
 """
 
 
-def test_root_steps_on_a_real_system(tmp_path):
-    """Without DESTDIR, as root and under systemd: the account, dialout and systemctl steps, run against
-    stub commands (id says root) and paths under tmp_path, so the test needs no root and changes nothing."""
-    before = system_state()
-    stubs, log = tmp_path / "stubs", tmp_path / "commands.log"
-    stubs.mkdir()
-    for name in ("id", "getent", "groupadd", "useradd", "usermod", "userdel", "groupdel", "systemctl"):
-        (stubs / name).write_text(STUB.format(log=log, accounts=tmp_path / "accounts"))
-        (stubs / name).chmod(0o755)
-    (tmp_path / "systemd-running").mkdir()
-    places = [f"PREFIX={tmp_path}/opt/hilgate", f"SYSCONFDIR={tmp_path}/etc", f"UNITDIR={tmp_path}/units",
-              f"LOGROTATEDIR={tmp_path}/logrotate.d", f"BINDIR={tmp_path}/bin", "PIP_ARGS=--no-deps"]
-    env = dict(os.environ, PATH=f"{stubs}:{os.environ['PATH']}", HILGATE_SYSTEMD_RUN_DIR=str(tmp_path / "systemd-running"))
+class TestRootSteps:
+    """(A class of its own: `make test` hands test files and classes to its workers whole, and this test
+    takes a minute and a half: beside the module's installed venv, not after it.)"""
 
-    def run(*args: str) -> str:
-        result = subprocess.run(["make", "--no-print-directory", "-C", str(REPO), *args, *places,
-                                 f"PYTHON={sys.executable}"], capture_output=True, text=True, env=env)
-        assert result.returncode == 0, result.stdout + result.stderr
-        return result.stdout
+    def test_root_steps_on_a_real_system(self, tmp_path):
+        """Without DESTDIR, as root and under systemd: the account, dialout and systemctl steps, run against
+        stub commands (id says root) and paths under tmp_path, so the test needs no root and changes nothing."""
+        before = system_state()
+        stubs, log = tmp_path / "stubs", tmp_path / "commands.log"
+        stubs.mkdir()
+        for name in ("id", "getent", "groupadd", "useradd", "usermod", "userdel", "groupdel", "systemctl"):
+            (stubs / name).write_text(STUB.format(log=log, accounts=tmp_path / "accounts"))
+            (stubs / name).chmod(0o755)
+        (tmp_path / "systemd-running").mkdir()
+        places = [f"PREFIX={tmp_path}/opt/hilgate", f"SYSCONFDIR={tmp_path}/etc", f"UNITDIR={tmp_path}/units",
+                  f"LOGROTATEDIR={tmp_path}/logrotate.d", f"BINDIR={tmp_path}/bin", "PIP_ARGS=--no-deps"]
+        env = dict(os.environ, PATH=f"{stubs}:{os.environ['PATH']}", HILGATE_SYSTEMD_RUN_DIR=str(tmp_path / "systemd-running"))
 
-    output = run("install")
-    commands = log.read_text().splitlines()
-    assert "groupadd --system hilgate" in commands
-    assert ("useradd --system --gid hilgate --home-dir /var/lib/hilgate --no-create-home --shell /usr/sbin/nologin "
-            "--comment hilgate daemon hilgate") in commands
-    assert "usermod -a -G dialout hilgate" in commands
-    assert "systemctl daemon-reload" in commands and "systemctl enable --now hilgate" in output
-    unit = unit_settings(tmp_path / "units" / "hilgate.service")  # the chosen paths, consistently
-    assert unit["ExecStart"][0].startswith(f"{tmp_path}/opt/hilgate/bin/hilgate run ")
-    assert unit["EnvironmentFile"] == [f"-{tmp_path}/etc/hilgate/hilgate.env"]
-    assert f"HILGATE_SCENE={tmp_path}/etc/hilgate/scene.yaml" in (tmp_path / "etc/hilgate/hilgate.env").read_text()
+        def run(*args: str) -> str:
+            result = subprocess.run(["make", "--no-print-directory", "-C", str(REPO), *args, *places,
+                                     f"PYTHON={sys.executable}"], capture_output=True, text=True, env=env)
+            assert result.returncode == 0, result.stdout + result.stderr
+            return result.stdout
 
-    log.unlink()
-    output = run("uninstall")
-    commands = log.read_text().splitlines()
-    assert commands.index("systemctl disable --now hilgate") < commands.index("systemctl daemon-reload")
-    assert not any(c.startswith(("userdel", "groupdel")) for c in commands)  # kept without PURGE, and said
-    assert "kept the hilgate user and group" in output
-    assert files_under(tmp_path / "etc") == [] and not (tmp_path / "opt/hilgate").exists()
-    assert not (tmp_path / "units/hilgate.service").exists() and not (tmp_path / "bin/hilgate").exists()
+        output = run("install")
+        commands = log.read_text().splitlines()
+        assert "groupadd --system hilgate" in commands
+        assert ("useradd --system --gid hilgate --home-dir /var/lib/hilgate --no-create-home --shell /usr/sbin/nologin "
+                "--comment hilgate daemon hilgate") in commands
+        assert "usermod -a -G dialout hilgate" in commands
+        assert "systemctl daemon-reload" in commands and "systemctl enable --now hilgate" in output
+        unit = unit_settings(tmp_path / "units" / "hilgate.service")  # the chosen paths, consistently
+        assert unit["ExecStart"][0].startswith(f"{tmp_path}/opt/hilgate/bin/hilgate run ")
+        assert unit["EnvironmentFile"] == [f"-{tmp_path}/etc/hilgate/hilgate.env"]
+        assert f"HILGATE_SCENE={tmp_path}/etc/hilgate/scene.yaml" in (tmp_path / "etc/hilgate/hilgate.env").read_text()
 
-    log.unlink()
-    run("install")  # the accounts exist now: not created again
-    assert not any(c.startswith(("useradd", "groupadd")) for c in log.read_text().splitlines())
-    run("uninstall", "PURGE=1")
-    commands = log.read_text().splitlines()
-    assert "userdel hilgate" in commands and "groupdel hilgate" in commands
-    assert system_state() == before
+        log.unlink()
+        output = run("uninstall")
+        commands = log.read_text().splitlines()
+        assert commands.index("systemctl disable --now hilgate") < commands.index("systemctl daemon-reload")
+        assert not any(c.startswith(("userdel", "groupdel")) for c in commands)  # kept without PURGE, and said
+        assert "kept the hilgate user and group" in output
+        assert files_under(tmp_path / "etc") == [] and not (tmp_path / "opt/hilgate").exists()
+        assert not (tmp_path / "units/hilgate.service").exists() and not (tmp_path / "bin/hilgate").exists()
+
+        log.unlink()
+        run("install")  # the accounts exist now: not created again
+        assert not any(c.startswith(("useradd", "groupadd")) for c in log.read_text().splitlines())
+        run("uninstall", "PURGE=1")
+        commands = log.read_text().splitlines()
+        assert "userdel hilgate" in commands and "groupdel hilgate" in commands
+        assert system_state() == before
