@@ -9,12 +9,9 @@ Phase 3: simulated again.  The emulated modem the driver talks to exists only in
 plugged in): an M64 of role A transmits every second, and would share the channel with the simulated links.
 """
 
-import json
-import time
-
 import pytest
 
-from daemon_kit import Daemon, unique
+from daemon_kit import Daemon, unique, wait_until
 from hilgate.client import Link
 
 SPEED = 4
@@ -45,23 +42,6 @@ links:
 """ + (f"  {ea}: {{vehicle: va, model: {modem}, address: 3, gli: [socket], {mine}}}\n" if real else "")
 
 
-def live_events(daemon):
-    events = []
-    for line in daemon.trace.read_text().splitlines():
-        try:
-            events.append(json.loads(line))
-        except ValueError:
-            pass
-    return events
-
-
-def wait_state(daemon, link, state, timeout=60):
-    deadline = time.monotonic() + timeout
-    while daemon.link_status(link)["state"] != state:
-        assert time.monotonic() < deadline, f"{link} never {state}\n{daemon.output()}"
-        time.sleep(0.05)
-
-
 @pytest.mark.parametrize("modem", ["m64", "micromodem"])
 def test_a_link_moves_between_simulated_and_real_modem_with_the_application_untouched(tmp_path, modem):
     ap, far, ea = unique("ap"), unique("far"), unique("ea")
@@ -73,7 +53,7 @@ def test_a_link_moves_between_simulated_and_real_modem_with_the_application_unto
             message = lf.recv(timeout=60)
             assert message is not None and message.data == b"simulated"
             daemon.reload(scene(tmp_path, ap, far, ea, modem, real=True))
-            wait_state(daemon, ap, "up")  # the driver has configured the emulated modem on the pty
+            daemon.wait_up(ap)  # the driver has configured the emulated modem on the pty
             la.send(b"through the real modem's driver", dst=2)
             message = lf.recv(timeout=60)
             assert message is not None and message.data == b"through the real modem's driver"
@@ -81,13 +61,9 @@ def test_a_link_moves_between_simulated_and_real_modem_with_the_application_unto
             # what the removed emulated modem had on the air finishes as the physics says: wait (in model time,
             # from the live trace: the pose samples go on) until it has, or the next frame meets it
             # (the trace is flushed every half second: wait for the second reload's own line, not the first's)
-            deadline = time.monotonic() + 60
-            while len(reloads := [e["t"] for e in live_events(daemon) if e["ev"] == "reload"]) < 2:
-                assert time.monotonic() < deadline, "the second reload never reached the trace"
-                time.sleep(0.05)
-            while not any(e["t"] > reloads[-1] + 3 for e in live_events(daemon)):
-                assert time.monotonic() < deadline, "the model's clock stood still"
-                time.sleep(0.05)
+            reloads = wait_until(lambda: (lambda r: r if len(r) >= 2 else None)(
+                [e["t"] for e in daemon.trace_so_far() if e["ev"] == "reload"]), "the second reload in the trace")
+            wait_until(lambda: any(e["t"] > reloads[-1] + 3 for e in daemon.trace_so_far()), "the model's clock")
             la.send(b"simulated again", dst=2)
             message = lf.recv(timeout=60)
             assert message is not None and message.data == b"simulated again"
