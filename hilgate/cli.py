@@ -858,9 +858,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"hilgate: {exc}", file=sys.stderr)
         return 1
     except Exception as exc:  # a client tool's error (GliError, …): one line, no traceback
+        from .channel.runner import BellhopError
         from .gli.client import GliError
 
-        if isinstance(exc, GliError):
+        if isinstance(exc, (GliError, BellhopError)):
             print(f"hilgate: {exc}", file=sys.stderr)
             return 1
         raise

@@ -33,7 +33,7 @@ if TYPE_CHECKING:
     from .path import PathEnd
     from .trajectories import Vec3
 
-__all__ = ["Fields", "BellhopChannel", "BellhopPath", "Reception", "TL_CAP"]
+__all__ = ["Fields", "BellhopChannel", "BellhopPath", "Reception", "TL_CAP", "path_frequency_hz"]
 
 TL_CAP = 250.0
 """Transmission loss (dB) where BELLHOP finds no sound (a shadow, a surface node): nothing decodes."""
@@ -261,18 +261,7 @@ class BellhopChannel:
         return min(self.fields, key=lambda f: abs(math.log(f.frequency_hz / hz)))
 
     def frequency_of(self, sender: "PathEnd", receiver: "PathEnd") -> float:
-        """The frequency a path is looked up at: the centre of the sender's band inside the receiver's
-        (where absorption is computed too), else of the sender's band, else the water's default."""
-        tx, rx = front_of(sender), front_of(receiver)
-        if tx is not None and rx is not None:
-            overlap = rx.overlap_khz(tx)
-            if overlap is not None:
-                return (overlap[0] + overlap[1]) / 2.0 * 1000.0
-        if tx is not None:
-            return tx.centre_khz * 1000.0
-        if rx is not None:
-            return rx.centre_khz * 1000.0
-        return self.water.frequency_khz * 1000.0
+        return path_frequency_hz(front_of(sender), front_of(receiver), self.water.frequency_khz * 1000.0)
 
     def delay(self, d: float, a: "Vec3 | None" = None, b: "Vec3 | None" = None) -> float:
         """The first arrival's delay between ``a`` and ``b`` at the water's default frequency; without
@@ -292,6 +281,21 @@ class BellhopChannel:
         limit = _tolerated_spread(receiver)
         return BoundPath(BellhopPath(fields, inner, undecodable, limit, self.water.surface_z_m), bound.refused,
                          bound.interferes)
+
+
+def path_frequency_hz(tx: Any, rx: Any, default_hz: float) -> float:
+    """The frequency a path is looked up at, from its ends' front ends (``physical.Acoustic`` or None):
+    the centre of the sender's band inside the receiver's (where absorption is computed too), else
+    of the sender's band, else of the receiver's, else ``default_hz``."""
+    if tx is not None and rx is not None:
+        overlap = rx.overlap_khz(tx)
+        if overlap is not None:
+            return (overlap[0] + overlap[1]) / 2.0 * 1000.0
+    if tx is not None:
+        return tx.centre_khz * 1000.0
+    if rx is not None:
+        return rx.centre_khz * 1000.0
+    return default_hz
 
 
 def _tolerated_spread(receiver: "PathEnd") -> float | None:

@@ -92,7 +92,7 @@ class Water:
     source_depths: int = 11
     arrival_ranges: int = 101      # the arrivals' grid (delay and spread vary slowly: a coarser one)
     arrival_depths: int = 26
-    beams: int = 0                 # 0: BELLHOP chooses
+    beams: int = 1001              # the fan's beams (0: BELLHOP chooses; in shallow water it chooses too many)
     run: str = "incoherent"
     threshold_db: float = 20.0
     frequency_khz: float = 10.0    # for senders whose modem has no acoustic front end
