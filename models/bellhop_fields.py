@@ -13,9 +13,12 @@ then asks :meth:`BellhopPath.at` with the ends' positions for a :class:`Receptio
 there) that is the arrival's loss model: received level = SL − TL(range, source depth, receiver
 depth), into the physical model's SNR → BER → PER chain.  A static pair asks once.
 
-Outside the grid: depths are clamped to it; nearer than its first range, TL falls back spherically
-to 1 m and the delay is the slant distance at the mean sound speed; beyond its last range, TL goes on
-with 15·log r and Thorp's absorption and the delay at the mean speed.  A receiver in a shadow (no
+What is interpolated is the part the straight line does not explain: TL − 20·log10 R and the delay
+− R/c̄ (R the slant distance, c̄ the mean sound speed), which stay smooth where the field bends sharply
+near the source's depth at short range; the lookup adds the straight line back.  Outside the grid:
+depths are clamped to it; nearer than its first range the residual of the first range is used (TL
+then falls spherically to 1 m, the delay to zero); beyond its last range TL goes on with 15·log r and
+Thorp's absorption and the delay at the mean speed.  A receiver in a shadow (no
 arrival within the grid) has TL :data:`TL_CAP` and the straight-line delay.
 """
 
@@ -23,6 +26,8 @@ from __future__ import annotations
 
 import math
 from typing import TYPE_CHECKING, Any, Sequence
+
+import numpy as np
 
 from .acoustics import db_to_linear, thorp_db_per_km
 from .path import BoundPath, Undecodable, bind_path, front_of
@@ -84,13 +89,24 @@ class Fields:
         self.ranges = _Axis(ranges)
         self.a_depths = _Axis(depths if arrival_depths is None else arrival_depths)
         self.a_ranges = _Axis(ranges if arrival_ranges is None else arrival_ranges)
-        self.tl = _flat(tl, (self.sources.n, self.depths.n, self.ranges.n), "tl")
-        self.first = _flat(first, (self.sources.n, self.a_depths.n, self.a_ranges.n), "first")
-        self.spread = _flat(spread, (self.sources.n, self.a_depths.n, self.a_ranges.n), "spread")
         self.mean_speed = float(mean_speed_mps)
+        # what is interpolated is what the straight line does not explain (TL − 20·log10 R, delay − R/c,
+        # R the slant distance): smooth where the field itself bends sharply (near the source's depth)
+        tl = np.asarray(tl, dtype=np.float64)
+        first = np.asarray(first, dtype=np.float64)
+        self.tl = _flat(tl - 20.0 * np.log10(np.maximum(_slant(sources, depths, ranges), 1.0)),
+                        (self.sources.n, self.depths.n, self.ranges.n), "tl")
+        self.first = _flat(first - _slant(sources, self.a_depths_values(arrival_depths, depths),
+                                          self.a_depths_values(arrival_ranges, ranges)) / self.mean_speed,
+                           (self.sources.n, self.a_depths.n, self.a_ranges.n), "first")
+        self.spread = _flat(spread, (self.sources.n, self.a_depths.n, self.a_ranges.n), "spread")
         self.alpha_db_per_m = thorp_db_per_km(self.frequency_hz / 1000.0) / 1000.0
         self._tl_strides = (self.depths.n * self.ranges.n, self.ranges.n)
         self._a_strides = (self.a_depths.n * self.a_ranges.n, self.a_ranges.n)
+
+    @staticmethod
+    def a_depths_values(own: Sequence[float] | None, shared: Sequence[float]) -> Sequence[float]:
+        return shared if own is None else own
 
     def _lookup(self, grid: list[float], strides: tuple[int, int], depths: _Axis, ranges: _Axis,
                 zs: float, zr: float, r: float) -> float:
@@ -117,31 +133,36 @@ class Fields:
         """Transmission loss (dB) at horizontal range ``r`` from a source at depth ``zs`` to a receiver
         at depth ``zr`` (metres)."""
         ranges = self.ranges
-        if r < ranges.x0:
-            near = self._lookup(self.tl, self._tl_strides, self.depths, ranges, zs, zr, ranges.x0)
-            slant0 = math.hypot(ranges.x0, zr - zs)
-            slant = max(math.hypot(r, zr - zs), 1.0)
-            return max(near - 20.0 * math.log10(slant0 / slant), 0.0)
+        slant = math.hypot(r, zr - zs)
+        spherical = 20.0 * math.log10(slant) if slant > 1.0 else 0.0
         if r > ranges.last:
             edge = self._lookup(self.tl, self._tl_strides, self.depths, ranges, zs, zr, ranges.last)
+            edge += 20.0 * math.log10(max(math.hypot(ranges.last, zr - zs), 1.0))
             return min(edge + 15.0 * math.log10(r / ranges.last) + self.alpha_db_per_m * (r - ranges.last), TL_CAP)
-        return self._lookup(self.tl, self._tl_strides, self.depths, ranges, zs, zr, r)
+        residual = self._lookup(self.tl, self._tl_strides, self.depths, ranges, zs, zr, r)
+        return min(max(residual + spherical, 0.0), TL_CAP)
 
     def delay_s(self, r: float, zs: float, zr: float) -> float:
         """The first arrival's delay (s) at (``r``, ``zs``, ``zr``)."""
         ranges = self.a_ranges
-        if r < ranges.x0:
-            return math.hypot(r, zr - zs) / self.mean_speed
+        straight = math.hypot(r, zr - zs) / self.mean_speed
         if r > ranges.last:
             edge = self._lookup(self.first, self._a_strides, self.a_depths, ranges, zs, zr, ranges.last)
-            return edge + (r - ranges.last) / self.mean_speed
-        return self._lookup(self.first, self._a_strides, self.a_depths, ranges, zs, zr, r)
+            return edge + math.hypot(ranges.last, zr - zs) / self.mean_speed + (r - ranges.last) / self.mean_speed
+        return straight + self._lookup(self.first, self._a_strides, self.a_depths, ranges, zs, zr, r)
 
     def spread_s(self, r: float, zs: float, zr: float) -> float:
         """The RMS delay spread (s) of the arrivals that count there (the edge value beyond the grid)."""
         ranges = self.a_ranges
         return self._lookup(self.spread, self._a_strides, self.a_depths, ranges, zs, zr,
                             min(max(r, ranges.x0), ranges.last))
+
+
+def _slant(sources: Sequence[float], depths: Sequence[float], ranges: Sequence[float]) -> "np.ndarray":
+    zs = np.asarray(sources, dtype=np.float64)[:, None, None]
+    zr = np.asarray(depths, dtype=np.float64)[None, :, None]
+    r = np.asarray(ranges, dtype=np.float64)[None, None, :]
+    return np.hypot(r, zr - zs)
 
 
 def _flat(values: Any, shape: tuple[int, int, int], name: str) -> list[float]:

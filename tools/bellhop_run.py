@@ -50,6 +50,7 @@ def main() -> int:
         arrivals = result.arrivals
         if arrivals is not None and len(arrivals.amplitude):
             report.update(receiver_offset=arrivals.receiver_offset.tolist(),
+                          receiver_ranges=arrivals.ranges_m.tolist(), receiver_depths=arrivals.depths_m.tolist(),
                           arrival_offset=arrivals.arrival_offset.tolist(),
                           amplitude=arrivals.amplitude.tolist(), travel_time_s=arrivals.travel_time_s.tolist(),
                           phase_radians=arrivals.phase_radians.tolist(),
