@@ -84,13 +84,16 @@ install uninstall:
 	sh systemd/install.sh $@
 
 # Every benchmark once (a few minutes each on a loaded 2-core machine); their output goes to bench.out
-# and from there into docs/performance.md. NS3_PYTHON=PATH (a Python with the ns3 wheel)
-# runs ns-3 UAN alongside the ALOHA ring; without it ns-3 is "not run".
-NS3_PYTHON ?=
+# and from there into docs/performance.md (all of it) and docs/compiled-hot-path.md (the pass and the round
+# trips). NS3_PYTHON=PATH (a Python with the ns3 wheel; .venv-ns3/bin/python when it exists, see
+# docs/performance.md) runs ns-3 UAN alongside the ALOHA ring and its real-time scheduler alongside the
+# lateness benchmark; without it ns-3 is "not run".
+NS3_PYTHON ?= $(wildcard .venv-ns3/bin/python)
 
 bench: $(VENV)/.installed
 	NS3_PYTHON='$(NS3_PYTHON)' $(BIN)/python benchmarks/run_all.py --out bench.out
 	$(BIN)/python benchmarks/readme_bench.py bench.out docs/performance.md
+	$(BIN)/python benchmarks/readme_bench.py bench.out docs/compiled-hot-path.md --only pass_cost.py gli_roundtrip.py multihost.py
 
 clean:
 	rm -rf $(VENV) $(BELLHOP_VENV) build *.egg-info .pytest_cache

@@ -11,13 +11,18 @@
    fast as its queue takes them, the one on b counts them; frames per second and the number lost
    (target: zero loss up to 20 000 frames/s).
 
-Bare and hilgate round trips alternate, ``--repeats`` times, in this one run.  The bare anchor moves
-with the host's idleness (a few µs loaded, four times that idle), so beside the ratio the benchmark
-prints the **added latency**, hilgate's p50 round trip minus the bare one of the same repeat, in µs:
-min/median/max over the repeats.  Every queue handle is closed (a daemon's queues count against the
-per-user budget until the last handle goes).
+Every process of a round trip is pinned (``placement.py``), in two placements measured one after the
+other: **same CPU** (the client, the daemon and the echo on one CPU) and **across CPUs** (client and echo on
+one, the daemon on the other, so each of the four hops crosses; the bare ping-pong likewise, each of its two
+hops crossing).  Unpinned, the kernel draws one of these per run for the anchor and another for hilgate,
+and the difference of the two is a lottery (8 µs against 50 µs for the bare ping-pong on a 2-core virtual
+machine).  Bare and hilgate alternate (each goes first in turn), ``--repeats`` times per placement, in this
+one run.  The **added latency** is hilgate's round trip minus the bare one of the same repeat and
+placement, at p50 and at p99, in µs: min/median/max over the repeats.  The throughput runs are not pinned
+(and say so): they measure how much the daemon carries wherever the kernel puts it.  Every queue handle is
+closed (a daemon's queues count against the per-user budget until the last handle goes).
 
-    python benchmarks/gli_roundtrip.py [--round-trips 3000] [--frames 20000] [--repeats 3]
+    python benchmarks/gli_roundtrip.py [--round-trips 3000] [--frames 20000] [--repeats 3] [--placement same|across|both]
 """
 
 from __future__ import annotations
@@ -38,7 +43,10 @@ import time
 
 import posix_ipc
 
-from hilgate.gli.queues import unlink_queues
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from placement import Placement, choose, pin, pinned, pinned_command  # noqa: E402
+
+from hilgate.gli.queues import unlink_queues  # noqa: E402
 
 MESSAGE = 2066
 MAX_REAL = 2053
@@ -62,7 +70,8 @@ def percentiles(samples: list[float]) -> tuple[float, float]:
 # -- 1. bare ping-pong ---------------------------------------------------------------------------
 
 
-def _pong(ping_name: str, pong_name: str, count: int) -> None:
+def _pong(ping_name: str, pong_name: str, count: int, cpu: int | None) -> None:
+    pin(cpu)
     ping, pong = open_queue(ping_name), open_queue(pong_name)
     for _ in range(count):
         message, _ = ping.receive()
@@ -71,18 +80,20 @@ def _pong(ping_name: str, pong_name: str, count: int) -> None:
     pong.close()
 
 
-def bare(count: int) -> list[float]:
+def bare(count: int, placement: Placement) -> list[float]:
+    """Ping (this thread) on the placement's step 0, pong on step 1."""
     tag = f"/hgbench{os.getpid()}"
     ping, pong = open_queue(tag + "_ping"), open_queue(tag + "_pong")
-    process = mp.Process(target=_pong, args=(tag + "_ping", tag + "_pong", count))
+    process = mp.Process(target=_pong, args=(tag + "_ping", tag + "_pong", count, placement.cpu(1)))
     process.start()
     message = b"\x00" * MESSAGE
     samples = []
-    for _ in range(count):
-        start = time.perf_counter()
-        ping.send(message)
-        pong.receive()
-        samples.append(time.perf_counter() - start)
+    with pinned(placement.cpu(0)):
+        for _ in range(count):
+            start = time.perf_counter()
+            ping.send(message)
+            pong.receive()
+            samples.append(time.perf_counter() - start)
     process.join()
     for queue in (ping, pong):
         queue.close()
@@ -103,10 +114,11 @@ links:
 """
 
 
-def _echo(link: str, count: int, mode: str, result, timeout: float = 10.0) -> None:
+def _echo(link: str, count: int, mode: str, result, timeout: float = 10.0, cpu: int | None = None) -> None:
     """On link b: echo every frame back to address 1 (``mode`` "echo"), or only count them ("count");
-    put (frames received, time of the first, time of the last) on ``result``.  Shared with
-    multihost.py."""
+    put (frames received, time of the first, time of the last) on ``result``.  Runs pinned to ``cpu``
+    (None: where the kernel puts it).  Shared with multihost.py."""
+    pin(cpu)
     tx, rx = open_queue(f"/{link}_tx_dlnk_phy"), open_queue(f"/{link}_rx_dlnk_phy")
     tx.send(b"\x01")  # REQ_STATE, as a dccomms application says when it starts: the daemon knows it is there
     received = 0
@@ -131,9 +143,10 @@ def _echo(link: str, count: int, mode: str, result, timeout: float = 10.0) -> No
 
 class Daemon:
     """``hilgate run`` in a subprocess on ``scene_text`` (its links are ``links``), up once it says
-    READY=1; :meth:`close` stops it and removes its queues.  Shared with realtime_lateness.py."""
+    READY=1; :meth:`close` stops it and removes its queues.  ``cpu``: the one CPU it runs on (None: the
+    kernel's choice).  Shared with realtime_lateness.py."""
 
-    def __init__(self, scene_text: str, links: tuple[str, ...], args: tuple[str, ...] = ()):
+    def __init__(self, scene_text: str, links: tuple[str, ...], args: tuple[str, ...] = (), cpu: int | None = None):
         self.dir = tempfile.mkdtemp(prefix="hilgate-bench-")
         scene = os.path.join(self.dir, "scene.yaml")
         with open(scene, "w") as handle:
@@ -142,9 +155,9 @@ class Daemon:
         self.notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
         self.notify.bind(notify_path)
         self.log = open(os.path.join(self.dir, "daemon.log"), "w")  # its log stays out of the benchmark's output
-        self.process = subprocess.Popen(
+        self.process = subprocess.Popen(pinned_command(
             [sys.executable, "-m", "hilgate", "run", scene, "--runtime-dir", os.path.join(self.dir, "rt"),
-             "--no-status-line", *args], env=dict(os.environ, NOTIFY_SOCKET=notify_path),
+             "--no-status-line", *args], cpu), env=dict(os.environ, NOTIFY_SOCKET=notify_path),
             stderr=self.log)
         self.notify.settimeout(30)
         while b"READY=1" not in self.notify.recv(4096):
@@ -173,25 +186,27 @@ class Daemon:
         return usage
 
 
-def through_hilgate(count: int) -> list[float]:
+def through_hilgate(count: int, placement: Placement) -> list[float]:
+    """The client (this thread) on the placement's step 0, the daemon on step 1, the echo on step 2."""
     a, b = f"bga{os.getpid()}", f"bgb{os.getpid()}"
-    daemon = Daemon(SCENE.format(a=a, b=b), (a, b))
+    daemon = Daemon(SCENE.format(a=a, b=b), (a, b), cpu=placement.cpu(1))
     try:
         result = mp.Queue()
-        echo = mp.Process(target=_echo, args=(b, count, "echo", result))
+        echo = mp.Process(target=_echo, args=(b, count, "echo", result, 10.0, placement.cpu(2)))
         echo.start()
         tx, rx = open_queue(f"/{a}_tx_dlnk_phy"), open_queue(f"/{a}_rx_dlnk_phy")
         message = frame(b"ping" * 5, 0, 2)
         assert len(message) == MESSAGE
         samples = []
-        for _ in range(count):
-            start = time.perf_counter()
-            tx.send(message)
-            while True:
-                reply, _ = rx.receive(5.0)
-                if reply[0] == 0:
-                    break
-            samples.append(time.perf_counter() - start)
+        with pinned(placement.cpu(0)):
+            for _ in range(count):
+                start = time.perf_counter()
+                tx.send(message)
+                while True:
+                    reply, _ = rx.receive(5.0)
+                    if reply[0] == 0:
+                        break
+                samples.append(time.perf_counter() - start)
         echo.join()
         tx.close()
         rx.close()
@@ -255,34 +270,52 @@ def throughput(count: int, size: int, rate: float | None) -> tuple[float, int, i
         daemon.close()
 
 
+def spread(values: list[float]) -> str:
+    return " / ".join(f"{v:.0f}" for v in (min(values), statistics.median(values), max(values)))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--round-trips", type=int, default=3000)
     parser.add_argument("--frames", type=int, default=20000)
     parser.add_argument("--size", type=int, default=20, help="payload bytes per frame in the throughput test")
-    parser.add_argument("--repeats", type=int, default=3, help="alternating bare / hilgate round-trip runs")
+    parser.add_argument("--repeats", type=int, default=3, help="alternating bare / hilgate round-trip runs per placement")
+    parser.add_argument("--placement", choices=("same", "across", "both"), default="both")
     args = parser.parse_args()
-    bares, hils = [], []
+    chosen, why_not = choose(args.placement)
+    roles = {"bare": ["ping", "pong"], "hilgate": ["client", "daemon", "echo"]}
+    for placement in chosen:
+        print(f"{placement.name:>11}: {placement.describe(roles['hilgate'])} (bare: {placement.describe(roles['bare'])})")
+    if why_not:
+        print(why_not)
+    # (placement, side) -> [(p50, p99) per repeat]
+    measured: dict[tuple[str, str], list[tuple[float, float]]] = {}
     for repeat in range(1, args.repeats + 1):
-        order = [("bare", bare), ("hilgate", through_hilgate)]
-        if repeat % 2 == 0:
-            order.reverse()  # alternate which goes first
-        measured = {}
-        for side, run in order:
-            measured[side] = percentiles(run(args.round_trips + WARM_UP))
-        (bare_p50, bare_p99), (hil_p50, hil_p99) = measured["bare"], measured["hilgate"]
-        bares.append(bare_p50)
-        hils.append(hil_p50)
-        print(f"repeat {repeat}: bare POSIX-queue ping-pong (2 hops) p50 {bare_p50 * 1e6:.0f} µs (p99 "
-              f"{bare_p99 * 1e6:.0f}); through hilgate (4 hops) p50 {hil_p50 * 1e6:.0f} µs (p99 {hil_p99 * 1e6:.0f}); "
-              f"added {(hil_p50 - bare_p50) * 1e6:.0f} µs, ratio {hil_p50 / bare_p50:.2f}", flush=True)
-    added = [1e6 * (h - b) for h, b in zip(hils, bares)]
-    ratios = [h / b for h, b in zip(hils, bares)]
-    print(f"round trip of a {MESSAGE}-byte message, p50, {args.round_trips:,} round trips x {args.repeats}: bare "
-          f"{statistics.median(bares) * 1e6:.0f} µs, hilgate {statistics.median(hils) * 1e6:.0f} µs (medians)")
-    print(f"added by hilgate, min/median/max µs: {' / '.join(f'{v:.0f}' for v in (min(added), statistics.median(added), max(added)))};"
-          f"  ratio min/median/max: {min(ratios):.2f} / {statistics.median(ratios):.2f} / {max(ratios):.2f}"
-          f" (target: <= 40 µs added at p50; the ratio's floor is 2 x, twice the hops)", flush=True)
+        for k in range(len(chosen)):
+            placement = chosen[(repeat - 1 + k) % len(chosen)]  # each placement goes first in turn
+            order = [("bare", bare), ("hilgate", through_hilgate)]
+            if repeat % 2 == 0:
+                order.reverse()  # and, from one repeat to the next, each side
+            got = {}
+            for side, run in order:
+                got[side] = percentiles(run(args.round_trips + WARM_UP, placement))
+                measured.setdefault((placement.name, side), []).append(got[side])
+            (bare_p50, bare_p99), (hil_p50, hil_p99) = got["bare"], got["hilgate"]
+            print(f"repeat {repeat}, {placement.name:>11}: bare POSIX-queue ping-pong (2 hops) p50 {bare_p50 * 1e6:.0f} µs "
+                  f"(p99 {bare_p99 * 1e6:.0f}); through hilgate (4 hops) p50 {hil_p50 * 1e6:.0f} µs (p99 {hil_p99 * 1e6:.0f}); "
+                  f"added p50 {(hil_p50 - bare_p50) * 1e6:.0f} µs (p99 {(hil_p99 - bare_p99) * 1e6:.0f}); "
+                  f"first: {order[0][0]}", flush=True)
+    print(f"round trip of a {MESSAGE}-byte message, {args.round_trips:,} round trips x {args.repeats} per placement, "
+          f"min / median / max over the repeats, µs:")
+    for placement in chosen:
+        bares, hils = measured[(placement.name, "bare")], measured[(placement.name, "hilgate")]
+        added50 = [1e6 * (h[0] - b[0]) for h, b in zip(hils, bares)]
+        added99 = [1e6 * (h[1] - b[1]) for h, b in zip(hils, bares)]
+        print(f"  {placement.name:>11}: bare p50 {spread([1e6 * b[0] for b in bares])}, hilgate p50 "
+              f"{spread([1e6 * h[0] for h in hils])}; added by hilgate p50 {spread(added50)}, p99 {spread(added99)}",
+              flush=True)
+    print("(target: <= 40 µs added at p50, pinned)")
+    print("throughput: unpinned (the kernel places the sender, the daemon and the counter)")
     for offered in (5000, 10000, 20000, None):
         rate, lost, drops = throughput(args.frames, args.size, offered)
         label = f"{offered:,}/s offered" if offered else "flat out"

@@ -18,8 +18,12 @@ second; the readers' is printed apart.  ``--spin fixed`` runs the daemon with th
 after every input and fixed 0.3 ms spin before timers (as before the adaptive spin), alternating with
 ``adaptive`` over ``--repeats`` runs.
 
+The processes are pinned (``placement.py``): **same CPU** (the daemon and every reader on one CPU) and
+**across CPUs** (the readers on one, the daemon on the other), one after the other, each first in turn.
+There is no anchor here: the bare timer loop beside a daemon is realtime_lateness.py's.
+
     python benchmarks/many_links.py [--links 500] [--rate 10] [--seconds 20] [--readers 10]
-                                    [--spin adaptive|fixed|both] [--repeats 1]
+                                    [--spin adaptive|fixed|both] [--repeats 1] [--placement same|across|both]
 """
 
 from __future__ import annotations
@@ -37,6 +41,9 @@ import sys
 import tempfile
 import time
 import uuid
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from placement import Placement, choose, pin, pinned_command  # noqa: E402
 
 HEADER = struct.Struct(">IB")
 RECV_HEAD = struct.Struct(">BBd")
@@ -105,8 +112,9 @@ def clock_origin(sock: socket.socket, samples: int = 30) -> tuple[float, float]:
 
 
 def reader(runtime: str, links: list[tuple[str, int]], rate: float, start: float, stop: float,
-           warmup: float, phase0: float, result) -> None:
+           warmup: float, phase0: float, result, cpu: int | None = None) -> None:
     """One application process: sends on its links at ``rate`` and timestamps every frame received."""
+    pin(cpu)
     selector = selectors.DefaultSelector()
     socks = []
     for link_id, partner in links:
@@ -175,7 +183,8 @@ def percentile(values: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, int(q * (len(ordered) - 1) + 0.5))]
 
 
-def run_once(args: argparse.Namespace, spin: str) -> dict:
+def run_once(args: argparse.Namespace, spin: str, placement: Placement) -> dict:
+    """The readers on the placement's step 0, the daemon on step 1."""
     prefix = "ml" + uuid.uuid4().hex[:6] + "_"
     directory = tempfile.mkdtemp(prefix="hilgate-many-links-")
     scene = os.path.join(directory, "scene.yaml")
@@ -186,8 +195,9 @@ def run_once(args: argparse.Namespace, spin: str) -> dict:
     notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
     notify.bind(notify_path)
     log = open(os.path.join(directory, "daemon.log"), "w")
-    daemon = subprocess.Popen([sys.executable, "-c", LAUNCH, spin, "run", scene, "--runtime-dir", runtime,
-                               "--no-status-line", "--max-clients", str(args.links + 16)],
+    daemon = subprocess.Popen(pinned_command([sys.executable, "-c", LAUNCH, spin, "run", scene, "--runtime-dir", runtime,
+                                              "--no-status-line", "--max-clients", str(args.links + 16)],
+                                             placement.cpu(1)),
                               env=dict(os.environ, NOTIFY_SOCKET=notify_path),
                               stdout=log, stderr=subprocess.STDOUT)
     try:
@@ -201,7 +211,8 @@ def run_once(args: argparse.Namespace, spin: str) -> dict:
         stop = start + args.warmup + args.seconds
         result = mp.Queue()
         processes = [mp.Process(target=reader, args=(runtime, group, args.rate, start, stop, args.warmup,
-                                                      r / args.readers / args.rate / len(group), result))
+                                                      r / args.readers / args.rate / len(group), result,
+                                                      placement.cpu(0)))
                      for r, group in enumerate(groups)]
         for process in processes:
             process.start()
@@ -224,6 +235,7 @@ def run_once(args: argparse.Namespace, spin: str) -> dict:
     lateness = [value for outcome in outcomes for value in outcome[0]]
     return {
         "spin": spin,
+        "placement": placement.name,
         "sent": sum(o[1] for o in outcomes),
         "received": sum(o[2] for o in outcomes),
         "lateness": lateness,
@@ -236,8 +248,8 @@ def run_once(args: argparse.Namespace, spin: str) -> dict:
 def report(r: dict, args: argparse.Namespace) -> str:
     late = r["lateness"]
     if not late:
-        return f"{r['spin']:>8}: no frame received"
-    return (f"{r['spin']:>8}: {r['received']} frames delivered in the window, {r['sent']} sent in it; lateness at the "
+        return f"{r['placement']:>11}, {r['spin']:>8}: no frame received"
+    return (f"{r['placement']:>11}, {r['spin']:>8}: {r['received']} frames delivered in the window, {r['sent']} sent in it; lateness at the "
             f"applications p50 {percentile(late, 0.5) * 1e3:.3f} ms, p99 {percentile(late, 0.99) * 1e3:.3f} ms, "
             f"max {max(late) * 1e3:.3f} ms (upper bounds, at most {r['clock_width'] * 1e3:.3f} ms high); "
             f"daemon CPU {r['daemon_cpu']:.2f} s/s; readers {r['reader_cpu']:.2f} s/s")
@@ -252,15 +264,23 @@ def main() -> None:
     parser.add_argument("--readers", type=int, default=10, help="application processes holding the links")
     parser.add_argument("--spin", choices=("adaptive", "fixed", "both"), default="adaptive")
     parser.add_argument("--repeats", type=int, default=1)
+    parser.add_argument("--placement", choices=("same", "across", "both"), default="both")
     args = parser.parse_args()
+    chosen, why_not = choose(args.placement)
     if args.links < 2 or args.links % 2:
         parser.error("--links must be even (links come in pairs)")
     spins = ("adaptive", "fixed") if args.spin == "both" else (args.spin,)
     print(f"{args.links} links (gli: [socket]) at {args.rate:g} frames/s each, {args.readers} reader processes, "
           f"{args.seconds:g} s measured after {args.warmup:g} s; load average {os.getloadavg()[0]:.2f} at start")
+    for placement in chosen:
+        print(f"{placement.name:>11}: {placement.describe(['readers', 'daemon'])}")
+    if why_not:
+        print(why_not)
     for repeat in range(args.repeats):
-        for spin in spins:
-            print(report(run_once(args, spin), args), flush=True)
+        for k in range(len(chosen)):
+            placement = chosen[(repeat + k) % len(chosen)]  # each placement goes first in turn
+            for spin in spins:
+                print(report(run_once(args, spin, placement), args), flush=True)
     print(f"load average {os.getloadavg()[0]:.2f} at the end (lateness p99 <= 1 ms is the target on a quiet host)")
 
 

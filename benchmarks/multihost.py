@@ -16,10 +16,17 @@
    as its queue takes them, the one on B counts; frames per second and frames lost, by cause
    (target ≥ 5 000 frames/s, zero loss).
 
-Bare, TLS and plain round trips alternate, ``--repeats`` times; the ratio (TLS against bare) is printed as
-min/median/max.
+The round trips (1 and 2) are pinned (``placement.py``), in two placements: **same CPU** (every process
+on one CPU) and **across CPUs** (the client and daemon B on one, daemon A and B's echo on the other, so
+each of the six hops crosses; the bare ping and pong on one each).  Bare, TLS and insecure alternate:
+each goes first in turn from one repeat to the next, and so does each placement; ``--repeats`` runs of
+each per placement.  Printed per placement: each side's p50 and the ratios TLS/bare and insecure/bare,
+min/median/max over the repeats.  The bare ping-pong is the peer baseline
+/work/shared/peers/zenoh_pingpong.py's (the same configuration and message), with a free port and a key
+of its own so that two runs on one machine do not meet, and its ping in a process of its own so that it
+can be pinned.  3 and 4 are not pinned (they say so) and run with TLS.
 
-    python benchmarks/multihost.py [--round-trips 2000] [--frames 20000] [--repeats 3]
+    python benchmarks/multihost.py [--round-trips 2000] [--frames 20000] [--repeats 3] [--placement same|across|both]
 """
 
 from __future__ import annotations
@@ -39,6 +46,8 @@ import uuid
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from gli_roundtrip import MESSAGE, _echo, frame, open_queue, percentiles, send_paced  # noqa: E402
+from peers import spread  # noqa: E402
+from placement import Placement, choose, pin, pinned, pinned_command  # noqa: E402
 
 from hilgate.gli.queues import unlink_queues  # noqa: E402
 
@@ -67,7 +76,8 @@ def zenoh_config(listen: str | None = None, connect: str | None = None):
 # -- 1. bare Zenoh ping-pong ------------------------------------------------------------------------
 
 
-def _pong(port: int, key: str, ready) -> None:
+def _pong(port: int, key: str, ready, cpu: int | None) -> None:
+    pin(cpu)  # before the session: Zenoh's threads stay on this CPU too
     import zenoh
 
     session = zenoh.open(zenoh_config(listen=f"tcp/127.0.0.1:{port}"))
@@ -77,14 +87,10 @@ def _pong(port: int, key: str, ready) -> None:
     time.sleep(3600)
 
 
-def bare(count: int) -> list[float]:
+def _ping(port: int, key: str, count: int, cpu: int | None, result) -> None:
+    pin(cpu)
     import zenoh
 
-    port, key = free_port(), f"bench-{uuid.uuid4().hex[:8]}"
-    ready = SPAWN.Event()
-    process = SPAWN.Process(target=_pong, args=(port, key, ready), daemon=True)
-    process.start()
-    ready.wait(30)
     session = zenoh.open(zenoh_config(connect=f"tcp/127.0.0.1:{port}"))
     got = threading.Event()
     session.declare_subscriber(f"{key}/pong", lambda sample: got.set())
@@ -99,12 +105,33 @@ def bare(count: int) -> list[float]:
         start = time.perf_counter()
         publisher.put(message)
         if not got.wait(5):
-            raise RuntimeError("the bare ping-pong lost a message")
+            result.put("the bare ping-pong lost a message")
+            return
         samples.append(time.perf_counter() - start)
     session.close()
-    process.terminate()
-    process.join()
-    return samples[WARM_UP:]
+    result.put(samples[WARM_UP:])
+
+
+def bare(count: int, placement: Placement) -> list[float]:
+    """Ping and pong, each in a process of its own (as /work/shared/peers/zenoh_pingpong.py, the peer
+    baseline, with a free port and a key of its own), on the placement's steps 0 and 1."""
+    port, key = free_port(), f"bench-{uuid.uuid4().hex[:8]}"
+    ready, result = SPAWN.Event(), SPAWN.Queue()
+    pong = SPAWN.Process(target=_pong, args=(port, key, ready, placement.cpu(1)), daemon=True)
+    pong.start()
+    try:
+        if not ready.wait(60):
+            raise RuntimeError("the bare pong process did not start")
+        ping = SPAWN.Process(target=_ping, args=(port, key, count, placement.cpu(0), result))
+        ping.start()
+        samples = result.get(timeout=300)
+        ping.join()
+    finally:
+        pong.terminate()
+        pong.join()
+    if isinstance(samples, str):
+        raise RuntimeError(samples)
+    return samples
 
 
 # -- 2. and 3. through two daemons --------------------------------------------------------------------
@@ -122,9 +149,11 @@ links:
 
 
 class Network:
-    """Daemons A and B, joined over loopback TCP."""
+    """Daemons A and B, joined over loopback TCP (``secure``: mutual TLS); A pinned to ``cpus[0]``, B to
+    ``cpus[1]`` (None: the kernel's choice)."""
 
-    def __init__(self, a: str, b: str, template: str = SCENE, secure: bool = True):
+    def __init__(self, a: str, b: str, template: str = SCENE, secure: bool = True,
+                 cpus: tuple[int | None, int | None] = (None, None)):
         from hilgate.netinit import init_network
 
         self.dir = tempfile.mkdtemp(prefix="hilgate-multihost-bench-")
@@ -137,15 +166,15 @@ class Network:
         port = free_port()
         scheme = "tls" if secure else "tcp"
         self.processes = []
-        for host, args in (("A", ["--zenoh-listen", f"{scheme}/127.0.0.1:{port}"]),
-                           ("B", ["--zenoh-connect", f"{scheme}/127.0.0.1:{port}"])):
+        for host, cpu, args in (("A", cpus[0], ["--zenoh-listen", f"{scheme}/127.0.0.1:{port}"]),
+                                ("B", cpus[1], ["--zenoh-connect", f"{scheme}/127.0.0.1:{port}"])):
             notify_path = os.path.join(self.dir, f"notify-{host}")
             notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
             notify.bind(notify_path)
             with open(os.path.join(self.dir, f"{host}.log"), "w") as log:  # (the daemons' logs stay there)
-                self.processes.append(subprocess.Popen(
+                self.processes.append(subprocess.Popen(pinned_command(
                     [sys.executable, "-m", "hilgate", "run", scene, "--host", host, "--runtime-dir",
-                     os.path.join(self.dir, host), "--no-status-line", *args],
+                     os.path.join(self.dir, host), "--no-status-line", *args], cpu),
                     env=dict(os.environ, NOTIFY_SOCKET=notify_path), stdout=log, stderr=subprocess.STDOUT))
             notify.settimeout(30)
             while b"READY=1" not in notify.recv(4096):
@@ -177,25 +206,27 @@ class Network:
         unlink_queues(self.links)
 
 
-def through_hilgate(count: int, secure: bool = True) -> list[float]:
+def through_hilgate(count: int, placement: Placement, secure: bool = True) -> list[float]:
+    """The client (this thread) on the placement's step 0, daemon A on 1, daemon B on 2, B's echo on 3."""
     a, b = f"mha{os.getpid()}", f"mhb{os.getpid()}"
-    network = Network(a, b, secure=secure)
+    network = Network(a, b, secure=secure, cpus=(placement.cpu(1), placement.cpu(2)))
     try:
         result = SPAWN.Queue()
-        echo = SPAWN.Process(target=_echo, args=(b, count + WARM_UP, "echo", result))
+        echo = SPAWN.Process(target=_echo, args=(b, count + WARM_UP, "echo", result, 10.0, placement.cpu(3)))
         echo.start()
         tx, rx = open_queue(f"/{a}_tx_dlnk_phy"), open_queue(f"/{a}_rx_dlnk_phy")
         message = frame(b"\xa5" * 2048, 0, 2)
         assert len(message) == MESSAGE
         samples = []
-        for _ in range(count + WARM_UP):
-            start = time.perf_counter()
-            tx.send(message)
-            while True:
-                reply, _ = rx.receive(10.0)
-                if reply[0] == 0:
-                    break
-            samples.append(time.perf_counter() - start)
+        with pinned(placement.cpu(0)):
+            for _ in range(count + WARM_UP):
+                start = time.perf_counter()
+                tx.send(message)
+                while True:
+                    reply, _ = rx.receive(10.0)
+                    if reply[0] == 0:
+                        break
+                samples.append(time.perf_counter() - start)
         echo.join()
         tx.close()
         rx.close()
@@ -266,32 +297,53 @@ def on_time(count: int) -> list[float]:
         network.close()
 
 
+SIDES = {"bare": "bare Zenoh", "tls": "hilgate, TLS", "insecure": "hilgate, insecure"}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--round-trips", type=int, default=2000)
     parser.add_argument("--frames", type=int, default=20000)
     parser.add_argument("--size", type=int, default=20, help="payload bytes per frame in the throughput test")
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--repeats", type=int, default=3, help="runs of each side per placement, alternating")
+    parser.add_argument("--placement", choices=("same", "across", "both"), default="both")
     parser.add_argument("--on-time", type=int, default=100, help="frames for the wall-clock delivery check")
     args = parser.parse_args()
-    ratios, bares, hils, plains = [], [], [], []
-    for repeat in range(args.repeats):
-        bare_p50, bare_p99 = percentiles(bare(args.round_trips))
-        hil_p50, hil_p99 = percentiles(through_hilgate(args.round_trips, secure=True))
-        plain_p50, plain_p99 = percentiles(through_hilgate(args.round_trips, secure=False))
-        bares.append(bare_p50)
-        hils.append(hil_p50)
-        plains.append(plain_p50)
-        ratios.append(hil_p50 / bare_p50)
-        print(f"repeat {repeat + 1}: bare Zenoh ping-pong p50 {bare_p50 * 1e6:.0f} µs (p99 {bare_p99 * 1e6:.0f}); "
-              f"through two daemons, TLS p50 {hil_p50 * 1e6:.0f} µs (p99 {hil_p99 * 1e6:.0f}), "
-              f"insecure p50 {plain_p50 * 1e6:.0f} µs (p99 {plain_p99 * 1e6:.0f}); "
-              f"ratio TLS/bare {hil_p50 / bare_p50:.2f}", flush=True)
-    print(f"round trip of a {MESSAGE}-byte frame, p50: bare {statistics.median(bares) * 1e6:.0f} µs, hilgate "
-          f"with TLS {statistics.median(hils) * 1e6:.0f} µs, insecure {statistics.median(plains) * 1e6:.0f} µs "
-          f"(median of {args.repeats}; TLS costs {(statistics.median(hils) - statistics.median(plains)) * 1e6:+.0f} µs); "
-          f"ratio TLS/bare min/median/max {min(ratios):.2f} / {statistics.median(ratios):.2f} / {max(ratios):.2f} "
-          f"(target <= 3)")
+    chosen, why_not = choose(args.placement)
+    for placement in chosen:
+        print(f"{placement.name:>11}: {placement.describe(['client', 'daemon A', 'daemon B', 'echo'])} "
+              f"(bare: {placement.describe(['ping', 'pong'])})", flush=True)
+    if why_not:
+        print(why_not, flush=True)
+    runs = {"bare": lambda n, p: bare(n, p), "tls": lambda n, p: through_hilgate(n, p, secure=True),
+            "insecure": lambda n, p: through_hilgate(n, p, secure=False)}
+    sides = list(SIDES)
+    p50s: dict[tuple[str, str], list[float]] = {}
+    for repeat in range(1, args.repeats + 1):
+        for k in range(len(chosen)):
+            placement = chosen[(repeat - 1 + k) % len(chosen)]  # each placement goes first in turn
+            order = sides[(repeat - 1) % 3:] + sides[:(repeat - 1) % 3]  # and each side, from one repeat to the next
+            got = {}
+            for side in order:
+                got[side] = percentiles(runs[side](args.round_trips, placement))
+                p50s.setdefault((placement.name, side), []).append(got[side][0])
+            print(f"repeat {repeat}, {placement.name:>11}: " + "; ".join(
+                f"{SIDES[side]} p50 {got[side][0] * 1e6:.0f} µs (p99 {got[side][1] * 1e6:.0f})" for side in sides)
+                + f"; ratio TLS/bare {got['tls'][0] / got['bare'][0]:.2f}, insecure/bare "
+                f"{got['insecure'][0] / got['bare'][0]:.2f}; order: {', '.join(order)}", flush=True)
+    print(f"round trip of a {MESSAGE}-byte frame, p50, {args.round_trips:,} round trips x {args.repeats} per placement, "
+          f"min / median / max over the repeats:")
+    for placement in chosen:
+        got = {side: p50s[(placement.name, side)] for side in sides}
+        tls = [t / b for t, b in zip(got["tls"], got["bare"])]
+        plain = [t / b for t, b in zip(got["insecure"], got["bare"])]
+        cost = [1e6 * (t - i) for t, i in zip(got["tls"], got["insecure"])]
+        print(f"  {placement.name:>11}: " + ", ".join(
+            f"{SIDES[side]} {spread([1e6 * v for v in got[side]], 0)} µs" for side in sides)
+            + f"; ratio TLS/bare {spread(tls)}, insecure/bare {spread(plain)}; TLS costs {spread(cost, 0)} µs", flush=True)
+    print("(target: <= 3 x bare Zenoh at p50, with TLS)")
+    print("delivery on the wall clock and throughput: unpinned (the kernel places the daemons and applications); "
+          "both with TLS", flush=True)
     errors = sorted(on_time(args.on_time))
     print(f"delivery on the wall clock A -> B (150 m, 1000 b/s), application to application, minus the model: "
           f"min {errors[0] * 1e3:+.2f} ms, p50 {errors[len(errors) // 2] * 1e3:+.2f} ms, "

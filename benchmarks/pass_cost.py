@@ -12,6 +12,8 @@ Run from the repository root:
 
     python benchmarks/pass_cost.py [PASSES]          # p10 / p50 / p90 of PASSES passes (default 20 000)
     PROF=1 python benchmarks/pass_cost.py 3000       # and a cProfile table of the passes
+
+It runs pinned to the first CPU it may use (``placement.py``) and says so: one process, so one placement.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ import posix_ipc
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from gli_roundtrip import SCENE, frame  # noqa: E402
+from placement import pin  # noqa: E402
 
 from hilgate.core.realtime import RealtimeScheduler  # noqa: E402
 from hilgate.daemon import service  # noqa: E402
@@ -45,7 +48,7 @@ def _drain(queue: posix_ipc.MessageQueue) -> int:
         count += 1
 
 
-def measuring_scheduler(a: str, b: str, passes: int, profile: bool) -> type[RealtimeScheduler]:
+def measuring_scheduler(a: str, b: str, passes: int, profile: bool, pinned_cpu: int) -> type[RealtimeScheduler]:
     """A scheduler whose ``run`` times ``passes`` passes instead of serving (a subclass: a class
     compiled by mypyc cannot be patched)."""
 
@@ -84,7 +87,7 @@ def measuring_scheduler(a: str, b: str, passes: int, profile: bool) -> type[Real
                 states += _drain(from_a)
                 frames += _drain(from_b)
             samples.sort()
-            print(f"one daemon pass (a's queue -> b's queue, in process), {passes:,} passes: "
+            print(f"one daemon pass (a's queue -> b's queue, in process, pinned to CPU {pinned_cpu}), {passes:,} passes: "
                   f"p10 {samples[passes // 10] * 1e6:.1f} µs, p50 {samples[passes // 2] * 1e6:.1f} µs, "
                   f"p90 {samples[9 * passes // 10] * 1e6:.1f} µs, CPU (thread time) {cpu / passes * 1e6:.1f} µs a pass on average; READY messages per frame {states / passes:.2f}, "
                   f"frames delivered {frames:,}", flush=True)
@@ -99,12 +102,14 @@ def measuring_scheduler(a: str, b: str, passes: int, profile: bool) -> type[Real
 
 def main() -> int:
     passes = int(sys.argv[1]) if len(sys.argv) > 1 else 20000
+    cpu = min(os.sched_getaffinity(0))
+    pin(cpu)  # before the daemon makes any thread
     a, b = f"ppa{os.getpid()}", f"ppb{os.getpid()}"
     directory = tempfile.mkdtemp(prefix="hilgate-pass-")
     scene = os.path.join(directory, "scene.yaml")
     with open(scene, "w") as handle:
         handle.write(SCENE.format(a=a, b=b))
-    service.RealtimeScheduler = measuring_scheduler(a, b, passes, bool(os.environ.get("PROF")))
+    service.RealtimeScheduler = measuring_scheduler(a, b, passes, bool(os.environ.get("PROF")), cpu)
     try:
         return service.Daemon(scene, runtime_dir=os.path.join(directory, "rt")).run()
     finally:

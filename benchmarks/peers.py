@@ -13,8 +13,25 @@ import subprocess
 import tempfile
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-PEERS = os.path.normpath(os.path.join(HERE, "..", "..", "shared", "peers"))
-"""The peers' scripts (../shared/peers/ next to the repository); ``--peers DIR`` elsewhere."""
+
+
+def _peers_dir() -> str:
+    """shared/peers/ beside the repository, or beside a folder above it (a git worktree kept in a
+    subfolder of the checkout's parent); beside the repository if there is none."""
+    repository = os.path.dirname(HERE)
+    folder = os.path.dirname(repository)
+    while True:
+        candidate = os.path.join(folder, "shared", "peers")
+        if os.path.isdir(candidate):
+            return candidate
+        parent = os.path.dirname(folder)
+        if parent == folder:
+            return os.path.join(os.path.dirname(repository), "shared", "peers")
+        folder = parent
+
+
+PEERS = _peers_dir()
+"""The peers' scripts (../shared/peers/ next to the repository); ``--ns3-script PATH`` elsewhere."""
 
 
 def run_json(argv: list[str]) -> tuple[dict, float]:

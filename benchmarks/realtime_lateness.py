@@ -17,24 +17,30 @@ over Poisson due times at the rate hilgate delivers at (N × rate × (N − 1) p
 time to an application process over a Unix socket, which stamps it on receipt: the floor this host gives a
 timer plus one hop at this moment.
 
-The two alternate (bare, hilgate, hilgate, bare, …), ``--repeats`` times each.  Printed per run: p50, p99
-and max lateness in ms, deliveries, the daemon's CPU per wall second; then min/median/max of hilgate's
-p99 over the bare loop's p99 (DESIGN.md: p99 <= 0.25 ms and max <= 1 ms on a quiet host, within 1.2 x the
-bare loop's p99 on a loaded one).
+ns-3 (``--ns3-python PATH``, a Python with the PyPI ``ns3`` wheel; ``make bench`` passes ``NS3_PYTHON``):
+the same scene in ns-3's own real-time scheduler, ``RealtimeSimulatorImpl`` (``benchmarks/ns3_realtime.py``:
+N UAN nodes on the same ring, the same bit rate, frame size and Poisson broadcasts, ALOHA).  At each
+reception that ends well, plain C++ writes the wall-clock time the event was due to a socket whose other
+end this process reads and stamps: a timer's lateness in ns-3 plus one hop, the bare loop's measurement with
+ns-3's scheduler and model in front.  Without the option, or when that Python cannot import ``ns``, ns-3 is
+"not run" with the reason.
 
-With ``--ns3-python PATH`` (a Python with the PyPI ``ns3`` wheel) ns-3's real-time scheduler runs too,
-alternating with the other two: the peer script ``ns3_uan_aloha.py --realtime`` (N nodes, the same rate
-and bit rate, its senders to a sink), which reports how late its send events ran against the wall
-clock, mean and max.  That is a timer's lateness inside ns-3, not a delivery's at an application, so it
-is printed beside the others (min/median/max over the repeats) and not divided into them.  Without the
-option ns-3 is "not run".
+Every process is pinned (``placement.py``), in two placements: **same CPU** (everything on one CPU) and
+**across CPUs** (the applications, and the bare loop's and ns-3's reader, on one; the daemon, the bare
+timer loop and ns-3 on the other).  The sides alternate (each goes first in turn from one repeat to the
+next, and so does each placement), ``--repeats`` runs of each per placement.  Printed per run: p50, p99,
+max and min lateness in ms, deliveries, the daemon's CPU per wall second; then, per placement, the p99s
+min/median/max and the ratios hilgate/bare and hilgate/ns-3 of the p99 (DESIGN.md: p99 <= 0.25 ms and
+max <= 1 ms on a quiet host, within 1.2 x the bare loop's p99 on a loaded one).
 
-    python benchmarks/realtime_lateness.py [--seconds 20] [--nodes 50] [--rate 0.5] [--repeats 3] [--ns3-python PATH]
+    python benchmarks/realtime_lateness.py [--seconds 20] [--nodes 50] [--rate 0.5] [--repeats 3]
+                                           [--placement same|across|both] [--ns3-python PATH]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import multiprocessing as mp
 import os
@@ -43,12 +49,17 @@ import selectors
 import socket
 import statistics
 import struct
+import subprocess
 import sys
+import tempfile
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from gli_roundtrip import Daemon  # noqa: E402
-from peers import PEERS, check_python, run_json, spread  # noqa: E402
+from peers import check_python, spread  # noqa: E402
+from placement import Placement, choose, pin, pinned, pinned_command  # noqa: E402
+
+NS3_SCRIPT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "ns3_realtime.py")
 
 BITRATE, TX_DELAY, ON_AIR, SPEED, RADIUS = 9600, 0.001, 20, 1500.0, 200.0
 MIN_GAP = 0.05  # s between one link's frames: longer than its 17.7 ms on air, so none waits in the FIFO
@@ -81,9 +92,10 @@ def percentile(values: list[float], q: float) -> float:
 
 
 def _application(runtime_dir: str, links: list[tuple[int, str]], nodes: int, rate: float, seconds: float,
-                 seed: int, start_at: float, result) -> None:
+                 seed: int, start_at: float, result, cpu: int | None = None) -> None:
     """Send from and read every link in ``links`` for ``seconds`` from ``start_at`` (perf_counter), then
     one more second for the frames on their way; put (lateness list, frames sent, deliveries) on ``result``."""
+    pin(cpu)
     from hilgate.client import Link
 
     where = positions(nodes)
@@ -126,16 +138,18 @@ def _application(runtime_dir: str, links: list[tuple[int, str]], nodes: int, rat
     result.put((late, sent))
 
 
-def through_hilgate(nodes: int, rate: float, seconds: float, apps: int, seed: int, daemon_args: tuple[str, ...]):
-    prefix = f"rt{os.getpid()}x{seed}_"
+def through_hilgate(nodes: int, rate: float, seconds: float, apps: int, seed: int, daemon_args: tuple[str, ...],
+                    placement: Placement):
+    """The applications on the placement's step 0, the daemon on step 1."""
+    prefix = f"rt{os.getpid()}x{seed}{placement.name[0]}_"
     names = [f"{prefix}{i}" for i in range(nodes)]
-    daemon = Daemon(scene_text(nodes, prefix), tuple(names), daemon_args)
+    daemon = Daemon(scene_text(nodes, prefix), tuple(names), daemon_args, cpu=placement.cpu(1))
     try:
         result = mp.Queue()
         start_at = time.perf_counter() + 2.0  # every application has opened its links by then
         workers = [mp.Process(target=_application, args=(
             os.path.join(daemon.dir, "rt"), [(i, names[i]) for i in range(k, nodes, apps)], nodes, rate, seconds,
-            seed, start_at, result)) for k in range(apps)]
+            seed, start_at, result, placement.cpu(0))) for k in range(apps)]
         for worker in workers:
             worker.start()
         cpu0, wall0 = _cpu(daemon.process.pid), time.perf_counter()
@@ -162,10 +176,12 @@ def _cpu(pid: int) -> float:
 # -- bare: a timer loop and one hop -------------------------------------------------------------------
 
 
-def _timer_loop(sock: socket.socket, rate: float, seconds: float, seed: int, realtime_priority: int) -> None:
+def _timer_loop(sock: socket.socket, rate: float, seconds: float, seed: int, realtime_priority: int,
+                cpu: int | None = None) -> None:
     """Sleep until 0.3 ms before each due time, spin the rest (as hilgate's loop does), write the due time."""
     import select
 
+    pin(cpu)
     from hilgate.core.realtime import lower_timer_slack
 
     lower_timer_slack()
@@ -192,92 +208,136 @@ def _timer_loop(sock: socket.socket, rate: float, seconds: float, seed: int, rea
     sock.close()
 
 
-def bare(rate: float, seconds: float, seed: int, realtime_priority: int) -> list[float]:
-    here, there = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
-    loop = mp.Process(target=_timer_loop, args=(there, rate, seconds, seed, realtime_priority))
-    loop.start()
-    there.close()
+def _read_due_times(here: socket.socket, timeout: float) -> list[float]:
+    """Read 8-byte due times (CLOCK_MONOTONIC) until end of file; the lateness of each on receipt."""
+    here.settimeout(timeout)
     late = []
     unpack = struct.Struct("<d").unpack
     while True:
         message = here.recv(64)
         received = time.perf_counter()
         if not message:
-            break
+            return late
         late.append(received - unpack(message)[0])
+
+
+def bare(rate: float, seconds: float, seed: int, realtime_priority: int, placement: Placement) -> list[float]:
+    """The reader (this thread) on the placement's step 0, the timer loop on step 1."""
+    here, there = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+    loop = mp.Process(target=_timer_loop, args=(there, rate, seconds, seed, realtime_priority, placement.cpu(1)))
+    loop.start()
+    there.close()
+    with pinned(placement.cpu(0)):
+        late = _read_due_times(here, seconds + 60)
     loop.join()
     here.close()
     return late
 
 
-def ns3_realtime(python: str, script: str, nodes: int, rate: float, seconds: float, seed: int) -> dict:
-    raw, _ = run_json([python, script, "--realtime", "--nodes", str(nodes), "--sim-time", repr(seconds), "--rate",
-                       repr(rate), "--size", str(ON_AIR - 3), "--bitrate", str(BITRATE), "--radius", repr(RADIUS),
-                       "--seed", str(seed)])
-    return raw
+def ns3_realtime(python: str, nodes: int, rate: float, seconds: float, seed: int, realtime_priority: int,
+                 placement: Placement) -> tuple[list[float], dict]:
+    """ns3_realtime.py under ``python`` on the placement's step 1, its reader (this thread) on step 0: the
+    lateness of each delivery on receipt, and the script's JSON summary."""
+    here, there = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+    argv = [python, NS3_SCRIPT, "--fd", str(there.fileno()), "--nodes", str(nodes), "--sim-time", repr(seconds),
+            "--rate", repr(rate), "--min-gap", repr(MIN_GAP), "--size", str(ON_AIR - 3), "--bitrate", str(BITRATE),
+            "--radius", repr(RADIUS), "--seed", str(seed), "--realtime-priority", str(realtime_priority)]
+    with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
+        process = subprocess.Popen(pinned_command(argv, placement.cpu(1)), stdout=out, stderr=err, text=True,
+                                   pass_fds=(there.fileno(),))
+        there.close()
+        try:
+            with pinned(placement.cpu(0)):
+                late = _read_due_times(here, seconds + 300)  # (importing ns-3 takes seconds)
+        finally:
+            here.close()
+            process.wait()
+        out.seek(0)
+        err.seek(0)
+        lines, errors = out.read().strip().splitlines(), err.read().strip().splitlines()
+    if process.returncode != 0 or not lines:
+        raise RuntimeError(f"ns3_realtime.py exited with {process.returncode}: {(errors or ['(no output)'])[-1]}")
+    return late, json.loads(lines[-1])
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--seconds", type=float, default=20.0, help="of sending, per hilgate run")
+    parser.add_argument("--seconds", type=float, default=20.0, help="of sending, per hilgate and ns-3 run")
     parser.add_argument("--bare-seconds", type=float, default=10.0, help="per bare run")
     parser.add_argument("--nodes", type=int, default=50)
     parser.add_argument("--rate", type=float, default=0.5, help="frames per second per node")
     parser.add_argument("--apps", type=int, default=2, help="application processes sharing the links")
-    parser.add_argument("--repeats", type=int, default=3, help="runs of each, alternating")
+    parser.add_argument("--repeats", type=int, default=3, help="runs of each side per placement, alternating")
+    parser.add_argument("--placement", choices=("same", "across", "both"), default="both")
     parser.add_argument("--realtime-priority", type=int, default=0,
-                        help="SCHED_FIFO priority for the daemon and the bare loop, as `hilgate run --realtime-priority`")
+                        help="SCHED_FIFO priority for the daemon, the bare loop and ns-3, as `hilgate run --realtime-priority`")
     parser.add_argument("--ns3-python", help="a Python with the ns3 wheel: run ns-3's real-time scheduler alongside")
-    parser.add_argument("--ns3-script", default=os.path.join(PEERS, "ns3_uan_aloha.py"))
     args = parser.parse_args()
-    why_not = check_python(args.ns3_python, "ns") or (None if os.path.exists(args.ns3_script)
-                                                      else f"no peer script {args.ns3_script}")
+    why_not = check_python(args.ns3_python, "ns")
     daemon_args = ("--realtime-priority", str(args.realtime_priority)) if args.realtime_priority else ()
     setup = f"SCHED_FIFO {args.realtime_priority}" if args.realtime_priority else "normal scheduling"
     deliveries_per_s = args.nodes * args.rate * (args.nodes - 1)
+    chosen, across_not_run = choose(args.placement)
     print(f"{args.nodes} nodes, {args.rate:g} frames/s each, {args.apps} application processes on the socket GLI, "
-          f"{setup}; bare loop at {deliveries_per_s:,.0f} timers/s; {args.repeats} runs of each, alternating", flush=True)
-    print(f"ns-3: {'real-time scheduler run alongside (' + args.ns3_python + ')' if why_not is None else 'not run (' + why_not + ')'}",
+          f"{setup}; bare loop at {deliveries_per_s:,.0f} timers/s; {args.repeats} run(s) of each per placement, "
+          f"alternating", flush=True)
+    for placement in chosen:
+        ns3 = f"; ns-3: {placement.describe(['reader', 'ns-3'])}" if why_not is None else ""
+        print(f"{placement.name:>11}: {placement.describe(['applications', 'daemon'])} (bare: "
+              f"{placement.describe(['reader', 'timer loop'])}{ns3})", flush=True)
+    if across_not_run:
+        print(across_not_run, flush=True)
+    print(f"ns-3: {'RealtimeSimulatorImpl run alongside (' + args.ns3_python + ')' if why_not is None else 'not run (' + why_not + ')'}",
           flush=True)
-    p99s: dict[str, list[float]] = {"bare": [], "hilgate": []}
-    ns3_mean, ns3_max = [], []
     sides = ["bare", "hilgate"] + (["ns-3"] if why_not is None else [])
+    p99s: dict[tuple[str, str], list[float]] = {}
     for repeat in range(1, args.repeats + 1):
-        k = (repeat - 1) % len(sides)  # each side goes first in turn
-        order = sides[k:] + sides[:k]
-        for side in order:
-            if side == "ns-3":
-                raw = ns3_realtime(args.ns3_python, args.ns3_script, args.nodes, args.rate, args.seconds, repeat)
-                ns3_mean.append(raw["send_lateness_mean_ms"])
-                ns3_max.append(raw["send_lateness_max_ms"])
-                print(f"run {repeat}    ns-3: send lateness of its real-time scheduler (a timer, not a delivery at an "
-                      f"application) mean {raw['send_lateness_mean_ms']:.3f} ms  max {raw['send_lateness_max_ms']:.3f} ms; "
-                      f"{raw['sends_late_over_1ms']:,} of {raw['app_tx']:,} sends later than 1 ms", flush=True)
-                continue
-            if side == "bare":
-                late = bare(deliveries_per_s, args.bare_seconds, repeat, args.realtime_priority)
-                extra = f"{len(late):,} timers in {args.bare_seconds:g} s"
-            else:
-                late, expected, cpu, counted = through_hilgate(args.nodes, args.rate, args.seconds, args.apps, repeat,
-                                                               daemon_args)
-                extra = (f"{len(late):,} deliveries read of {expected:,} frame-receiver pairs sent in {args.seconds:g} s "
-                         f"(the daemon delivered {counted['delivered']:,}, dropped {counted['drops']}; the rest were lost "
-                         f"on the channel); daemon CPU {cpu:.2f} s per wall s")
-            ms = [1e3 * x for x in late]
-            p99s[side].append(percentile(ms, 0.99))
-            print(f"run {repeat} {side:>7}: lateness at the application p50 {percentile(ms, 0.5):.3f} ms  p99 "
-                  f"{percentile(ms, 0.99):.3f} ms  max {max(ms):.3f} ms  min {min(ms):.3f} ms; {extra}", flush=True)
-    ratios = [h / b for h, b in zip(p99s["hilgate"], p99s["bare"])]
-    print(f"p99 lateness, min/median/max of {args.repeats}: bare {spread(p99s['bare'], 3)} ms, hilgate "
-          f"{spread(p99s['hilgate'], 3)} ms; ratio hilgate / bare {spread(ratios)}")
-    if ns3_mean:
-        print(f"ns-3 real-time send lateness, min/median/max of {args.repeats}: mean {spread(ns3_mean, 3)} ms, "
-              f"max {spread(ns3_max, 3)} ms (not divided into the above: not the same measurement point)")
-    else:
-        print("ns-3 real-time scheduler: not run")
+        for k in range(len(chosen)):
+            placement = chosen[(repeat - 1 + k) % len(chosen)]  # each placement goes first in turn
+            j = (repeat - 1) % len(sides)
+            for side in sides[j:] + sides[:j]:  # and each side, from one repeat to the next
+                if side not in sides:
+                    continue  # (ns-3 failed in an earlier run)
+                if side == "ns-3":
+                    try:
+                        late, raw = ns3_realtime(args.ns3_python, args.nodes, args.rate, args.seconds, repeat,
+                                                 args.realtime_priority, placement)
+                    except (RuntimeError, OSError, ValueError) as exc:
+                        print(f"ns-3: failed, not run again ({exc})", flush=True)
+                        sides.remove("ns-3")
+                        continue
+                    extra = (f"{len(late):,} deliveries read, {raw['sent']:,} frames sent in {args.seconds:g} s; "
+                             f"its scheduler's own lateness at those events (before the hop) mean "
+                             f"{raw['event_lateness_mean_ms']:.3f} ms, max {raw['event_lateness_max_ms']:.3f} ms")
+                elif side == "bare":
+                    late = bare(deliveries_per_s, args.bare_seconds, repeat, args.realtime_priority, placement)
+                    extra = f"{len(late):,} timers in {args.bare_seconds:g} s"
+                else:
+                    late, expected, cpu, counted = through_hilgate(args.nodes, args.rate, args.seconds, args.apps, repeat,
+                                                                   daemon_args, placement)
+                    extra = (f"{len(late):,} deliveries read of {expected:,} frame-receiver pairs sent in {args.seconds:g} s "
+                             f"(the daemon delivered {counted['delivered']:,}, dropped {counted['drops']}; the rest were "
+                             f"lost on the channel); daemon CPU {cpu:.2f} s per wall s")
+                if not late:
+                    raise RuntimeError(f"{side}: no lateness measured in run {repeat}")
+                ms = [1e3 * x for x in late]
+                p99s.setdefault((placement.name, side), []).append(percentile(ms, 0.99))
+                print(f"run {repeat}, {placement.name:>11}, {side:>7}: lateness at the application p50 "
+                      f"{percentile(ms, 0.5):.3f} ms  p99 {percentile(ms, 0.99):.3f} ms  max {max(ms):.3f} ms  "
+                      f"min {min(ms):.3f} ms; {extra}", flush=True)
+    print("p99 lateness at the application, min / median / max over the runs:")
+    for placement in chosen:
+        got = {side: p99s.get((placement.name, side), []) for side in ("bare", "hilgate", "ns-3")}
+        line = f"  {placement.name:>11}: bare {spread(got['bare'], 3)} ms, hilgate {spread(got['hilgate'], 3)} ms"
+        line += f", ns-3 {spread(got['ns-3'], 3)} ms" if got["ns-3"] else ", ns-3 not run"
+        line += f"; ratio hilgate / bare {spread([h / b for h, b in zip(got['hilgate'], got['bare'])])}"
+        if got["ns-3"]:
+            line += f", hilgate / ns-3 {spread([h / n for h, n in zip(got['hilgate'], got['ns-3'])])}"
+        print(line, flush=True)
+    medians = [statistics.median(p99s[(p.name, 'hilgate')]) for p in chosen]
     print(f"(targets: p99 <= {TARGET_P99_MS} ms and max <= {TARGET_MAX_MS} ms on a quiet host; within "
-          f"{TARGET_LOADED} x the bare loop's p99 on a loaded one; median p99 now "
-          f"{statistics.median(p99s['hilgate']):.3f} ms)")
+          f"{TARGET_LOADED} x the bare loop's p99 on a loaded one; hilgate's median p99 now "
+          + ", ".join(f"{m:.3f} ms {p.name}" for m, p in zip(medians, chosen)) + ")")
 
 
 if __name__ == "__main__":

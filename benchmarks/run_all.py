@@ -2,8 +2,9 @@
 """``make bench``: run every benchmark once, one after the other, and keep what they printed.
 
 Each benchmark's standard output is shown as it comes and written to ``--out`` (default
-``bench.out``) under a header line ``== <command line> ==``, after a first block saying when, on which
-host (cores, load average) and with which peers.  ``benchmarks/readme_bench.py`` turns that file into
+``bench.out``) under a header line ``== <command line> ==`` and a line with the load average when it
+started (other work on the machine moves every figure), after a first block saying when, on which host
+(cores, the CPUs this run may use, load average) and with which peers.  ``benchmarks/readme_bench.py`` turns that file into
 docs/performance.md, so no figure there is typed by hand.  A benchmark that fails stops
 the run (exit 1) and the file is left incomplete on purpose.
 
@@ -38,6 +39,14 @@ def benchmarks(ns3_python: str | None) -> list[list[str]]:
     ]
 
 
+def shown_path(path: str | None) -> str | None:
+    """``path`` relative to the repository when it is inside (.venv-ns3/bin/python): no one's home folder in the docs."""
+    if not path:
+        return path
+    relative = os.path.relpath(os.path.abspath(path), os.path.dirname(HERE))
+    return path if relative.startswith("..") else relative
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--ns3-python", default=os.environ.get("NS3_PYTHON") or None,
@@ -48,14 +57,16 @@ def main() -> int:
     with open(args.out, "w") as out:
         started = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
         load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
-        out.write(f"# make bench, {started}: {os.cpu_count()} cores, load average {load} at the start, "
+        cpus = ",".join(str(c) for c in sorted(os.sched_getaffinity(0)))
+        out.write(f"# make bench, {started}: {os.cpu_count()} cores (this run may use CPUs {cpus}), load average {load} at the start, "
                   f"Python {platform.python_version()}, {platform.machine()}; "
-                  f"ns-3: {args.ns3_python or 'not installed (no --ns3-python / NS3_PYTHON)'}\n")
+                  f"ns-3: {shown_path(args.ns3_python) or 'not installed (no --ns3-python / NS3_PYTHON)'}\n")
         for argv in benchmarks(args.ns3_python):
             shown = " ".join(argv[:1] + [a if a != args.ns3_python else "NS3_PYTHON" for a in argv[1:]])
             header = f"== {shown} =="
-            print(header, flush=True)
-            out.write(header + "\n")
+            load = "(load average " + ", ".join(f"{x:.2f}" for x in os.getloadavg()) + " as it started)"
+            print(header, load, sep="\n", flush=True)
+            out.write(header + "\n" + load + "\n")
             out.flush()
             process = subprocess.Popen([sys.executable, *argv], stdout=subprocess.PIPE, text=True, bufsize=1)
             for line in process.stdout:
