@@ -18,12 +18,13 @@ __all__ = ["frequencies_of", "ready_channels"]
 
 def frequencies_of(channel: Channel, links: Mapping[str, Any]) -> set[float]:
     """The frequencies (Hz) the paths of ``channel`` are looked up at: one per distinct pair of
-    front ends between its senders and its receivers, and the water's default."""
+    front ends between its senders and its receivers (the water's ``frequency_khz`` for a pair
+    without any, and for a channel without pairs)."""
     water = channel.water
     senders = {front_of(link.params) for link in links.values() if link.params.tx_channel == channel.name}
     receivers = {front_of(link.params) for link in links.values() if link.params.rx_channel == channel.name}
     default = water.frequency_khz * 1000.0
-    return {default} | {path_frequency_hz(tx, rx, default) for tx in senders for rx in receivers}
+    return {path_frequency_hz(tx, rx, default) for tx in senders for rx in receivers} or {default}
 
 
 def ready_channels(channels: Mapping[str, Channel], links: Mapping[str, Any], *, program: Program | None = None,
