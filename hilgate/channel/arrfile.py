@@ -59,86 +59,72 @@ class ArrivalFile:
         return slice(int(self.offsets[k]), int(self.offsets[k + 1]))
 
 
-class _Tokens:
-    def __init__(self, text: str):
-        self.tokens = text.split()
-        self.i = 0
-
-    def take(self, what: str) -> str:
-        if self.i >= len(self.tokens):
-            raise FieldFileError(f"truncated arrivals file: it ends before {what}")
-        token = self.tokens[self.i]
-        self.i += 1
-        return token
-
-    def count(self, what: str, limit: int = MAX_ARRIVALS) -> int:
-        token = self.take(what)
-        try:
-            value = int(token)
-        except ValueError:
-            raise FieldFileError(f"not an arrivals file: {what} is {token[:20]!r}, not a whole number") from None
-        if not 0 <= value <= limit:
-            raise FieldFileError(f"not an arrivals file: {what} {value}")
-        return value
-
-    def numbers(self, n: int, what: str) -> np.ndarray:
-        if self.i + n > len(self.tokens):
-            raise FieldFileError(f"truncated arrivals file: it ends within {what}")
-        chunk = self.tokens[self.i:self.i + n]
-        self.i += n
-        try:
-            values = np.asarray(chunk, dtype=np.float64)
-        except ValueError:
-            raise FieldFileError(f"not an arrivals file: {what} hold something that is not a number") from None
-        if not np.all(np.isfinite(values)):
-            raise FieldFileError(f"not an arrivals file: {what} hold values that are not finite")
-        return values
-
-
 def read_arr(text: str) -> ArrivalFile:
-    """Every arrival of a 2-D ASCII arrivals file."""
-    t = _Tokens(text)
-    kind = t.take("its kind").strip("'\"")
+    """Every arrival of a 2-D ASCII arrivals file.  After its kind, the file is numbers only: numpy
+    parses them in one pass (a file of tens of megabytes takes a fraction of a second), and the counts
+    are walked to find each receiver's rows."""
+    head, _, rest = text.lstrip().partition("\n") if text.strip() else ("", "", "")
+    kind = head.strip().strip("'\"")
+    if not head.strip():
+        raise FieldFileError("truncated arrivals file: it ends before its kind")
     if kind != "2D":
         raise FieldFileError(f"not a 2-D ASCII arrivals file: it starts with {kind[:20]!r}, not '2D'")
-    frequency = float(t.numbers(1, "the frequency")[0])
+    try:
+        values = np.fromstring(rest, sep=" ") if rest.strip() else np.zeros(0)
+    except ValueError:
+        raise FieldFileError("not an arrivals file: it holds something that is not a number") from None
+    if not np.all(np.isfinite(values)):
+        raise FieldFileError("not an arrivals file: it holds values that are not finite")
+    size = len(values)
+    i = 0
+
+    def count(what: str, limit: int) -> int:
+        nonlocal i
+        if i >= size:
+            raise FieldFileError(f"truncated arrivals file: it ends before {what}")
+        value = values[i]
+        if value != int(value) or not 0 <= value <= limit:
+            raise FieldFileError(f"not an arrivals file: {what} {value:g}")
+        i += 1
+        return int(value)
+
+    if size < 1:
+        raise FieldFileError("truncated arrivals file: it ends before the frequency")
+    frequency = float(values[0])
+    i = 1
     axes = []
     for what in ("source depths", "receiver depths", "ranges"):
-        n = t.count(f"the number of {what}", 10_000_000)
+        n = count(f"the number of {what}", 10_000_000)
         if n < 1:
             raise FieldFileError(f"not an arrivals file: no {what}")
-        axes.append(t.numbers(n, what))
+        if i + n > size:
+            raise FieldFileError(f"truncated arrivals file: it ends within the {what}")
+        axes.append(values[i:i + n].copy())
+        i += n
     nsz, nrz, nrr = (len(a) for a in axes)
     if nsz * nrz * nrr > MAX_ARRIVALS:
         raise FieldFileError(f"not an arrivals file: {nsz}×{nrz}×{nrr} receivers")
     counts = np.zeros(nsz * nrz * nrr, dtype=np.int64)
-    spans: list[tuple[int, int]] = []
-    total = 0
+    starts = np.zeros(nsz * nrz * nrr, dtype=np.int64)
     k = 0
     for _ in range(nsz):
-        most = t.count("the largest number of arrivals")
+        most = count("the largest number of arrivals", MAX_ARRIVALS)
         for _ in range(nrz * nrr):
-            n = t.count("a number of arrivals", most)
-            if n:
-                start = t.i
-                t.i += 8 * n
-                if t.i > len(t.tokens):
-                    raise FieldFileError("truncated arrivals file: it ends within an arrival")
-                spans.append((start, t.i))
-                total += n
-                if total > MAX_ARRIVALS:
-                    raise FieldFileError(f"not an arrivals file: more than {MAX_ARRIVALS} arrivals")
+            n = count("a number of arrivals", most)
+            starts[k] = i
             counts[k] = n
+            i += 8 * n
+            if i > size:
+                raise FieldFileError("truncated arrivals file: it ends within an arrival")
             k += 1
-    rows = [token for a, b in spans for token in t.tokens[a:b]]
-    try:
-        table = np.asarray(rows, dtype=np.float64).reshape(-1, 8)
-    except ValueError:
-        raise FieldFileError("not an arrivals file: an arrival holds something that is not a number") from None
-    if not np.all(np.isfinite(table)):
-        raise FieldFileError("not an arrivals file: an arrival holds values that are not finite")
+    total = int(counts.sum())
+    if total > MAX_ARRIVALS:
+        raise FieldFileError(f"not an arrivals file: more than {MAX_ARRIVALS} arrivals")
     offsets = np.zeros(len(counts) + 1, dtype=np.int64)
     np.cumsum(counts, out=offsets[1:])
+    # row r of receiver k starts at starts[k] + 8·(r − offsets[k])
+    row_start = np.repeat(starts - 8 * offsets[:-1], counts) + 8 * np.arange(total)
+    table = values[row_start[:, None] + np.arange(8)[None, :]]
     return ArrivalFile(frequency, axes[0], axes[1], axes[2], offsets, table[:, 0], table[:, 1], table[:, 2],
                        table[:, 4], table[:, 5], table[:, 6].astype(np.int64), table[:, 7].astype(np.int64))
 

@@ -28,9 +28,11 @@ def _list(values: list[float]) -> str:
     return " ".join(_num(v) for v in values) + " /"
 
 
-def env_text(water: Water, frequency_hz: float, kind: str, title: str = "hilgate") -> str:
+def env_text(water: Water, frequency_hz: float, kind: str, title: str = "hilgate",
+             sources: list[float] | None = None) -> str:
     """The ``.env`` text of one BELLHOP run: transmission loss on the water's grid (``kind`` =
-    :data:`TL_RUN`) or the arrivals on the same grid (:data:`ARRIVALS_RUN`, written as ASCII)."""
+    :data:`TL_RUN`) or the arrivals on its arrival grid (:data:`ARRIVALS_RUN`, written as ASCII), for
+    the water's source depths or ``sources``."""
     deepest = water.deepest_m
     top = "R" if water.surface == "rigid" else "V"
     # C: c-linear interpolation; W: attenuation in dB/wavelength; T: Thorp volume attenuation
@@ -46,7 +48,7 @@ def env_text(water: Water, frequency_hz: float, kind: str, title: str = "hilgate
     lines.append("'A*' 0.0" if water.bathymetry else "'A' 0.0")
     lines.append(f"{_num(deepest)} {_num(bottom.speed_mps)} 0.0 {_num(bottom.density)} "
                  f"{_num(bottom.attenuation_db_per_wavelength)} /")
-    sources = water.source_grid()
+    sources = water.source_grid() if sources is None else sources
     if kind == TL_RUN:
         receivers, ranges = water.receiver_grid(), water.range_grid()
     else:

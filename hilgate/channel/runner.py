@@ -39,7 +39,7 @@ __all__ = ["BellhopError", "Program", "find_program", "cache_dir", "field_key", 
 
 log = logging.getLogger(__name__)
 
-REDUCTION = 1
+REDUCTION = 2
 """The version of what the cache holds (bump it when the reduction changes)."""
 RUN_TIMEOUT_S = 3600.0
 MAX_OUTPUT_BYTES = 2 * 1024 ** 3
@@ -134,19 +134,35 @@ def _run(program: Program, workdir: str, name: str, env: str, bty: str | None, s
         return fh.read()
 
 
-def compute(water: Water, frequency_hz: float, program: Program, workdir: str) -> dict[str, np.ndarray]:
-    """Run BELLHOP twice (TL, arrivals) at one frequency and reduce its output to the lookup's grids."""
+def compute(water: Water, frequency_hz: float, program: Program, workdir: str,
+            step: Callable[[str], None] | None = None) -> dict[str, np.ndarray]:
+    """Run BELLHOP at one frequency (TL for every source depth at once, then the arrivals one source
+    depth at a time: an arrivals file holds every path, tens of megabytes per source depth in shallow
+    water) and reduce its output to the lookup's grids as it comes."""
     bty = bty_text(water) if water.bathymetry else None
+    khz = f"{frequency_hz / 1000:g} kHz"
     try:
+        if step is not None:
+            step(f"{khz}: transmission loss")
         shade = read_shd(_run(program, workdir, "tl", env_text(water, frequency_hz, TL_RUN), bty, ".shd"))
-        arrivals = read_arr(_run(program, workdir, "arr", env_text(water, frequency_hz, ARRIVALS_RUN), bty,
-                                 ".arr").decode("latin-1"))
+        firsts, spreads = [], []
+        sources = water.source_grid()
+        for n, zs in enumerate(sources):
+            if step is not None:
+                step(f"{khz}: arrivals from {zs:g} m ({n + 1}/{len(sources)})")
+            text = _run(program, workdir, "arr", env_text(water, frequency_hz, ARRIVALS_RUN, sources=[zs]), bty,
+                        ".arr").decode("latin-1")
+            arrivals = read_arr(text)
+            del text
+            first, spread = first_and_spread(arrivals, water.threshold_db)
+            firsts.append(first[0])
+            spreads.append(spread[0])
     except FieldFileError as exc:
         raise BellhopError(f"BELLHOP ({program}) wrote a file hilgate cannot read: {exc}") from None
     tl = shade.transmission_loss_db()
     tl[~np.isfinite(tl) | (tl > TL_CAP)] = TL_CAP
-    first, spread = first_and_spread(arrivals, water.threshold_db)
-    zs = arrivals.source_depths[:, None, None]
+    first, spread = np.stack(firsts), np.stack(spreads)
+    zs = np.asarray(sources)[:, None, None]
     zr = arrivals.receiver_depths[None, :, None]
     r = arrivals.ranges[None, None, :]
     straight = np.hypot(r, zr - zs) / water.mean_speed_mps
@@ -189,11 +205,17 @@ def prepare_fields(water: Water, frequencies: Iterable[float], *, program: Progr
     if missing:
         program = program or find_program()
         os.makedirs(cache, mode=0o700, exist_ok=True)
-        for n, hz in enumerate(missing):
+        runs = len(missing) * (1 + water.source_depths)
+        done = [0]
+
+        def step(what: str) -> None:
             if progress is not None:
-                progress(n, len(missing), f"{hz / 1000.0:g} kHz")
+                progress(done[0], runs, what)
+            done[0] += 1
+
+        for hz in missing:
             with tempfile.TemporaryDirectory(prefix="hilgate-bellhop-") as workdir:
-                arrays = compute(water, hz, program, workdir)
+                arrays = compute(water, hz, program, workdir, step)
             path = os.path.join(cache, field_key(water, hz) + ".npz")
             fd, tmp = tempfile.mkstemp(dir=cache, suffix=".npz.tmp")
             with os.fdopen(fd, "wb") as fh:
@@ -202,7 +224,7 @@ def prepare_fields(water: Water, frequencies: Iterable[float], *, program: Progr
             log.info("BELLHOP fields at %g Hz cached in %s", hz, path)
             found[hz] = arrays
         if progress is not None:
-            progress(len(missing), len(missing), "done")
+            progress(runs, runs, "done")
     return [to_fields(found[hz], water) for hz in wanted]
 
 
@@ -215,7 +237,7 @@ def bar(stream=None) -> Progress:
         filled = width * done // max(total, 1)
         line = f"BELLHOP [{'#' * filled}{'.' * (width - filled)}] {done}/{total} {what}"
         if stream.isatty():
-            stream.write("\r" + line + ("\n" if done == total else ""))
+            stream.write("\r" + line.ljust(100) + ("\n" if done == total else ""))
         else:
             stream.write(line + "\n")
         stream.flush()
