@@ -574,6 +574,14 @@ def cmd_report(args: argparse.Namespace) -> int:
         written = report(args.trace, args.summaries, args.out, args.vehicles, args.csv, args.title,
                          tuple(args.window) if args.window else None, run if len(runs) > 1 else None, formats,
                          args.width)
+        if args.water:
+            from .waterfig import water_figures
+
+            drawn = water_figures(args.trace, args.water, args.out, formats)
+            if not drawn:
+                print(f"{args.water}: no channel with water, or no simulated sender with a pose in the trace: "
+                      f"no field drawn", file=sys.stderr)
+            written = drawn + written
     except TraceError as exc:  # (ReportError is one): a line that names the file, the line and what is wrong
         print(f"hilgate: {exc}", file=sys.stderr)
         return 1
@@ -820,6 +828,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "many flows wider; text keeps its size, tick labels are thinned where they would overlap)")
     p.add_argument("--run", metavar="ID|N", help="a trace the daemon appended to across restarts holds several runs: "
                                                  "this one (its id, or 1 for the first, -1 the last; default the last)")
+    p.add_argument("--water", metavar="SCENE", help="also draw each channel with water's BELLHOP transmission loss "
+                                                    "with the vehicles' tracks over it (water-CHANNEL.png)")
 
     p = sub.add_parser("view", help="the operator's view in a browser: play a trace (play, pause, speed, a time "
                                     "slider), or without TRACE print the running daemon's address (hilgate run --web)")
