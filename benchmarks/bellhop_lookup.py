@@ -105,9 +105,10 @@ def main() -> int:
             print(f"  the same from the cache: {1000 * (time.perf_counter() - t0):.1f} ms")
 
     # -- per arrival, alone --------------------------------------------------------------------------
+    shared = tempfile.TemporaryDirectory()  # the scenes' fields, computed once for what follows
+    cache = os.path.join(shared.name, "bellhop")
     scene = load_scene_text(scene_text(True, 1), "bench.yaml")
-    with tempfile.TemporaryDirectory() as cache:
-        channels = ready_channels(scene.channels, scene.links, program=program, cache=cache)
+    channels = ready_channels(scene.channels, scene.links, program=program, cache=cache)
     paths: BellhopChannel = channels["ac"].paths
     sender, receiver = scene.links["ls"].params, scene.links["l0"].params
     thorp = receiver.error.path_from(sender.acoustic, sender.bitrate_bps)
@@ -147,8 +148,8 @@ def main() -> int:
     # -- per arrival, in a simulation ----------------------------------------------------------------
     from hilgate.sim.simulate import Simulation
 
-    with tempfile.TemporaryDirectory() as cache:
-        os.environ["HILGATE_CACHE"] = cache
+    with shared:
+        os.environ["HILGATE_CACHE"] = shared.name
         plain = load_scene_text(scene_text(False), "bench.yaml")
         watery = load_scene_text(scene_text(True), "bench.yaml")
         Simulation(watery, 1.0, None, None).run(False)  # fields into the cache, outside the timing

@@ -395,3 +395,51 @@ def test_first_and_spread_of_known_arrivals():
     mean = (w1 * 0.10 + w2 * 0.12) / (w1 + w2)
     assert spread[0, 0, 0] == pytest.approx(math.sqrt((w1 * (0.10 - mean) ** 2 + w2 * (0.12 - mean) ** 2) / (w1 + w2)))
     assert math.isnan(first[0, 0, 1]) and math.isnan(spread[0, 0, 1])
+
+
+# -- the commands ------------------------------------------------------------------------------------------
+
+
+def test_channel_prepare_check_and_report_draw_the_water(program, cache, tmp_path, monkeypatch, capsys):
+    """``hilgate channel prepare`` fills the cache (a progress bar on stderr), ``hilgate check`` prints the
+    link budget from the fields and a TL / PER table per pair, ``hilgate report --water`` draws the field
+    with the tracks; a scene without water says there is nothing to prepare."""
+    from hilgate.cli import main
+
+    monkeypatch.setenv("HILGATE_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("HILGATE_BELLHOP", " ".join(program.argv))
+    scene = tmp_path / "w.yaml"
+    scene.write_text(SCENE.format(r=600.0, sl=120.0))
+    assert main(["channel", "prepare", str(scene)]) == 0
+    out, err = capsys.readouterr()
+    assert "channel ac: BELLHOP fields at 12 kHz ready in" in out
+    assert "BELLHOP [" in err and "done" in err
+    assert main(["check", str(scene)]) == 0
+    out, _ = capsys.readouterr()
+    assert "the water (BELLHOP):" in out
+    assert "la -> lb on ac: 12 kHz, source at 75 m, 16 bytes" in out
+    table = out[out.index("la -> lb on ac"):].splitlines()
+    assert table[1].split() == ["depth", "m", "100", "m", "250", "m", "500", "m", "1", "km"]
+    assert [row.split()[0] for row in table[2:5]] == ["20", "100", "180"]
+    trace = tmp_path / "t.jsonl"
+    assert main(["sim", str(scene), "--until", "20", "--trace", str(trace)]) == 0
+    assert main(["report", str(trace), "--out", str(tmp_path / "rep"), "--water", str(scene)]) == 0
+    assert (tmp_path / "rep" / "water-ac.png").stat().st_size > 10_000
+    plain = tmp_path / "plain.yaml"
+    plain.write_text("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0, 0, 0]}}}\n"
+                     "links: {la: {vehicle: a, address: 1}}\n")
+    capsys.readouterr()
+    assert main(["channel", "prepare", str(plain)]) == 0
+    assert "no channel has water" in capsys.readouterr().out
+
+
+def test_a_failing_program_is_one_line_from_the_command(tmp_path, monkeypatch, capsys):
+    from hilgate.cli import main
+
+    monkeypatch.setenv("HILGATE_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("HILGATE_BELLHOP", "/bin/false")
+    scene = tmp_path / "w.yaml"
+    scene.write_text(SCENE.format(r=600.0, sl=120.0))
+    assert main(["channel", "prepare", str(scene)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("hilgate: BELLHOP (/bin/false) failed on tl: exit status 1"), err
