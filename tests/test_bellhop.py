@@ -443,3 +443,16 @@ def test_a_failing_program_is_one_line_from_the_command(tmp_path, monkeypatch, c
     assert main(["channel", "prepare", str(scene)]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("hilgate: BELLHOP (/bin/false) failed on tl: exit status 1"), err
+
+
+def test_a_cached_field_that_does_not_fit_is_computed_again(program, tmp_path):
+    from hilgate.channel.runner import field_key
+    water = Water(depth_m=50.0, sound_speed=((0.0, 1500.0),), ranges=5, depths=5, source_depths=1,
+                  arrival_ranges=5, arrival_depths=5)
+    path = tmp_path / (field_key(water, 10000.0) + ".npz")
+    with open(path, "wb") as fh:
+        np.savez(fh, tl=np.full((1, 2, 2), np.nan))  # wrong keys and shapes, as a hostile or broken file
+    fields = prepare_fields(water, [10000.0], program=program, cache=str(tmp_path))[0]
+    assert fields.tl_db(50.0, 25.0, 25.0) > 0.0
+    path.write_bytes(b"not a zip")
+    assert prepare_fields(water, [10000.0], program=program, cache=str(tmp_path))[0].frequency_hz == 10000.0

@@ -193,15 +193,21 @@ def prepare_fields(water: Water, frequencies: Iterable[float], *, program: Progr
     """The fields of ``water`` at each frequency (Hz): from the cache, or computed by BELLHOP and cached."""
     cache = cache_dir() if cache is None else cache
     wanted = sorted({float(f) for f in frequencies})
-    found: dict[float, dict[str, np.ndarray]] = {}
+    found: dict[float, Fields] = {}
     missing = []
     for hz in wanted:
         path = os.path.join(cache, field_key(water, hz) + ".npz")
         arrays = _load(path) if os.path.exists(path) else None
-        if arrays is None:
+        fields = None
+        if arrays is not None:
+            try:
+                fields = to_fields(arrays, water)
+            except (KeyError, ValueError, TypeError, IndexError) as exc:  # another version's, or tampered with
+                log.warning("cached BELLHOP fields %s do not fit (%s): computing them again", path, exc)
+        if fields is None:
             missing.append(hz)
         else:
-            found[hz] = arrays
+            found[hz] = fields
     if missing:
         program = program or find_program()
         os.makedirs(cache, mode=0o700, exist_ok=True)
@@ -222,10 +228,10 @@ def prepare_fields(water: Water, frequencies: Iterable[float], *, program: Progr
                 np.savez(fh, **arrays)
             os.replace(tmp, path)
             log.info("BELLHOP fields at %g Hz cached in %s", hz, path)
-            found[hz] = arrays
+            found[hz] = to_fields(arrays, water)
         if progress is not None:
             progress(runs, runs, "done")
-    return [to_fields(found[hz], water) for hz in wanted]
+    return [found[hz] for hz in wanted]
 
 
 def bar(stream=None) -> Progress:
