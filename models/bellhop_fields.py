@@ -67,6 +67,7 @@ class Fields:
     ``arrival_ranges``)."""
 
     __slots__ = ("frequency_hz", "sources", "depths", "ranges", "a_depths", "a_ranges", "tl", "first", "spread",
+                 "first_on_tl",
                  "mean_speed", "alpha_db_per_m", "_tl_strides", "_a_strides")
 
     def __init__(self, frequency_hz: float, sources: Sequence[float], depths: Sequence[float],
@@ -93,6 +94,12 @@ class Fields:
                                           self.a_depths_values(arrival_ranges, ranges)) / self.mean_speed,
                            (self.sources.n, self.a_depths.n, self.a_ranges.n), "first")
         self.spread = _flat(spread, (self.sources.n, self.a_depths.n, self.a_ranges.n), "spread")
+        # the delay's residual resampled onto the TL grid: an arrival then locates its place once for both
+        self.first_on_tl = _flat(_resample(np.asarray(self.first).reshape(self.sources.n, self.a_depths.n,
+                                                                          self.a_ranges.n),
+                                           self.a_depths_values(arrival_depths, depths),
+                                           self.a_depths_values(arrival_ranges, ranges), depths, ranges),
+                                 (self.sources.n, self.depths.n, self.ranges.n), "first")
         self.alpha_db_per_m = thorp_db_per_km(self.frequency_hz / 1000.0) / 1000.0
         self._tl_strides = (self.depths.n * self.ranges.n, self.ranges.n)
         self._a_strides = (self.a_depths.n * self.a_ranges.n, self.a_ranges.n)
@@ -149,6 +156,57 @@ class Fields:
         b = g[base + sj] + wk * (g[base + sj + 1] - g[base + sj])
         return lower + wi * (a + wj * (b - a) - lower)
 
+    def tl_and_delay(self, r: float, zs: float, zr: float) -> tuple[float, float]:
+        """:meth:`tl_db` and :meth:`delay_s` at once, the grid located once (what an arrival asks)."""
+        ranges = self.ranges
+        if r > ranges.last:
+            return self.tl_db(r, zs, zr), self.delay_s(r, zs, zr)
+        sources, depths = self.sources, self.depths
+        si, sj = self._tl_strides
+        n = sources.n
+        f = (zs - sources.x0) / sources.step if n > 1 else 0.0
+        if f <= 0.0:
+            i, wi = 0, 0.0
+        elif f >= n - 1:
+            i, wi = n - 1, 0.0
+        else:
+            i = int(f)
+            wi = f - i
+        n = depths.n
+        f = (zr - depths.x0) / depths.step
+        if f <= 0.0:
+            j, wj = 0, 0.0
+        elif f >= n - 1:
+            j, wj = n - 2, 1.0
+        else:
+            j = int(f)
+            wj = f - j
+        n = ranges.n
+        f = (r - ranges.x0) / ranges.step
+        if f <= 0.0:
+            k, wk = 0, 0.0
+        else:
+            k = int(f)
+            wk = f - k
+            if k >= n - 1:
+                k, wk = n - 2, 1.0
+        base = i * si + j * sj + k
+        values = []
+        for g in (self.tl, self.first_on_tl):
+            a = g[base] + wk * (g[base + 1] - g[base])
+            b = g[base + sj] + wk * (g[base + sj + 1] - g[base + sj])
+            lower = a + wj * (b - a)
+            if wi != 0.0:
+                up = base + si
+                a = g[up] + wk * (g[up + 1] - g[up])
+                b = g[up + sj] + wk * (g[up + sj + 1] - g[up + sj])
+                lower += wi * (a + wj * (b - a) - lower)
+            values.append(lower)
+        slant = math.hypot(r, zr - zs)
+        spherical = 20.0 * math.log10(slant) if slant > 1.0 else 0.0
+        tl = values[0] + spherical
+        return (TL_CAP if tl > TL_CAP else 0.0 if tl < 0.0 else tl), slant / self.mean_speed + values[1]
+
     def tl_db(self, r: float, zs: float, zr: float) -> float:
         """Transmission loss (dB) at horizontal range ``r`` from a source at depth ``zs`` to a receiver
         at depth ``zr`` (metres)."""
@@ -176,6 +234,16 @@ class Fields:
         ranges = self.a_ranges
         return self._lookup(self.spread, self._a_strides, self.a_depths, ranges, zs, zr,
                             min(max(r, ranges.x0), ranges.last))
+
+
+def _resample(values: "np.ndarray", depths: Sequence[float], ranges: Sequence[float],
+              onto_depths: Sequence[float], onto_ranges: Sequence[float]) -> "np.ndarray":
+    """``values`` [source][depth][range] linearly interpolated onto other depth and range axes (clamped)."""
+    out = np.empty((values.shape[0], len(onto_depths), len(onto_ranges)))
+    for s, plane in enumerate(values):
+        by_depth = np.array([np.interp(onto_depths, depths, plane[:, k]) for k in range(plane.shape[1])]).T
+        out[s] = np.array([np.interp(onto_ranges, ranges, row) for row in by_depth])
+    return out
 
 
 def _slant(sources: Sequence[float], depths: Sequence[float], ranges: Sequence[float]) -> "np.ndarray":
@@ -266,7 +334,8 @@ class BellhopPath:
         zr = b[2] - self.surface_z
         fields = self.fields
         spread = fields.spread_s(r, zs, zr) if self.spread_limit is not None else 0.0  # asked only where it counts
-        return Reception(self, fields.tl_db(r, zs, zr), fields.delay_s(r, zs, zr), spread)
+        tl, delay = fields.tl_and_delay(r, zs, zr)
+        return Reception(self, tl, delay, spread)
 
     # without positions (hilgate check's scan over distance): both ends at the grid's middle depth
     def per(self, d: float, size: int) -> float:

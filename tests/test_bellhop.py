@@ -456,3 +456,16 @@ def test_a_cached_field_that_does_not_fit_is_computed_again(program, tmp_path):
     assert fields.tl_db(50.0, 25.0, 25.0) > 0.0
     path.write_bytes(b"not a zip")
     assert prepare_fields(water, [10000.0], program=program, cache=str(tmp_path))[0].frequency_hz == 10000.0
+
+
+def test_an_arrivals_lookup_agrees_with_the_separate_ones(program, cache):
+    """``tl_and_delay`` (what an arrival asks: the grid located once, the delay resampled onto the TL
+    grid) gives tl_db's TL exactly and delay_s's delay within 0.1 ms, in the Munk field where the delay
+    bends most, at random places inside and beyond the grid."""
+    fields = prepare_fields(MUNK, [50.0], program=program, cache=cache)[0]
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        r, zs, zr = rng.uniform(0, 12000), rng.uniform(0, 5000), rng.uniform(0, 5000)
+        tl, delay = fields.tl_and_delay(r, zs, zr)
+        assert tl == pytest.approx(fields.tl_db(r, zs, zr), abs=1e-9)
+        assert delay == pytest.approx(fields.delay_s(r, zs, zr), abs=1e-4)
