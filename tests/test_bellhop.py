@@ -469,3 +469,17 @@ def test_an_arrivals_lookup_agrees_with_the_separate_ones(program, cache):
         tl, delay = fields.tl_and_delay(r, zs, zr)
         assert tl == pytest.approx(fields.tl_db(r, zs, zr), abs=1e-9)
         assert delay == pytest.approx(fields.delay_s(r, zs, zr), abs=1e-4)
+
+
+def test_a_sloping_bottom_reaches_the_field(program, cache):
+    """``bathymetry`` (depth against range from the sender, BELLHOP's .bty): where the bottom has risen
+    from 100 m to 70 m (1 km) and 43 m (1.9 km), a receiver at 80 m is in the sediment (tens of dB more
+    loss, or none of the sound), while at 30 m the field stays within 1 dB of the flat bottom's."""
+    sloping = Water(depth_m=100.0, sound_speed=((0.0, 1500.0), (100.0, 1500.0)), bathymetry=((0.0, 100.0), (2000.0, 40.0)),
+                    range_m=2000.0, ranges=20, depths=20, source_depths=2, arrival_ranges=10, arrival_depths=10)
+    flat = Water(**{**sloping.__dict__, "bathymetry": ()})
+    slope, level = (prepare_fields(w, [12000.0], program=program, cache=cache)[0] for w in (sloping, flat))
+    for r in (1000.0, 1900.0):
+        assert slope.tl_db(r, 25.0, 80.0) > level.tl_db(r, 25.0, 80.0) + 20.0
+        assert slope.tl_db(r, 25.0, 30.0) == pytest.approx(level.tl_db(r, 25.0, 30.0), abs=1.0)
+    assert slope.tl_db(200.0, 25.0, 80.0) == pytest.approx(level.tl_db(200.0, 25.0, 80.0), abs=1.0)
