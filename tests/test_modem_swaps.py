@@ -80,8 +80,11 @@ def test_a_link_moves_between_simulated_and_real_modem_with_the_application_unto
             daemon.reload(scene(tmp_path, ap, far, ea, modem, real=False))
             # what the removed emulated modem had on the air finishes as the physics says: wait (in model time,
             # from the live trace: the pose samples go on) until it has, or the next frame meets it
-            reloads = [e["t"] for e in live_events(daemon) if e["ev"] == "reload"]
+            # (the trace is flushed every half second: wait for the second reload's own line, not the first's)
             deadline = time.monotonic() + 60
+            while len(reloads := [e["t"] for e in live_events(daemon) if e["ev"] == "reload"]) < 2:
+                assert time.monotonic() < deadline, "the second reload never reached the trace"
+                time.sleep(0.05)
             while not any(e["t"] > reloads[-1] + 3 for e in live_events(daemon)):
                 assert time.monotonic() < deadline, "the model's clock stood still"
                 time.sleep(0.05)
