@@ -483,3 +483,20 @@ def test_a_sloping_bottom_reaches_the_field(program, cache):
         assert slope.tl_db(r, 25.0, 80.0) > level.tl_db(r, 25.0, 80.0) + 20.0
         assert slope.tl_db(r, 25.0, 30.0) == pytest.approx(level.tl_db(r, 25.0, 30.0), abs=1.0)
     assert slope.tl_db(200.0, 25.0, 80.0) == pytest.approx(level.tl_db(200.0, 25.0, 80.0), abs=1.0)
+
+
+def test_a_receiver_that_tolerates_less_delay_spread_loses_the_frame(program, cache):
+    """``acoustic: delay_spread_s`` on the receiver: where the looked-up RMS spread (surface and bottom
+    echoes in 200 m of water, 600 m apart) exceeds it, every frame is lost; below it, the SNR decides."""
+    import dataclasses
+
+    scene = _scene()
+    paths = _ready(scene, program, cache)["ac"].paths
+    sender, receiver = scene.links["la"].params, scene.links["lb"].params
+    spread = paths.bind(sender, receiver).model.fields.spread_s(600.0, 75.0, 75.0)
+    assert spread > 1e-4
+    for limit, lost in ((spread / 2, True), (spread * 2, False)):
+        strict = dataclasses.replace(receiver, acoustic=dataclasses.replace(receiver.acoustic, delay_spread_s=limit))
+        reception = paths.bind(sender, strict).model.at((0.0, 0.0, 75.0), (600.0, 0.0, 75.0))
+        assert reception.spread == pytest.approx(spread)
+        assert (reception.per(600.0, 16) == 1.0) is lost
