@@ -26,9 +26,10 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Iterable
 
+from .bellhop_fields import BellhopPath
 from .frame import BROADCAST
 from .path import bind_path
 from .radio import OVERLAP_EPS, Arrival  # noqa: F401  (their home was here; kept importable)
@@ -50,6 +51,11 @@ class Channel:
     name: str
     speed_mps: float
     min_delay_s: float = 0.0
+    water: Any = None
+    """The channel's water (``environment.Water``) when the scene gives one: BELLHOP's fields then
+    decide every path's delay and loss (``paths``, set when the fields are ready)."""
+    paths: Any = field(default=None, compare=False)
+    """A ``bellhop_fields.BellhopChannel``: binds each pair to the fields it looks up per arrival."""
 
     def delay(self, d: float) -> float:
         return self.min_delay_s + d / self.speed_mps
@@ -64,7 +70,7 @@ class _Neighbour:
     never takes the fast path (``reach`` is False)."""
 
     __slots__ = ("radio", "static", "reach", "d", "tau", "in_range", "rmin", "rmax", "min_delay", "speed",
-                 "per_cache", "model", "power", "refused", "interferes")
+                 "per_cache", "model", "power", "refused", "interferes", "positional")
 
     def __init__(self, sender: "Radio", receiver: "Radio", channel: Channel):
         self.radio = receiver
@@ -72,7 +78,9 @@ class _Neighbour:
         self.min_delay = channel.min_delay_s
         self.speed = channel.speed_mps
         self.per_cache: dict[int, float] | None = None  # made at the first loss drawn: a million pairs, few draw
-        self.model, self.refused, self.interferes = bind_path(sender, receiver)
+        paths = channel.paths
+        self.model, self.refused, self.interferes = (bind_path if paths is None else paths.bind)(sender, receiver)
+        self.positional = isinstance(self.model, BellhopPath)  # delay and loss from the ends' positions
         self.power = -1.0  # received power on a static path, once asked (collisions: sinr)
         self.static = bool(sender.pose.static and receiver.pose.static)
         self.d = self.tau = 0.0
@@ -85,6 +93,10 @@ class _Neighbour:
             else:
                 self.d = math.dist(a, b)
                 self.tau = channel.delay(self.d)
+                if self.positional:  # a static pair looks the water up once
+                    self.model = self.model.at(a, b)
+                    self.positional = False
+                    self.tau = channel.min_delay_s + self.model.delay
                 self.in_range = self.rmin <= self.d <= self.rmax
         self.reach = self.static and self.in_range and self.refused is None  # the common case, tested first
 
@@ -350,6 +362,7 @@ class Medium:
         missed = 0  # neighbours the frame does not reach (counted this way round: they are the few)
         for nb in neighbours:
             radio = nb.radio
+            loss: Any = nb
             if nb.reach:
                 d = nb.d
                 start = t + nb.tau
@@ -379,16 +392,20 @@ class Medium:
                         radio.unreachable(frame)
                     missed += 1
                     continue
-                start = t + nb.min_delay + d / nb.speed
+                if nb.positional:  # the water between these two positions, looked up once for this arrival
+                    loss = nb.model.at(sender_position, receiver_position)
+                    start = t + nb.min_delay + loss.delay
+                else:
+                    start = t + nb.min_delay + d / nb.speed
             if nb.refused is not None:
                 if not nb.interferes:  # outside its band: it hears nothing
                     if radio.address == dst:
                         radio.unreachable(frame, nb.refused)
                     missed += 1
                     continue
-                radio.arrive_refused(frame, t, start, start + duration, d, nb, nb.refused)
+                radio.arrive_refused(frame, t, start, start + duration, d, loss, nb.refused)
                 continue
-            radio.arrive(frame, t, start, start + duration, d, nb)
+            radio.arrive(frame, t, start, start + duration, d, loss)
         self.arrivals += len(neighbours) - missed
 
 
