@@ -9,6 +9,8 @@ BIN    := $(VENV)/bin
 SCENE  ?= scenes/demo.yaml
 FUZZ   ?= 1
 ARGS   ?=
+BELLHOP_VENV := .venv-bellhop
+PELAGIC      := 0.5.0
 
 # `sudo make install` / `sudo make uninstall`: hilgate as a systemd service (systemd/install.sh;
 # docs/operations.md). DESTDIR=DIR writes every file under DIR instead and skips the root-only steps (the
@@ -54,9 +56,18 @@ sim: $(VENV)/.installed
 # serial: tests/conftest.py says which and why) run after it, alone.
 TEST_JOBS ?= 4
 
-test: $(VENV)/.installed-test
+test: $(VENV)/.installed-test $(BELLHOP_VENV)/.installed
 	$(BIN)/python -m pytest -q -n $(TEST_JOBS) --dist loadscope -m "not serial"
 	$(BIN)/python -m pytest -q -m serial
+
+# BELLHOP for the channel that knows the water (docs/channel-models.md, "BELLHOP"): pelagic, GPL-3.0-or-later,
+# in an environment of its own that hilgate (MIT) never imports; hilgate runs tools/bellhop_run.py with its
+# Python as a separate program. `make test` makes it: the BELLHOP tests run the real program.
+$(BELLHOP_VENV)/.installed:
+	@echo "make: creating $(BELLHOP_VENV), BELLHOP (pelagic $(PELAGIC)) in an environment of its own"
+	$(PYTHON) -m venv $(BELLHOP_VENV)
+	$(BELLHOP_VENV)/bin/python -m pip install --quiet --disable-pip-version-check 'pelagic==$(PELAGIC)'
+	touch $@
 
 # The fuzz tests (test_fuzz_*) for minutes instead of seconds: HILGATE_FUZZ multiplies their examples.
 fuzz: $(VENV)/.installed-test
@@ -93,4 +104,4 @@ bench: $(VENV)/.installed
 	$(BIN)/python benchmarks/readme_bench.py bench.out docs/compiled-hot-path.md --only pass_cost.py gli_roundtrip.py multihost.py
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache
+	rm -rf $(VENV) $(BELLHOP_VENV) build *.egg-info .pytest_cache

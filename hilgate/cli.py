@@ -42,14 +42,47 @@ def cmd_check(args: argparse.Namespace) -> int:
     print(scene_summary(scene))
     print(_queue_budget(scene))
     limit = None if args.budget_rows == 0 else args.budget_rows
-    rows = link_budget(scene, args.frame_bytes, limit)
+    channels = None
+    if any(channel.water is not None for channel in scene.channels.values()):
+        from .channel.prepare import ready_channels
+        from .channel.runner import bar, find_program
+
+        program = find_program(args.bellhop) if args.bellhop else None
+        channels = ready_channels(scene.channels, scene.links, program=program, progress=bar())
+    rows = link_budget(scene, args.frame_bytes, limit, channels)
     if rows:
         sizes = f"{args.frame_bytes} bytes" if args.frame_bytes else "the sender's first flow's size, else 64 bytes"
         print(f"\nlink budget (distances at t = 0; frames of {sizes}):")
         print(format_budget(rows[:limit]))
         if limit is not None and len(rows) > limit:
             print("... more pairs not shown (--budget-rows 0 shows them all)")
+    if channels is not None:
+        from .sim.water_budget import water_tables
+
+        tables = water_tables(scene, channels, args.frame_bytes, limit)
+        if tables:
+            print("\nthe water (BELLHOP):")
+            print("\n".join(tables))
     print("ok")
+    return 0
+
+
+def cmd_channel(args: argparse.Namespace) -> int:
+    """``hilgate channel prepare SCENE``: BELLHOP's fields of every channel with water, into the cache."""
+    from .channel.prepare import frequencies_of, ready_channels
+    from .channel.runner import bar, cache_dir, find_program
+    from .scene.load import load_scene
+
+    scene = load_scene(args.scene, args.overrides, plugins=args.plugins, preset_dirs=args.preset_dirs)
+    watery = {name: c for name, c in scene.channels.items() if c.water is not None}
+    if not watery:
+        print(f"{args.scene}: no channel has water: nothing to prepare")
+        return 0
+    program = find_program(args.bellhop) if args.bellhop else None
+    ready_channels(watery, scene.links, program=program, progress=bar())
+    for name, channel in watery.items():
+        hz = ", ".join(f"{f / 1000:g}" for f in sorted(frequencies_of(channel, scene.links)))
+        print(f"channel {name}: BELLHOP fields at {hz} kHz ready in {cache_dir()}")
     return 0
 
 
@@ -542,6 +575,14 @@ def cmd_report(args: argparse.Namespace) -> int:
         written = report(args.trace, args.summaries, args.out, args.vehicles, args.csv, args.title,
                          tuple(args.window) if args.window else None, run if len(runs) > 1 else None, formats,
                          args.width)
+        if args.water:
+            from .waterfig import water_figures
+
+            drawn = water_figures(args.trace, args.water, args.out, formats)
+            if not drawn:
+                print(f"{args.water}: no channel with water, or no simulated sender with a pose in the trace: "
+                      f"no field drawn", file=sys.stderr)
+            written = drawn + written
     except TraceError as exc:  # (ReportError is one): a line that names the file, the line and what is wrong
         print(f"hilgate: {exc}", file=sys.stderr)
         return 1
@@ -606,6 +647,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "emulate": cmd_emulate,
     "queues": cmd_queues,
     "check": cmd_check,
+    "channel": cmd_channel,
     "sim": cmd_sim,
     "run": cmd_run,
     "status": cmd_status,
@@ -641,6 +683,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="PER of frames of N bytes (default: the size of the sender's first flow, else 64)")
     p.add_argument("--budget-rows", type=int, default=50, metavar="N",
                    help="show at most N pairs in the link budget (default 50; 0: all)")
+    p.add_argument("--bellhop", metavar="COMMAND", help="the BELLHOP program for channels with water (default: "
+                   "HILGATE_BELLHOP, bellhop.exe on the PATH, or the checkout's .venv-bellhop)")
+
+    p = sub.add_parser("channel", help="channels that know the water: 'prepare' computes BELLHOP's fields of a "
+                                        "scene's channels with water into the cache (with a progress bar)")
+    p.add_argument("action", choices=("prepare",))
+    _add_scene_args(p)
+    p.add_argument("--bellhop", metavar="COMMAND", help="the BELLHOP program (default: HILGATE_BELLHOP, "
+                   "bellhop.exe on the PATH, or the checkout's .venv-bellhop)")
 
     p = sub.add_parser("fit", help="fit an error: block (loss against distance) to the frames of a trace")
     p.add_argument("trace", help="a trace (JSON lines) of hilgate run with real links, or of hilgate sim with "
@@ -778,6 +829,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "many flows wider; text keeps its size, tick labels are thinned where they would overlap)")
     p.add_argument("--run", metavar="ID|N", help="a trace the daemon appended to across restarts holds several runs: "
                                                  "this one (its id, or 1 for the first, -1 the last; default the last)")
+    p.add_argument("--water", metavar="SCENE", help="also draw each channel with water's BELLHOP transmission loss "
+                                                    "with the vehicles' tracks over it (water-CHANNEL.png)")
 
     p = sub.add_parser("view", help="the operator's view in a browser: play a trace (play, pause, speed, a time "
                                     "slider), or without TRACE print the running daemon's address (hilgate run --web)")
@@ -859,9 +912,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"hilgate: {exc}", file=sys.stderr)
         return 1
     except Exception as exc:  # a client tool's error (GliError, …): one line, no traceback
+        from .channel.runner import BellhopError
         from .gli.socket_client import GliError
 
-        if isinstance(exc, GliError):
+        if isinstance(exc, (GliError, BellhopError)):
             print(f"hilgate: {exc}", file=sys.stderr)
             return 1
         raise

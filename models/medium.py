@@ -50,7 +50,11 @@ class Channel:
     name: str
     speed_mps: float
     min_delay_s: float = 0.0
-    propagation: Propagation = field(default=None)  # type: ignore[assignment]  # (None: the straight line)
+    water: Any = None
+    """The channel's water (``environment.Water``) when the scene gives one: BELLHOP's fields then
+    decide every path's delay and loss (its propagation becomes a ``bellhop_fields.BellhopChannel``
+    once the fields are ready: ``hilgate.channel.prepare``)."""
+    propagation: Propagation = field(default=None, compare=False)  # type: ignore[assignment]  # (None: the straight line)
 
     def __post_init__(self) -> None:
         if self.propagation is None:
@@ -63,10 +67,12 @@ class _Neighbour:
     It is also the loss model handed with each arrival on this path: the receiver's error model bound
     to the sender (``path.py``) at the distance, cached per frame size when neither vehicle moves.  A
     pair whose receiver refuses the sender (``refused``: another band, a modulation it does not decode)
-    never takes the fast path (``reach`` is False)."""
+    never takes the fast path (``reach`` is False).  On a channel whose propagation is ``positional`` (the
+    water's BELLHOP fields) the bound model is looked up at both ends' positions: once for a static pair,
+    at every arrival for a moving one."""
 
-    __slots__ = ("radio", "static", "reach", "d", "tau", "in_range", "rmin", "rmax", "delay",
-                 "per_cache", "model", "power", "refused", "interferes")
+    __slots__ = ("radio", "static", "reach", "d", "tau", "in_range", "rmin", "rmax", "delay", "min_delay",
+                 "per_cache", "model", "power", "refused", "interferes", "positional")
 
     def __init__(self, sender: "Radio", receiver: "Radio", channel: Channel):
         self.radio = receiver
@@ -75,6 +81,8 @@ class _Neighbour:
         self.delay = propagation.delay  # a moving pair asks it at every transmission
         self.per_cache: dict[int, float] | None = None  # made at the first loss drawn: a million pairs, few draw
         self.model, self.refused, self.interferes = propagation.bind(sender, receiver)
+        self.positional = propagation.positional  # each arrival's delay and loss from both ends' positions
+        self.min_delay = channel.min_delay_s
         self.power = -1.0  # received power on a static path, once asked (collisions: sinr)
         self.static = bool(sender.pose.static and receiver.pose.static)
         self.d = self.tau = 0.0
@@ -86,7 +94,12 @@ class _Neighbour:
                 self.in_range = False
             else:
                 self.d = math.dist(a, b)
-                self.tau = propagation.delay(self.d, a, b)
+                if self.positional:  # a static pair looks the water up once
+                    self.model = self.model.at(a, b)
+                    self.positional = False
+                    self.tau = self.min_delay + self.model.delay
+                else:
+                    self.tau = propagation.delay(self.d, a, b)
                 self.in_range = self.rmin <= self.d <= self.rmax
         self.reach = self.static and self.in_range and self.refused is None  # the common case, tested first
 
@@ -349,6 +362,7 @@ class Medium:
         missed = 0  # neighbours the frame does not reach (counted this way round: they are the few)
         for nb in neighbours:
             radio = nb.radio
+            loss: Any = nb
             if nb.reach:
                 d = nb.d
                 start = t + nb.tau
@@ -378,16 +392,20 @@ class Medium:
                         radio.unreachable(frame)
                     missed += 1
                     continue
-                start = t + nb.delay(d, sender_position, receiver_position)
+                if nb.positional:  # the water between these two positions, looked up once for this arrival
+                    loss = nb.model.at(sender_position, receiver_position)
+                    start = t + nb.min_delay + loss.delay
+                else:
+                    start = t + nb.delay(d, sender_position, receiver_position)
             if nb.refused is not None:
                 if not nb.interferes:  # outside its band: it hears nothing
                     if radio.address == dst:
                         radio.unreachable(frame, nb.refused)
                     missed += 1
                     continue
-                radio.arrive_refused(frame, t, start, start + duration, d, nb, nb.refused)
+                radio.arrive_refused(frame, t, start, start + duration, d, loss, nb.refused)
                 continue
-            radio.arrive(frame, t, start, start + duration, d, nb)
+            radio.arrive(frame, t, start, start + duration, d, loss)
         self.arrivals += len(neighbours) - missed
 
 

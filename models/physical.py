@@ -79,6 +79,7 @@ class Acoustic:
     modulation: str = "bpsk"
     coding_gain_db: float = 0.0
     decodes: tuple[str, ...] = ()    # modulations it decodes besides its own (a multi-mode receiver)
+    delay_spread_s: float | None = None  # the RMS delay spread it tolerates (a BELLHOP channel: above, lost)
 
     @property
     def centre_khz(self) -> float:

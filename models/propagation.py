@@ -7,8 +7,10 @@ the models computes a path delay (``Medium.propagation_delay`` for an emulated m
 for a MAC's timing ask the same object), so a channel that replaces it, such as a ray-traced (BELLHOP)
 channel, changes every path at once.
 
-:class:`StraightLine` is the model of every shipped scene: sound on a straight line at one speed, the
-loss of the receiver's error model bound to the sender (``path.py``).
+:class:`StraightLine` is the model of a channel without water: sound on a straight line at one speed,
+the loss of the receiver's error model bound to the sender (``path.py``).  A channel with ``water:`` has
+:class:`~.bellhop_fields.BellhopChannel` instead, once its fields are ready: BELLHOP's delay and
+transmission loss at both ends' positions, looked up per arrival (``positional``).
 """
 
 from __future__ import annotations
@@ -27,6 +29,13 @@ __all__ = ["Propagation", "StraightLine"]
 class Propagation(Protocol):
     """What a channel is asked for every path."""
 
+    positional: bool
+    """False: the loss model :meth:`bind` gives is one of distance (``per(d, size)``) and :meth:`delay`
+    gives every arrival's delay.  True (a ray-traced channel): the bound model's ``at(a, b)`` is one
+    arrival's loss model at both ends' positions, with its ``delay`` (the channel's ``min_delay_s`` is
+    added to it by the medium); the medium asks it once for a static pair, at every arrival for a moving
+    one."""
+
     def delay(self, d: float, a: "Vec3 | None" = None, b: "Vec3 | None" = None) -> float:
         """Seconds from the sender at ``a`` to the receiver at ``b``, ``d`` metres apart.  Without
         positions (a MAC's timing at its range: ``SimModem.tau_at``) a model that needs them answers
@@ -43,6 +52,7 @@ class StraightLine:
 
     speed_mps: float
     min_delay_s: float = 0.0
+    positional = False
 
     def delay(self, d: float, a: "Vec3 | None" = None, b: "Vec3 | None" = None) -> float:
         return self.min_delay_s + d / self.speed_mps

@@ -16,12 +16,13 @@ ALLOWED = {
     "hilgate.drivers": {"hilgate.core"},
     "hilgate.gli": {"hilgate.core"},
     "hilgate.scene": {"hilgate.core", "hilgate.models", "hilgate.drivers"},  # drivers: their option checks
-    "hilgate.sim": {"hilgate.core", "hilgate.models", "hilgate.scene"},
+    "hilgate.channel": {"hilgate.core", "hilgate.models"},  # BELLHOP as a program, its files, the cache
+    "hilgate.sim": {"hilgate.core", "hilgate.models", "hilgate.scene", "hilgate.channel"},
     "hilgate.report": {"hilgate.core"},
     "hilgate.ros2": {"hilgate.core", "hilgate.gli"},  # gli: the Zenoh door's per-client bounds
     "hilgate.web": {"hilgate.core", "hilgate.report"},  # report: the trace reader the player uses
     "hilgate.daemon": {"hilgate.core", "hilgate.models", "hilgate.scene", "hilgate.sim", "hilgate.gli",
-                       "hilgate.drivers", "hilgate.ros2", "hilgate.web"},
+                       "hilgate.drivers", "hilgate.ros2", "hilgate.web", "hilgate.channel"},
 }
 
 

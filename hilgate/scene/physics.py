@@ -19,7 +19,7 @@ ERROR_KINDS = ("expr", "physical")
 PHYSICAL_KEYS = ("absorption", "spreading", "shipping", "wind_mps", "noise_floor_db", "noise_band",
                  "temperature_c", "salinity_ppt", "depth_m", "ph", "collisions", "capture_db")
 ERROR_KEYS = ("kind", "unit", "expr") + PHYSICAL_KEYS
-ACOUSTIC_KEYS = ("band_khz", "source_level_db", "level", "modulation", "coding_gain_db", "decodes")
+ACOUSTIC_KEYS = ("band_khz", "source_level_db", "level", "modulation", "coding_gain_db", "decodes", "delay_spread_s")
 
 
 def error_kind(node: Node, path: str) -> str:
@@ -82,4 +82,5 @@ def acoustic_params(node: Node, path: str) -> Acoustic:
         modulation=f.get("modulation", choice(*MODULATIONS), "bpsk"),
         coding_gain_db=f.get("coding_gain_db", number(0, 30), 0.0),
         decodes=f.get("decodes", _decodes, ()),
+        delay_spread_s=f.get("delay_spread_s", number(above=0, maximum=60), None),
     )

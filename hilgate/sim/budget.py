@@ -11,8 +11,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
+from ..models.bellhop_fields import BellhopPath
 from ..models.path import bind_path
+from ..models.physical import PhysicalErrorModel
 from ..scene.specs import Scene
 from .pose_sources import build_pose
 
@@ -67,10 +70,13 @@ def _frame_size(scene: Scene, link_id: str, default: int) -> int:
     return default
 
 
-def link_budget(scene: Scene, frame_bytes: int | None = None, limit: int | None = None) -> list[PairBudget]:
+def link_budget(scene: Scene, frame_bytes: int | None = None, limit: int | None = None,
+                channels: dict[str, Any] | None = None) -> list[PairBudget]:
     """Pairs of simulated links (sender → receiver on its transmit channel) that can lose frames;
     error-free paths are left out.  With ``limit``, at most that many plus one (so the caller knows
-    there are more): a scene of a thousand links has a million pairs."""
+    there are more): a scene of a thousand links has a million pairs.  ``channels``: the scene's
+    channels made ready (``hilgate.channel.prepare``): a channel with water binds its pairs through
+    BELLHOP's fields (SNR and PER at the two vehicles' places; the crossings with both at mid-depth)."""
     poses = {name: build_pose(vehicle) for name, vehicle in scene.vehicles.items()}
     sims = [link for link in scene.links.values() if link.backend == "sim"]
     rows = []
@@ -81,10 +87,12 @@ def link_budget(scene: Scene, frame_bytes: int | None = None, limit: int | None 
         for receiver in sims:
             if receiver is sender or receiver.params.rx_channel != sender.params.tx_channel:
                 continue
-            model, refused, _ = bind_path(sender.params, receiver.params)
+            propagation = None if channels is None else channels[sender.params.tx_channel].propagation
+            model, refused, _ = (bind_path if propagation is None else propagation.bind)(sender.params, receiver.params)
             a = poses[sender.vehicle].position(0.0)
             b = poses[receiver.vehicle].position(0.0)
             d = None if a is None or b is None else math.dist(a, b)
+            here = model.at(a, b) if isinstance(model, BellhopPath) and a is not None and b is not None else None
             if refused is not None:
                 per = None if d is None else 1.0
                 rows.append(PairBudget(sender.id, receiver.id, size, d, None, per, None, None, (rmin, rmax), refused))
@@ -95,7 +103,9 @@ def link_budget(scene: Scene, frame_bytes: int | None = None, limit: int | None 
                 continue
             snr_of = getattr(model, "snr_db", None)  # (a column of the table: only physical models have an SNR)
             snr = snr_of(d) if snr_of is not None and d is not None else None
-            per = None if d is None else (model.per(d, size) if rmin <= d <= rmax else 1.0)
+            if here is not None:
+                snr = here.snr_db() if isinstance(model.model, PhysicalErrorModel) else None
+            per = None if d is None else ((here or model).per(d, size) if rmin <= d <= rmax else 1.0)
             high = rmax if math.isfinite(rmax) else FAR_M
             key = (model, size, rmin, high)
             if key not in crossings:

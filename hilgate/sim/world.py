@@ -13,6 +13,7 @@ import logging
 import random
 from typing import Any
 
+from ..channel.prepare import ready_channels
 from ..models.flows import FlowSource
 from ..models.frame import BROADCAST
 from ..models.medium import Medium
@@ -45,7 +46,7 @@ class World:
         self.observer = observer
         self.host = host
         self.seed = scene.seed if seed is None else seed
-        self.medium = Medium(clock, scene.channels.values())
+        self.medium = Medium(clock, ready_channels(scene.channels, scene.links).values())
         self.poses: dict[str, PoseSource] = {name: self._build_pose(v) for name, v in scene.vehicles.items()}
         self.modems: dict[str, SimModem] = {}
         for link in scene.links.values():
@@ -118,7 +119,7 @@ class World:
         :func:`hilgate.scene.diff.diff` found, computed here when not given) says what to rebuild."""
         changes = changes if changes is not None else diff(self.scene, scene)
         self.medium.channels.clear()
-        self.medium.channels.update({c.name: c for c in scene.channels.values()})
+        self.medium.channels.update({c.name: c for c in ready_channels(scene.channels, scene.links).values()})
         for name in changes.vehicles:
             self.poses[name] = self._build_pose(scene.vehicles[name])
         for name in changes.vehicles_removed:

@@ -1,0 +1,251 @@
+"""Running BELLHOP as a separate program and keeping what it computed on disk.
+
+BELLHOP implementations are GPL (the Acoustics Toolbox; pelagic, GPL-3.0-or-later), hilgate is MIT: it
+never imports one.  It writes the run's environment file (``envfile.py``), starts the program the user
+installed as a process, and reads the ``.shd``/``.arr`` files it writes with its own readers.  The
+program is, in this order: ``--bellhop``/``HILGATE_BELLHOP`` (a command; the file root is appended), the
+Acoustics Toolbox's ``bellhop.exe`` on the PATH, or this checkout's ``.venv-bellhop`` (pelagic, ``make
+.venv-bellhop``) running ``tools/bellhop_run.py``.
+
+What a run gives is reduced at once to the grids a lookup needs (TL; first-arrival delay and delay
+spread) and cached as ``HASH.npz`` under ``$HILGATE_CACHE`` (default ``~/.cache/hilgate/bellhop``),
+where HASH is the SHA-256 of everything the fields depend on: the environment and bathymetry files
+exactly as BELLHOP reads them, the arrival threshold and this reduction's version.  A changed profile,
+bottom, grid or frequency is a new hash; an old file is never reused for it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import os
+import shlex
+import shutil
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass
+from typing import Callable, Iterable
+
+import numpy as np
+
+from ..models.bellhop_fields import TL_CAP, Fields
+from ..models.environment import Water
+from .arrfile import first_and_spread, read_arr
+from .envfile import ARRIVALS_RUN, TL_RUN, bty_text, env_text
+from .shdfile import FieldFileError, read_shd
+
+__all__ = ["BellhopError", "Program", "find_program", "cache_dir", "field_key", "prepare_fields", "Progress"]
+
+log = logging.getLogger(__name__)
+
+REDUCTION = 2
+"""The version of what the cache holds (bump it when the reduction changes)."""
+RUN_TIMEOUT_S = 3600.0
+MAX_OUTPUT_BYTES = 2 * 1024 ** 3
+
+Progress = Callable[[int, int, str], None]
+"""``progress(done, total, what)``: told before each run and once at the end."""
+
+
+class BellhopError(Exception):
+    """BELLHOP could not be run or its output not read: one line, what to do."""
+
+
+@dataclass(frozen=True)
+class Program:
+    """How to start BELLHOP: ``argv`` + the file root."""
+
+    argv: tuple[str, ...]
+    name: str
+
+    def __str__(self) -> str:
+        return self.name
+
+
+def _checkout() -> str:
+    """The source checkout hilgate runs from (where ``tools/`` and ``.venv-bellhop`` are)."""
+    return os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def find_program(command: str | None = None) -> Program:
+    """The BELLHOP program (the module's doc says in which order it is looked for)."""
+    command = command or os.environ.get("HILGATE_BELLHOP") or None
+    if command:
+        argv = tuple(shlex.split(command))
+        if not argv:
+            raise BellhopError("the BELLHOP command is empty")
+        return Program(argv, command)
+    exe = shutil.which("bellhop.exe") or shutil.which("bellhop")
+    if exe:
+        return Program((exe,), exe)
+    root = _checkout()
+    python = os.path.join(root, ".venv-bellhop", "bin", "python")
+    script = os.path.join(root, "tools", "bellhop_run.py")
+    if os.path.exists(python) and os.path.exists(script):
+        return Program((python, script), f"pelagic ({python} {script})")
+    raise BellhopError("no BELLHOP program: install one (make .venv-bellhop: pelagic in an environment of its own; "
+                       "or the Acoustics Toolbox's bellhop.exe on the PATH), or name it with --bellhop / "
+                       "HILGATE_BELLHOP (docs/channel-models.md, 'BELLHOP')")
+
+
+def cache_dir() -> str:
+    base = os.environ.get("HILGATE_CACHE")
+    if not base:
+        base = os.path.join(os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "hilgate")
+    return os.path.join(base, "bellhop")
+
+
+def field_key(water: Water, frequency_hz: float) -> str:
+    """The hash that names one frequency's fields: what BELLHOP reads, and how it is reduced."""
+    h = hashlib.sha256()
+    for part in (f"hilgate-fields-{REDUCTION}", env_text(water, frequency_hz, TL_RUN),
+                 env_text(water, frequency_hz, ARRIVALS_RUN), bty_text(water) if water.bathymetry else "",
+                 repr(water.threshold_db), repr(water.surface_z_m)):
+        h.update(part.encode())
+        h.update(b"\0")
+    return h.hexdigest()
+
+
+def _run(program: Program, workdir: str, name: str, env: str, bty: str | None, suffix: str) -> bytes:
+    root = os.path.join(workdir, name)
+    with open(root + ".env", "w", encoding="ascii") as fh:
+        fh.write(env)
+    if bty is not None:
+        with open(root + ".bty", "w", encoding="ascii") as fh:
+            fh.write(bty)
+    try:
+        done = subprocess.run(list(program.argv) + [root], cwd=workdir, stdin=subprocess.DEVNULL,
+                              capture_output=True, timeout=RUN_TIMEOUT_S, check=False)
+    except FileNotFoundError:
+        raise BellhopError(f"cannot start BELLHOP ({program}): no such program") from None
+    except PermissionError:
+        raise BellhopError(f"cannot start BELLHOP ({program}): not executable") from None
+    except subprocess.TimeoutExpired:
+        raise BellhopError(f"BELLHOP ({program}) ran longer than {RUN_TIMEOUT_S:g} s on {name}") from None
+    out = root + suffix
+    if done.returncode != 0 or not os.path.exists(out):
+        said = (done.stderr or done.stdout).decode("utf-8", "replace").strip().splitlines()
+        last = said[-1][:300] if said else f"exit status {done.returncode}"
+        raise BellhopError(f"BELLHOP ({program}) failed on {name}: {last}")
+    if os.path.getsize(out) > MAX_OUTPUT_BYTES:
+        raise BellhopError(f"BELLHOP's {name}{suffix} is larger than {MAX_OUTPUT_BYTES} bytes: a smaller grid")
+    with open(out, "rb") as fh:
+        return fh.read()
+
+
+def compute(water: Water, frequency_hz: float, program: Program, workdir: str,
+            step: Callable[[str], None] | None = None) -> dict[str, np.ndarray]:
+    """Run BELLHOP at one frequency (TL for every source depth at once, then the arrivals one source
+    depth at a time: an arrivals file holds every path, tens of megabytes per source depth in shallow
+    water) and reduce its output to the lookup's grids as it comes."""
+    bty = bty_text(water) if water.bathymetry else None
+    khz = f"{frequency_hz / 1000:g} kHz"
+    try:
+        if step is not None:
+            step(f"{khz}: transmission loss")
+        shade = read_shd(_run(program, workdir, "tl", env_text(water, frequency_hz, TL_RUN), bty, ".shd"))
+        firsts, spreads = [], []
+        sources = water.source_grid()
+        for n, zs in enumerate(sources):
+            if step is not None:
+                step(f"{khz}: arrivals from {zs:g} m ({n + 1}/{len(sources)})")
+            text = _run(program, workdir, "arr", env_text(water, frequency_hz, ARRIVALS_RUN, sources=[zs]), bty,
+                        ".arr").decode("latin-1")
+            arrivals = read_arr(text)
+            del text
+            first, spread = first_and_spread(arrivals, water.threshold_db)
+            firsts.append(first[0])
+            spreads.append(spread[0])
+    except FieldFileError as exc:
+        raise BellhopError(f"BELLHOP ({program}) wrote a file hilgate cannot read: {exc}") from None
+    tl = shade.transmission_loss_db()
+    tl[~np.isfinite(tl) | (tl > TL_CAP)] = TL_CAP
+    first, spread = np.stack(firsts), np.stack(spreads)
+    zs = np.asarray(sources)[:, None, None]
+    zr = arrivals.receiver_depths[None, :, None]
+    r = arrivals.ranges[None, None, :]
+    straight = np.hypot(r, zr - zs) / water.mean_speed_mps
+    first = np.where(np.isfinite(first), first, np.broadcast_to(straight, first.shape))
+    spread = np.where(np.isfinite(spread), spread, 0.0)
+    return {"frequency_hz": np.array(frequency_hz), "sources": shade.source_depths, "depths": shade.receiver_depths,
+            "ranges": shade.ranges, "tl": tl, "arrival_depths": arrivals.receiver_depths,
+            "arrival_ranges": arrivals.ranges, "first": first, "spread": spread}
+
+
+def to_fields(arrays: dict[str, np.ndarray], water: Water) -> Fields:
+    return Fields(float(arrays["frequency_hz"]), arrays["sources"], arrays["depths"], arrays["ranges"],
+                  arrays["tl"], arrays["first"], arrays["spread"], water.mean_speed_mps,
+                  arrays["arrival_depths"], arrays["arrival_ranges"])
+
+
+def _load(path: str) -> dict[str, np.ndarray] | None:
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return {name: data[name] for name in data.files}
+    except (OSError, ValueError, KeyError, EOFError) as exc:
+        log.warning("cached BELLHOP fields %s unreadable (%s): computing them again", path, exc)
+        return None
+
+
+def prepare_fields(water: Water, frequencies: Iterable[float], *, program: Program | None = None,
+                   cache: str | None = None, progress: Progress | None = None) -> list[Fields]:
+    """The fields of ``water`` at each frequency (Hz): from the cache, or computed by BELLHOP and cached."""
+    cache = cache_dir() if cache is None else cache
+    wanted = sorted({float(f) for f in frequencies})
+    found: dict[float, Fields] = {}
+    missing = []
+    for hz in wanted:
+        path = os.path.join(cache, field_key(water, hz) + ".npz")
+        arrays = _load(path) if os.path.exists(path) else None
+        fields = None
+        if arrays is not None:
+            try:
+                fields = to_fields(arrays, water)
+            except (KeyError, ValueError, TypeError, IndexError) as exc:  # another version's, or tampered with
+                log.warning("cached BELLHOP fields %s do not fit (%s): computing them again", path, exc)
+        if fields is None:
+            missing.append(hz)
+        else:
+            found[hz] = fields
+    if missing:
+        program = program or find_program()
+        os.makedirs(cache, mode=0o700, exist_ok=True)
+        runs = len(missing) * (1 + water.source_depths)
+        done = [0]
+
+        def step(what: str) -> None:
+            if progress is not None:
+                progress(done[0], runs, what)
+            done[0] += 1
+
+        for hz in missing:
+            with tempfile.TemporaryDirectory(prefix="hilgate-bellhop-") as workdir:
+                arrays = compute(water, hz, program, workdir, step)
+            path = os.path.join(cache, field_key(water, hz) + ".npz")
+            fd, tmp = tempfile.mkstemp(dir=cache, suffix=".npz.tmp")
+            with os.fdopen(fd, "wb") as fh:
+                np.savez(fh, **arrays)
+            os.replace(tmp, path)
+            log.info("BELLHOP fields at %g Hz cached in %s", hz, path)
+            found[hz] = to_fields(arrays, water)
+        if progress is not None:
+            progress(runs, runs, "done")
+    return [found[hz] for hz in wanted]
+
+
+def bar(stream=None) -> Progress:
+    """A progress bar on stderr (a terminal) or one line per run (a log file)."""
+    stream = stream or sys.stderr
+
+    def show(done: int, total: int, what: str) -> None:
+        width = 30
+        filled = width * done // max(total, 1)
+        line = f"BELLHOP [{'#' * filled}{'.' * (width - filled)}] {done}/{total} {what}"
+        if stream.isatty():
+            stream.write("\r" + line.ljust(100) + ("\n" if done == total else ""))
+        else:
+            stream.write(line + "\n")
+        stream.flush()
+
+    return show
