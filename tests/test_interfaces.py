@@ -46,13 +46,15 @@ SEAMS = {
     Observer: ["hilgate.models.observer:NullObserver", "hilgate.models.observer:EventList",
                "hilgate.sim.recorder:Recorder"],
     LossModel: ["hilgate.models.errormodel:ErrorModel", "hilgate.models.physical:PhysicalErrorModel",
+                "hilgate.models.bellhop_fields:BellhopPath", "hilgate.models.bellhop_fields:Reception",
                 "hilgate.models.path:Unheard",
                 "hilgate.models.path:Undecodable", "hilgate.models.medium:_Neighbour"],
     SinrLossModel: ["hilgate.models.physical:PhysicalErrorModel", "hilgate.models.path:Undecodable",
+                    "hilgate.models.bellhop_fields:BellhopPath", "hilgate.models.bellhop_fields:Reception",
                     "hilgate.models.path:Unheard",
                     "hilgate.models.medium:_Neighbour"],
 }
-SEAMS[Propagation] = ["hilgate.models.propagation:StraightLine"]
+SEAMS[Propagation] = ["hilgate.models.propagation:StraightLine", "hilgate.models.bellhop_fields:BellhopChannel"]
 BACKENDS = ["hilgate.sim.sim_backend:SimBackend", "hilgate.drivers.evologics:EvologicsBackend",
             "hilgate.drivers.s100:S100Backend", "hilgate.drivers.m64:M64Backend",
             "hilgate.drivers.micromodem:MicromodemBackend"]

@@ -20,6 +20,7 @@ class OneSecondMore:
     """A channel whose paths all take one second more (what a ray-traced model might add)."""
 
     line: StraightLine
+    positional = False
 
     def delay(self, d, a=None, b=None):
         return 1.0 + self.line.delay(d, a, b)
