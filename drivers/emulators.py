@@ -611,7 +611,7 @@ class EvologicsEmulator:
         velocity = self.last_velocity
         airtime = self.port.airtime(len(frame.real)) or 0.0  # the whole frame on air
         duration_us = round(airtime * 1e6)
-        ptime_us = round((self.port.delay_from(frame.src, t) or d / 1500) * 1e6)
+        ptime_us = round((self.port.delay_from(frame.src, t) or 0.0) * 1e6)  # the channel's: BELLHOP's in water
         self.received = True
         if kind == "burst":
             self._extended(f"BITRATE,remote,{self._bitrate()}")

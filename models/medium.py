@@ -40,6 +40,7 @@ if TYPE_CHECKING:
     from .clock import Clock
     from .frame import Frame
     from .radio import Radio
+    from .trajectories import Vec3
 
 
 @dataclass(frozen=True)
@@ -95,13 +96,28 @@ class _Neighbour:
             else:
                 self.d = math.dist(a, b)
                 if self.positional:  # a static pair looks the water up once
-                    self.model = self.model.at(a, b)
+                    self.model, self.tau = self.water_between(a, b)
                     self.positional = False
-                    self.tau = self.min_delay + self.model.delay
                 else:
                     self.tau = propagation.delay(self.d, a, b)
                 self.in_range = self.rmin <= self.d <= self.rmax
         self.reach = self.static and self.in_range and self.refused is None  # the common case, tested first
+
+    def water_between(self, a: "Vec3", b: "Vec3") -> tuple[Any, float]:
+        """On a ``positional`` channel: this arrival's loss model at both ends' positions and its delay
+        (the channel's ``min_delay_s`` added), from the fields of this pair's frequency."""
+        loss = self.model.at(a, b)
+        return loss, self.min_delay + loss.delay
+
+    def delay_between(self, d: float, a: "Vec3", b: "Vec3") -> float:
+        """τ of this path with its ends at ``a`` and ``b`` (``d`` apart): what an arrival on it takes,
+        and what every other asker (an emulated modem's ``AT?T``, an acknowledgement, a late remote
+        transmission) is told."""
+        if self.static:
+            return self.tau
+        if self.positional:
+            return self.water_between(a, b)[1]
+        return self.delay(d, a, b)
 
     def per(self, d: float, size: int) -> float:
         """Probability that a frame of ``size`` bytes is lost on this path at distance ``d``."""
@@ -145,6 +161,7 @@ class Medium:
         self._snap: tuple[float, dict[tuple[int, int, int], list[Radio]], list[Radio], float] | None = None
         self._snap_reach = 0.0
         self._dirty = True
+        self._pairs: dict[tuple[Radio, Radio], _Neighbour] = {}  # paths asked for their delay alone
         self.tap: Any = None
         """Called ``tap(sender, frame, t, duration)`` for every transmission from a radio that listens
         here (one this host serves): how other hosts' media hear it (hilgate.daemon.network)."""
@@ -249,6 +266,7 @@ class Medium:
         self._snap = None
         reach = [sender.range_m[1] for sender in roam]
         self._snap_reach = max(max(reach), 1.0) if reach else 0.0
+        self._pairs = {}
         self._dirty = False
 
     def _beyond(self, sender: "Radio", dst: int) -> tuple["Radio", ...]:
@@ -326,17 +344,28 @@ class Medium:
         listed.sort(key=lambda nb: order[nb.radio])
         return listed
 
-    def propagation_delay(self, sender: Any, receiver: Any, t: float) -> float | None:
-        """τ from ``sender`` to ``receiver`` (modems or radios) at ``t``, or None if out of range or
-        without a pose."""
+    def propagation_delay(self, sender: Any, receiver: Any, t: float, in_range: bool = True) -> float | None:
+        """τ from modem ``sender`` to modem ``receiver`` at ``t``, exactly what an arrival between them
+        at ``t`` takes (the pair's own path: ``_Neighbour.delay_between``); None without a pose, or
+        (``in_range``) out of the sender's range."""
         a, b = sender.pose.position(t), receiver.pose.position(t)
         if a is None or b is None:
             return None
         d = math.dist(a, b)
         rmin, rmax = sender.range_m
-        if not rmin <= d <= rmax:
+        if in_range and not rmin <= d <= rmax:
             return None
-        return self.channels[sender.tx_channel].propagation.delay(d, a, b)
+        return self._pair(sender.radio, receiver.radio).delay_between(d, a, b)
+
+    def _pair(self, sender: "Radio", receiver: "Radio") -> _Neighbour:
+        """The path from ``sender`` to ``receiver`` as transmissions see it (made once, kept until the
+        topology changes)."""
+        if self._dirty:
+            self._rebuild()
+        pair = self._pairs.get((sender, receiver))
+        if pair is None:
+            pair = self._pairs[(sender, receiver)] = _Neighbour(sender, receiver, self.channels[sender.tx_channel])
+        return pair
 
     def transmit(self, sender: "Radio", frame: "Frame", t: float, duration: float) -> None:
         """``frame`` goes on air from ``sender`` at ``t`` for ``duration`` seconds: hand out its arrivals."""
@@ -393,8 +422,8 @@ class Medium:
                     missed += 1
                     continue
                 if nb.positional:  # the water between these two positions, looked up once for this arrival
-                    loss = nb.model.at(sender_position, receiver_position)
-                    start = t + nb.min_delay + loss.delay
+                    loss, tau = nb.water_between(sender_position, receiver_position)
+                    start = t + tau
                 else:
                     start = t + nb.delay(d, sender_position, receiver_position)
             if nb.refused is not None:

@@ -67,3 +67,59 @@ def test_an_emulated_modems_delay_and_a_macs_timing_ask_the_same_model():
     b = net.modem("b", THERE, range_m=(0.0, 100.0))
     assert net.medium.propagation_delay(a, b, 0.0) == pytest.approx(1.0 + 1.8 / SPEED, abs=1e-15)
     assert b.tau_at(100.0) == pytest.approx(1.0 + 100.0 / SPEED, abs=1e-15)
+
+
+class DepthDelay:
+    """One arrival of a positional channel: its delay grows with the receiver's depth (as BELLHOP's
+    eigenrays do), no loss."""
+
+    def __init__(self, delay):
+        self.delay = delay
+
+    def per(self, d, size):
+        return 0.0
+
+
+class ByDepth:
+    """A pair's loss model on a positional channel, looked up at both ends' positions."""
+
+    def __init__(self, bound):
+        self.bound = bound
+
+    def at(self, a, b):
+        return DepthDelay(0.25 + abs(b[2]) * 0.125)
+
+
+@dataclass(frozen=True)
+class WaterLike:
+    """A positional propagation (the BELLHOP channel's kind): a pair's delay comes from its bound model
+    at both ends' positions, and its pair-less answer (a MAC's timing at a range) differs from it."""
+
+    line: StraightLine
+    positional = True
+
+    def delay(self, d, a=None, b=None):
+        return self.line.delay(d)
+
+    def bind(self, sender, receiver):
+        bound = bind_path(sender, receiver)
+        return bound._replace(model=ByDepth(bound.model))
+
+
+def test_on_a_positional_channel_an_emulated_modem_is_told_the_delay_its_arrivals_take():
+    """BELLHOP in the seam: the delay an emulated modem reports (AT?T) and an acknowledgement's timing
+    are the arrival's own (the pair's lookup at both ends' positions plus the channel's min_delay_s),
+    for a static and a moving receiver, not the channel's pair-less answer at the mean sound speed."""
+    channel = Channel("ac", 1500.0, 0.01, propagation=WaterLike(StraightLine(1500.0, 0.01)))
+    net = Net(channel)
+    a = net.modem("a", (0.0, 0.0, 0.0))
+    static = net.modem("static", (30.0, 0.0, 4.0))
+    moving = net.modem("moving", parked_until(100.0, (0.0, 30.0, 8.0), (0.0, 60.0, 8.0)))
+    net.send("a", None, 10, at=1.0)
+    net.run()
+    airtime = a.airtime(10)
+    heard = {name: net.delivered[name][0][0] - airtime - 1.0 for name in ("static", "moving")}
+    assert heard == pytest.approx({"static": 0.01 + 0.25 + 0.5, "moving": 0.01 + 0.25 + 1.0}, abs=1e-12)
+    assert net.medium.propagation_delay(a, static, 1.0) == pytest.approx(heard["static"], abs=1e-12)
+    assert net.medium.propagation_delay(a, moving, 1.0) == pytest.approx(heard["moving"], abs=1e-12)
+    assert a.tau_at(1500.0) == pytest.approx(0.01 + 1.0, abs=1e-12)  # no positions: the distance alone

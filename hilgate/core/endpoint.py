@@ -83,7 +83,8 @@ class LinkPort(Protocol):
         """Model seconds a frame of ``size`` bytes is on air (None when a real modem carries the link)."""
 
     def delay_from(self, address: int, t: float) -> float | None:
-        """Propagation delay from the modem at ``address`` to this link's (None: out of range, unknown)."""
+        """Propagation delay from the modem at ``address`` to this link's, as an arrival between them
+        now would take (None: unknown, or either position is)."""
 
     def reception_from(self, address: int, t: float) -> Any:
         """The receiving modem's measurements of a frame from ``address`` (a ``models.link_budget.Reception``)."""
