@@ -56,9 +56,15 @@ sim: $(VENV)/.installed
 # serial: tests/conftest.py says which and why) run after it, alone.
 TEST_JOBS ?= 4
 
+# Where this user may (root, or wherever `unshare --ipc` is allowed), each pytest runs in an IPC namespace of
+# its own: the POSIX queues its tests make, even those of a run killed midway, are gone when it ends (their
+# bytes back in the user's queue budget, RLIMIT_MSGQUEUE, which every run on the machine shares), and no
+# other run sees their names. Elsewhere the tests unlink what they make, as before.
+ISOLATE = $(shell unshare --ipc true 2>/dev/null && echo unshare --ipc)
+
 test: $(VENV)/.installed-test $(BELLHOP_VENV)/.installed
-	$(BIN)/python -m pytest -q -n $(TEST_JOBS) --dist loadscope -m "not serial"
-	$(BIN)/python -m pytest -q -m serial
+	$(ISOLATE) $(BIN)/python -m pytest -q -n $(TEST_JOBS) --dist loadscope -m "not serial"
+	$(ISOLATE) $(BIN)/python -m pytest -q -m serial
 
 # BELLHOP for the channel that knows the water (docs/channel-models.md, "BELLHOP"): pelagic, GPL-3.0-or-later,
 # in an environment of its own that hilgate (MIT) never imports; hilgate runs tools/bellhop_run.py with its

@@ -37,6 +37,8 @@ SERIAL = {
     "test_s100_emulator.py": "an S100 over ptys: pieces joined by the line's idle time",
     "test_field_realtime.py": "a preemption, provoked and measured",
     "test_realtime.py": "the real-time scheduler's own timing",
+    "test_readme.py::test_every_quick_start_command_prints_what_the_readme_shows":
+        "the README's walk: its daemons are the README's commands, which the kit does not start",
     "test_formation.py::test_the_application_classes_keep_formation_through_hilgate_app":
         "examples/formation/run.py: five links' queues in a daemon of its own",
 }

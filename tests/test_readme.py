@@ -215,6 +215,12 @@ class Walk:
     def close(self) -> None:
         for process in self.processes:
             process.finish(signal.SIGTERM)
+        self.unlink_queues()
+
+    def unlink_queues(self) -> None:
+        """Remove the queues this walk's daemons made (dccomms' rule: nobody unlinks them): each part of
+        the walk then needs only its own scene's share of the user's queue budget, which every test run
+        on the machine shares."""
         from hilgate.gli.queues import unlink_queues
 
         unlink_queues(f"{link}_{self.token}" for link in self.links)
@@ -282,6 +288,7 @@ def test_every_quick_start_command_prints_what_the_readme_shows(walk):
              "--param count=5 --until 12")
     assert "Pong: stopped after" in walk.stop(pong)  # Ctrl-C: its summary
     walk.stop(daemon)
+    walk.unlink_queues()
 
     # (b) one link to a real modem, without a restart
     walk.run("cp scenes/demo.yaml lab.yaml")
@@ -292,6 +299,7 @@ def test_every_quick_start_command_prints_what_the_readme_shows(walk):
     walk.run("hilgate reload")
     walk.run("hilgate status", until_shown=True)
     walk.stop(daemon)
+    walk.unlink_queues()
 
     # (c) the experiment in virtual time, with figures
     walk.run("hilgate sim scenes/demo.yaml --trace demo.jsonl --summary demo.json")
