@@ -11,6 +11,10 @@ import signal
 from collections import deque
 from typing import Any, Callable
 
+EPOLL_WAIT_MIN_S = 0.002
+"""From this wait on (seconds), the loop sleeps in one ``epoll_wait`` of whole milliseconds instead of
+``select()`` then ``epoll_wait(0)``: it may wake up to a millisecond early, which matters no more."""
+
 
 class IoLoop:
     def __init__(self) -> None:
@@ -76,14 +80,28 @@ class IoLoop:
         except BlockingIOError:
             pass
 
-    def wait(self, timeout: float) -> bool:
-        """Sleep until a descriptor is ready or ``timeout`` seconds passed; whether one is.  ``select()``
-        on the epoll descriptor itself: ``epoll_wait`` rounds its timeout to whole milliseconds."""
+    def wait(self, timeout: float) -> list[tuple[int, int]]:
+        """Sleep until a descriptor is ready or ``timeout`` seconds passed; the ready descriptors and
+        their events (empty: none came).
+
+        ``epoll_wait`` counts its timeout in whole milliseconds, so a wait shorter than
+        :data:`EPOLL_WAIT_MIN_S` sleeps in ``select()`` on the epoll descriptor (microseconds) and then
+        asks epoll what is ready: two system calls.  A longer one (an idle daemon, the wait for the next
+        frame of an application) is one ``epoll_wait`` of the whole milliseconds it holds, so it wakes
+        up to a millisecond early, never late; the loop then waits for the rest."""
+        if timeout >= EPOLL_WAIT_MIN_S:
+            return self.epoll.poll((int(timeout * 1000.0) - 0.5) / 1000.0)  # (Python rounds this up to the ms)
         try:
             ready, _, _ = select.select([self.epoll.fileno()], [], [], timeout)
         except InterruptedError:  # pragma: no cover - PEP 475 retries, kept for safety
-            return True
-        return bool(ready)
+            return self.epoll.poll(0)
+        return self.epoll.poll(0) if ready else []
+
+    @staticmethod
+    def waits_until(timeout: float) -> float:
+        """How long :meth:`wait` sleeps at most for ``timeout`` (seconds): whole milliseconds from
+        :data:`EPOLL_WAIT_MIN_S` on, else ``timeout`` itself."""
+        return float(int(timeout * 1000.0)) / 1000.0 if timeout >= EPOLL_WAIT_MIN_S else timeout
 
     def close(self) -> None:
         for fd in list(self.readers):

@@ -179,16 +179,16 @@ class RealtimeScheduler(VirtualScheduler):
         entry = self.model_time()
         blind = entry - self._watch_end  # not watching inputs since the last wait or poll ended
         if timeout > 0:
-            deadline = entry + timeout * self.speed
-            ready = io.wait(timeout)
+            deadline = entry + io.waits_until(timeout) * self.speed
+            events_ready = io.wait(timeout)  # (the ready descriptors: one system call for a long wait)
             woke = self.model_time()
             self._watch_end = woke
-            if not ready:
+            if not events_ready:
                 self.wait.overslept((woke - deadline) / self.speed)
                 return
             blind += max(0.0, woke - deadline)  # overslept: stopped or preempted while waiting
-        events_ready = io.epoll.poll(0)
-        if timeout <= 0:
+        else:
+            events_ready = io.epoll.poll(0)
             self._watch_end = self.model_time()
         posted = io.posted
         if events_ready or posted:

@@ -290,20 +290,15 @@ class MqEndpoint:
     # -- application → link --------------------------------------------------------------------
 
     def _readable(self) -> None:
-        # Bounded: a flood on one queue must not starve the other links' timers.  The queue's count
-        # says when it is empty: a receive that fails costs as much as a send and a receive together.
-        queue = self.from_app
-        for _ in range(MAX_MESSAGES):
-            try:
-                message, _priority = queue.receive()
-            except posix_ipc.BusyError:
-                return
-            self._handle(message)
-            try:
-                if not queue.current_messages:
-                    return
-            except posix_ipc.Error:  # closed while handling (a reload removed the link)
-                return
+        # One message per call: epoll is level-triggered, so a queue with more waiting is ready again at
+        # the loop's next look, after the timers that came due meanwhile (a flood on one queue cannot
+        # starve the other links).  Asking the queue's count instead (mq_getsetattr) was a system call
+        # per frame, and a receive that fails costs as much as a send and a receive together.
+        try:
+            message, _priority = self.from_app.receive()
+        except posix_ipc.BusyError:
+            return
+        self._handle(message)
 
     def _handle(self, message: bytes) -> None:
         event = self.protocol.receive(message)
