@@ -284,7 +284,7 @@ class SimModem:
     @property
     def idle(self) -> bool:
         """Nothing to send: FIFO empty, PHY free, and the MAC holds no frame (e.g. awaiting its ACK)."""
-        return not self.phy_busy and not self.fifo and not self.mac.holding and not self.acks.busy
+        return not self.phy_busy and not self.fifo and not self.mac.holding and not self.acks.waiting  # (acks.busy, written out)
 
     def check_idle(self) -> None:
         """Tell the GLI (READY) if the modem just became idle; MACs call it when they let go of a frame."""
@@ -375,8 +375,11 @@ class SimModem:
             if self.acks.heard_data(frame) and frame.app_frame is None:
                 return  # a flow's duplicate: traced, not delivered (an application's is, as on a real modem)
         if self.direct:
-            if cause is None and addressed:  # (NoMac's on_frame)
-                self.deliver(frame)
+            if cause is None and addressed:  # (NoMac's on_frame; deliver's rx delay only if it has one)
+                if self.rx_delay or self.rx_jitter:
+                    self.deliver(frame)
+                else:
+                    self._deliver_now(frame)
         elif addressed or self.mac.hears_all:
             self.mac.on_frame(frame, cause, addressed)
 
