@@ -11,6 +11,8 @@ import signal
 from collections import deque
 from typing import Any, Callable
 
+WAKE_READ = 4096
+"""Bytes of wake-ups read from the pipe at once."""
 EPOLL_WAIT_MIN_S = 0.002
 """From this wait on (seconds), the loop sleeps in one ``epoll_wait`` of whole milliseconds instead of
 ``select()`` then ``epoll_wait(0)``: it may wake up to a millisecond early, which matters no more."""
@@ -61,12 +63,19 @@ class IoLoop:
             self._registered.discard(fd)  # already closed: the kernel forgot it
 
     def post(self, fn: Callable[..., Any], *args: Any) -> None:
-        """Run ``fn(*args)`` in the loop as soon as possible; safe from other threads and signal handlers."""
-        self.posted.append((fn, args))
-        try:
-            os.write(self._wake_w, b"\0")
-        except BlockingIOError:
-            pass  # the pipe is full of wake-ups already
+        """Run ``fn(*args)`` in the loop as soon as possible; safe from other threads and signal handlers.
+
+        Only the call that finds the queue of posted calls empty writes a wake-up: until the loop has
+        taken every call (it takes them until none is left), one already written stands for the rest.
+        (Appending and counting are each atomic under the GIL; a call appended while the loop empties
+        the queue is either seen by its ``while`` or finds it empty and wakes it.)"""
+        posted = self.posted
+        posted.append((fn, args))
+        if len(posted) == 1:
+            try:
+                os.write(self._wake_w, b"\0")
+            except BlockingIOError:
+                pass  # the pipe is full of wake-ups already
 
     def on_signal(self, signum: int, handler: Callable[[int], Any]) -> None:
         """Handle ``signum`` in the loop (not in the interrupted frame)."""
@@ -74,8 +83,10 @@ class IoLoop:
         signal.signal(signum, lambda s, _frame: self.post(self._signals[s], s))
 
     def _drain_wakeups(self) -> None:
+        """Empty the wake-up pipe: a read that returns less than it asked for has taken everything
+        (no second read that fails, and its exception, per wake-up)."""
         try:
-            while os.read(self._wake_r, 4096):
+            while len(os.read(self._wake_r, WAKE_READ)) == WAKE_READ:
                 pass
         except BlockingIOError:
             pass

@@ -292,7 +292,8 @@ class RealtimeScheduler(VirtualScheduler):
             next_t = self.peek()
             wait = (min(next_t, until) - now) / self.speed
             spin = policy.spin_s
-            if wait > spin and not policy.keep_polling(time.perf_counter()):
+            if wait > spin and not self.io.posted and not policy.keep_polling(time.perf_counter()):
+                # (a posted call is never slept over: only the first of several writes a wake-up)
                 self._collect_if_idle(wait)
                 wait = (min(next_t, until) - self.model_time()) / self.speed
                 self._handle_inputs(min(max(0.0, wait - spin), 0.5))
