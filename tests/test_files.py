@@ -95,34 +95,26 @@ def test_the_pty_host_checks_again_when_it_opens(tmp_path):
     assert path.read_text() == "precious\n"
 
 
-def test_a_stale_pty_link_is_replaced_and_the_daemons_own_link_removed_at_stop(tmp_path):
+def test_a_stale_pty_link_is_replaced_and_the_daemons_own_link_removed_at_stop(tmp_path, daemon_of):
     link = unique("pt")
     stale = tmp_path / "ttyEVO"
     stale.symlink_to("/dev/pts/987654")  # what a daemon killed with SIGKILL leaves
     assert pty_link_problem(str(stale)) is None
-    daemon = Daemon(tmp_path, emulator_scene(link, stale), [link])
-    try:
-        daemon.wait_for("READY=1")
-        target = os.readlink(stale)
-        assert target.startswith("/dev/pts/") and target != "/dev/pts/987654"
-        daemon.stop()
-        assert not os.path.lexists(stale)  # its own link, removed
-    finally:
-        daemon.close()
+    daemon = daemon_of(emulator_scene(link, stale), [link])
+    target = os.readlink(stale)
+    assert target.startswith("/dev/pts/") and target != "/dev/pts/987654"
+    daemon.stop()
+    assert not os.path.lexists(stale)  # its own link, removed
 
 
-def test_a_link_that_replaced_the_daemons_own_is_not_removed_at_stop(tmp_path):
+def test_a_link_that_replaced_the_daemons_own_is_not_removed_at_stop(tmp_path, daemon_of):
     link = unique("pt")
     path = tmp_path / "ttyEVO"
-    daemon = Daemon(tmp_path, emulator_scene(link, path), [link])
-    try:
-        daemon.wait_for("READY=1")
-        os.unlink(path)
-        path.symlink_to(tmp_path / "someone-elses")  # another program's link now
-        daemon.stop()
-        assert os.readlink(path) == str(tmp_path / "someone-elses")
-    finally:
-        daemon.close()
+    daemon = daemon_of(emulator_scene(link, path), [link])
+    os.unlink(path)
+    path.symlink_to(tmp_path / "someone-elses")  # another program's link now
+    daemon.stop()
+    assert os.readlink(path) == str(tmp_path / "someone-elses")
 
 
 def trace_scene(link: str, trace) -> str:

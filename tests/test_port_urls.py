@@ -19,7 +19,7 @@ import pytest
 import serial
 import serial.rfc2217
 
-from daemon_kit import Daemon, unique
+from daemon_kit import unique
 from hilgate.core.backend import AppFrame
 from hilgate.client import Link
 from hilgate.drivers.port import port_problem
@@ -207,24 +207,19 @@ def echoes(daemon, link, payloads):
 PAYLOADS = [b"ping %d\r\n\0+++AT" % i for i in range(3)]
 
 
-def test_a_driver_link_on_loop_url_comes_up_and_echoes(tmp_path):
+def test_a_driver_link_on_loop_url_comes_up_and_echoes(daemon_of):
     link = unique("lo")
-    daemon = Daemon(tmp_path, one_link_scene(link, "loop://"), [link])
-    try:
-        daemon.wait_for("READY=1")
-        wait_state(daemon, link, "up")
-        assert echoes(daemon, link, PAYLOADS) == PAYLOADS
-        assert "fileno" not in daemon.output()
-    finally:
-        daemon.close()
+    daemon = daemon_of(one_link_scene(link, "loop://"), [link])
+    wait_state(daemon, link, "up")
+    assert echoes(daemon, link, PAYLOADS) == PAYLOADS
+    assert "fileno" not in daemon.output()
 
 
-def test_a_driver_link_on_rfc2217_comes_up_echoes_and_comes_back_after_the_network_drops(tmp_path):
+def test_a_driver_link_on_rfc2217_comes_up_echoes_and_comes_back_after_the_network_drops(daemon_of):
     link = unique("rf")
     server = Rfc2217Server()
-    daemon = Daemon(tmp_path, one_link_scene(link, f"rfc2217://127.0.0.1:{server.port}"), [link])
+    daemon = daemon_of(one_link_scene(link, f"rfc2217://127.0.0.1:{server.port}"), [link])
     try:
-        daemon.wait_for("READY=1")
         wait_state(daemon, link, "up")
         assert echoes(daemon, link, PAYLOADS) == PAYLOADS
         server.drop()
@@ -233,20 +228,17 @@ def test_a_driver_link_on_rfc2217_comes_up_echoes_and_comes_back_after_the_netwo
         assert server.clients == 2
         assert echoes(daemon, link, PAYLOADS) == PAYLOADS
     finally:
-        daemon.close()
         server.close()
 
 
-def test_a_driver_link_on_socket_url_comes_up_and_echoes(tmp_path):
+def test_a_driver_link_on_socket_url_comes_up_and_echoes(daemon_of):
     link = unique("so")
     server = EchoServer()
-    daemon = Daemon(tmp_path, one_link_scene(link, f"socket://127.0.0.1:{server.port}"), [link])
+    daemon = daemon_of(one_link_scene(link, f"socket://127.0.0.1:{server.port}"), [link])
     try:
-        daemon.wait_for("READY=1")
         wait_state(daemon, link, "up")
         assert echoes(daemon, link, PAYLOADS) == PAYLOADS
     finally:
-        daemon.close()
         server.close()
 
 
@@ -270,14 +262,13 @@ def read_until(fd, wanted: bytes, timeout=10.0, meanwhile=lambda: time.sleep(0.0
     return got
 
 
-def test_a_driver_link_on_spy_url_reads_and_writes_through_pyserial_so_the_spy_sees_it(tmp_path):
+def test_a_driver_link_on_spy_url_reads_and_writes_through_pyserial_so_the_spy_sees_it(tmp_path, daemon_of):
     link = unique("sp")
     master, slave = raw_pty()
     spy_log = tmp_path / "spy.txt"
     vl2b = packet_class("vl2b")
-    daemon = Daemon(tmp_path, one_link_scene(link, f"spy://{os.ttyname(slave)}?file={spy_log}"), [link])
+    daemon = daemon_of(one_link_scene(link, f"spy://{os.ttyname(slave)}?file={spy_log}"), [link])
     try:
-        daemon.wait_for("READY=1")
         wait_state(daemon, link, "up")
         with Link.open(link, runtime_dir=daemon.runtime) as app:
             app.send(b"to the modem", dst=1)
@@ -289,18 +280,16 @@ def test_a_driver_link_on_spy_url_reads_and_writes_through_pyserial_so_the_spy_s
         assert any(" TX " in line and "to the modem" in line for line in lines), lines
         assert any(" RX " in line and "from the modem" in line for line in lines), lines
     finally:
-        daemon.close()
         os.close(master)
         os.close(slave)
 
 
-def test_a_port_that_cannot_be_opened_shows_down_and_is_warned_once(tmp_path):
+def test_a_port_that_cannot_be_opened_shows_down_and_is_warned_once(daemon_of):
     link = unique("dn")
     refusing = socket.socket()  # bound and never listening: connections are refused, and the port is ours
     refusing.bind(("127.0.0.1", 0))
-    daemon = Daemon(tmp_path, one_link_scene(link, f"socket://127.0.0.1:{refusing.getsockname()[1]}"), [link])
+    daemon = daemon_of(one_link_scene(link, f"socket://127.0.0.1:{refusing.getsockname()[1]}"), [link])
     try:
-        daemon.wait_for("READY=1")
         wait_state(daemon, link, "down")
 
         def lines(level):  # the daemon logs "… LEVEL logger: message", whatever comes before LEVEL
@@ -317,7 +306,6 @@ def test_a_port_that_cannot_be_opened_shows_down_and_is_warned_once(tmp_path):
         row = next(line for line in table.stdout.splitlines() if line.startswith(link))
         assert " down " in row and "Connection refused" in row  # hilgate status says why
     finally:
-        daemon.close()
         refusing.close()
 
 
