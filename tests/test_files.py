@@ -57,6 +57,16 @@ def make_fifo(path):
     os.mkfifo(path)
 
 
+def refused(path, make, scene) -> tuple:
+    """``make(path)``, then load ``scene("x", path)`` from a scene.yaml beside it, which must refuse it: the
+    path, its ``os.lstat`` before the load, and the refusal's message."""
+    make(path)
+    before = os.lstat(path)
+    with pytest.raises(SceneError) as caught:
+        load_scene_text(scene("x", path), str(path.parent / "scene.yaml"))
+    return path, before, str(caught.value)
+
+
 @pytest.mark.parametrize("make,words", [
     (make_file, "is not a pty link (a regular file)"),
     (make_link, "is a link to"),               # pty: /etc/localtime removed a system file's link before
@@ -65,12 +75,7 @@ def make_fifo(path):
     (make_fifo, "is not a pty link (a FIFO)"),
 ])
 def test_a_pty_path_where_something_else_is_is_refused_when_the_scene_loads(tmp_path, make, words):
-    path = tmp_path / "tty"
-    make(path)
-    before = os.lstat(path)
-    with pytest.raises(SceneError) as caught:
-        load_scene_text(emulator_scene("x", path), str(tmp_path / "scene.yaml"))
-    message = str(caught.value)
+    path, before, message = refused(tmp_path / "tty", make, emulator_scene)
     assert message.startswith(f"{tmp_path / 'scene.yaml'}:4: links.x.emulate.pty: {path}") and words in message
     after = os.lstat(path)
     assert (after.st_ino, after.st_mode) == (before.st_ino, before.st_mode)  # untouched
@@ -133,12 +138,8 @@ trace: {{file: {trace}}}
     (make_fifo, "is a FIFO, not a regular file"),
 ])
 def test_a_trace_file_that_is_not_a_trace_is_refused_when_the_scene_loads(tmp_path, make, words):
-    path = tmp_path / "trace.jsonl"
-    make(path)
-    with pytest.raises(SceneError) as caught:
-        load_scene_text(trace_scene("x", path), str(tmp_path / "scene.yaml"))
-    assert str(caught.value).startswith(f"{tmp_path / 'scene.yaml'}:4: trace.file: {path}")
-    assert words in str(caught.value)
+    path, _, message = refused(tmp_path / "trace.jsonl", make, trace_scene)
+    assert message.startswith(f"{tmp_path / 'scene.yaml'}:4: trace.file: {path}") and words in message
 
 
 def test_the_command_lines_trace_and_summary_follow_the_same_rules(tmp_path):

@@ -207,21 +207,25 @@ def echoes(daemon, link, payloads):
 PAYLOADS = [b"ping %d\r\n\0+++AT" % i for i in range(3)]
 
 
-def test_a_driver_link_on_loop_url_comes_up_and_echoes(daemon_of):
-    link = unique("lo")
-    daemon = daemon_of(one_link_scene(link, "loop://"), [link])
+def a_link_that_echoes(daemon_of, url: str) -> tuple:
+    """A daemon with one driver link on ``url``, whose far end echoes: the link comes up and every payload
+    comes back as it was sent.  Returns the daemon and the link."""
+    link = unique("u")
+    daemon = daemon_of(one_link_scene(link, url), [link])
     wait_state(daemon, link, "up")
     assert echoes(daemon, link, PAYLOADS) == PAYLOADS
+    return daemon, link
+
+
+def test_a_driver_link_on_loop_url_comes_up_and_echoes(daemon_of):
+    daemon, _ = a_link_that_echoes(daemon_of, "loop://")
     assert "fileno" not in daemon.output()
 
 
 def test_a_driver_link_on_rfc2217_comes_up_echoes_and_comes_back_after_the_network_drops(daemon_of):
-    link = unique("rf")
     server = Rfc2217Server()
-    daemon = daemon_of(one_link_scene(link, f"rfc2217://127.0.0.1:{server.port}"), [link])
     try:
-        wait_state(daemon, link, "up")
-        assert echoes(daemon, link, PAYLOADS) == PAYLOADS
+        daemon, link = a_link_that_echoes(daemon_of, f"rfc2217://127.0.0.1:{server.port}")
         server.drop()
         wait_state(daemon, link, "down")
         wait_state(daemon, link, "up")
@@ -232,12 +236,9 @@ def test_a_driver_link_on_rfc2217_comes_up_echoes_and_comes_back_after_the_netwo
 
 
 def test_a_driver_link_on_socket_url_comes_up_and_echoes(daemon_of):
-    link = unique("so")
     server = EchoServer()
-    daemon = daemon_of(one_link_scene(link, f"socket://127.0.0.1:{server.port}"), [link])
     try:
-        wait_state(daemon, link, "up")
-        assert echoes(daemon, link, PAYLOADS) == PAYLOADS
+        a_link_that_echoes(daemon_of, f"socket://127.0.0.1:{server.port}")
     finally:
         server.close()
 
