@@ -57,28 +57,44 @@ def make_fifo(path):
     os.mkfifo(path)
 
 
-def refused(path, make, scene) -> tuple:
-    """``make(path)``, then load ``scene("x", path)`` from a scene.yaml beside it, which must refuse it: the
-    path, its ``os.lstat`` before the load, and the refusal's message."""
+def trace_scene(link: str, trace) -> str:
+    return f"""\
+channels: {{ac: {{speed_mps: 1500}}}}
+vehicles: {{v: {{pose: {{static: [0, 0, 0]}}}}}}
+links: {{{link}: {{vehicle: v, address: 4}}}}
+trace: {{file: {trace}}}
+"""
+
+
+PTY = ("tty", emulator_scene, "links.x.emulate.pty")
+TRACE = ("trace.jsonl", trace_scene, "trace.file")
+
+
+@pytest.mark.parametrize("where,make,words", [
+    (PTY, make_file, "is not a pty link (a regular file)"),
+    (PTY, make_link, "is a link to"),               # pty: /etc/localtime removed a system file's link before
+    (PTY, make_dangling_link, "not to a pty"),
+    (PTY, make_directory, "is not a pty link (a directory)"),
+    (PTY, make_fifo, "is not a pty link (a FIFO)"),
+    (TRACE, make_file, "holds something that is not a hilgate trace"),
+    (TRACE, make_link, "is a symbolic link, not a regular file"),
+    (TRACE, make_directory, "is a directory, not a regular file"),
+    (TRACE, make_fifo, "is a FIFO, not a regular file"),
+])
+def test_a_path_where_something_else_is_is_refused_when_the_scene_loads_and_left_untouched(tmp_path, where, make,
+                                                                                          words):
+    """A pty's path that is no pty link of hilgate's, a trace file that is no trace: the scene does not load,
+    its error names the file, line, key and path, and what is there is left as it was."""
+    name, scene, key = where
+    path = tmp_path / name
     make(path)
     before = os.lstat(path)
     with pytest.raises(SceneError) as caught:
-        load_scene_text(scene("x", path), str(path.parent / "scene.yaml"))
-    return path, before, str(caught.value)
-
-
-@pytest.mark.parametrize("make,words", [
-    (make_file, "is not a pty link (a regular file)"),
-    (make_link, "is a link to"),               # pty: /etc/localtime removed a system file's link before
-    (make_dangling_link, "not to a pty"),
-    (make_directory, "is not a pty link (a directory)"),
-    (make_fifo, "is not a pty link (a FIFO)"),
-])
-def test_a_pty_path_where_something_else_is_is_refused_when_the_scene_loads(tmp_path, make, words):
-    path, before, message = refused(tmp_path / "tty", make, emulator_scene)
-    assert message.startswith(f"{tmp_path / 'scene.yaml'}:4: links.x.emulate.pty: {path}") and words in message
+        load_scene_text(scene("x", path), str(tmp_path / "scene.yaml"))
+    message = str(caught.value)
+    assert message.startswith(f"{tmp_path / 'scene.yaml'}:4: {key}: {path}") and words in message
     after = os.lstat(path)
-    assert (after.st_ino, after.st_mode) == (before.st_ino, before.st_mode)  # untouched
+    assert (after.st_ino, after.st_mode) == (before.st_ino, before.st_mode)
 
 
 def test_hilgate_emulate_refuses_the_path_of_a_file_in_one_line(tmp_path):
@@ -120,26 +136,6 @@ def test_a_link_that_replaced_the_daemons_own_is_not_removed_at_stop(tmp_path, d
     path.symlink_to(tmp_path / "someone-elses")  # another program's link now
     daemon.stop()
     assert os.readlink(path) == str(tmp_path / "someone-elses")
-
-
-def trace_scene(link: str, trace) -> str:
-    return f"""\
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles: {{v: {{pose: {{static: [0, 0, 0]}}}}}}
-links: {{{link}: {{vehicle: v, address: 4}}}}
-trace: {{file: {trace}}}
-"""
-
-
-@pytest.mark.parametrize("make,words", [
-    (make_file, "holds something that is not a hilgate trace"),
-    (make_link, "is a symbolic link, not a regular file"),
-    (make_directory, "is a directory, not a regular file"),
-    (make_fifo, "is a FIFO, not a regular file"),
-])
-def test_a_trace_file_that_is_not_a_trace_is_refused_when_the_scene_loads(tmp_path, make, words):
-    path, _, message = refused(tmp_path / "trace.jsonl", make, trace_scene)
-    assert message.startswith(f"{tmp_path / 'scene.yaml'}:4: trace.file: {path}") and words in message
 
 
 def test_the_command_lines_trace_and_summary_follow_the_same_rules(tmp_path):

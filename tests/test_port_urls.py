@@ -79,22 +79,34 @@ def test_cp2110_is_refused_when_hidapi_is_missing():
 # -- real peers ---------------------------------------------------------------------------------------
 
 
-class EchoServer:
-    """A TCP server on a free loopback port that sends back what it gets (a modem in loopback)."""
+class LoopbackServer:
+    """A TCP server on a free loopback port; each connection it accepts is handed to :meth:`accepted`."""
 
     def __init__(self):
         self.listener = socket.create_server(("127.0.0.1", 0))
         self.port = self.listener.getsockname()[1]
-        self.thread = threading.Thread(target=self._serve, daemon=True)
-        self.thread.start()
+        threading.Thread(target=self._serve, daemon=True).start()
 
     def _serve(self):
         while True:
             try:
                 conn, _ = self.listener.accept()
-            except OSError:
+            except OSError:  # closed: the test is over
                 return
-            threading.Thread(target=self._echo, args=(conn,), daemon=True).start()
+            self.accepted(conn)
+
+    def accepted(self, conn) -> None:
+        conn.close()
+
+    def close(self):
+        self.listener.close()
+
+
+class EchoServer(LoopbackServer):
+    """Sends back what it gets (a modem in loopback), to each client on a thread of its own."""
+
+    def accepted(self, conn):
+        threading.Thread(target=self._echo, args=(conn,), daemon=True).start()
 
     @staticmethod
     def _echo(conn):
@@ -102,33 +114,23 @@ class EchoServer:
             while data := conn.recv(4096):
                 conn.sendall(data)
 
-    def close(self):
-        self.listener.close()
 
-
-class Rfc2217Server:
+class Rfc2217Server(LoopbackServer):
     """pyserial's RFC 2217 server side (``PortManager``, as in its ``rfc2217_server.py`` example) in
-    front of a ``loop://`` serial port, on a free loopback port: a networked serial port in loopback.
-    One client at a time; :meth:`drop` cuts the current one off (the network cable pulled)."""
+    front of a ``loop://`` serial port: a networked serial port in loopback.  One client at a time;
+    :meth:`drop` cuts the current one off (the network cable pulled)."""
 
     def __init__(self):
-        self.listener = socket.create_server(("127.0.0.1", 0))
-        self.port = self.listener.getsockname()[1]
         self.lock = threading.Lock()
         self.conn = None
         self.clients = 0
-        threading.Thread(target=self._serve, daemon=True).start()
+        super().__init__()
 
-    def _serve(self):
-        while True:
-            try:
-                conn, _ = self.listener.accept()
-            except OSError:
-                return
-            with self.lock:
-                self.conn = conn
-                self.clients += 1
-            self._client(conn)
+    def accepted(self, conn):
+        with self.lock:
+            self.conn = conn
+            self.clients += 1
+        self._client(conn)
 
     def _client(self, conn):
         device = serial.serial_for_url("loop://", timeout=0.05)
@@ -159,7 +161,7 @@ class Rfc2217Server:
             self.conn.shutdown(socket.SHUT_RDWR)
 
     def close(self):
-        self.listener.close()
+        super().close()
         if self.conn is not None:
             self.conn.close()
 

@@ -14,8 +14,8 @@ import threading
 
 import pytest
 
-from ros2kit import (DOMAIN, Publication, Subscription, dds, namespace, node_and_app_scene, publications, ros2_scene,  # noqa: F401
-                     ros2_section, wait_until)  # (dds: a fixture)
+from ros2kit import (DOMAIN, Publication, Subscription, dds, namespace, node_and_app_scene,  # noqa: F401 (dds: a fixture)
+                     publications, ros2_scene, wait_until)
 from daemon_kit import Daemon, assert_the_walk_traced, hilgate, peer_events, unique, walk_a_live_vehicle
 from hilgate.client import Link
 from hilgate.ros2.idl import message_class
@@ -58,18 +58,16 @@ class Simulator:
 def test_odometry_at_50_hz_moves_the_vehicle_and_the_delay_follows(daemon_of):
     ns = namespace()
     topside, bluerov = unique("top"), unique("rov")
-    scene = f"""\
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles:
+    scene = ros2_scene(ns, f"""\
   topside: {{pose: {{static: [0, 0, 0]}}}}
   bluerov:
     pose: {{ros2: {{topic: {ns}/bluerov/odom, type: nav_msgs/msg/Odometry, frame_id: odom}}}}
     stale_after_s: 1.0
     stale: drop
-links:
+""", f"""\
   {topside}: {{vehicle: topside, address: 1, bitrate_bps: 1000, addressing: strict}}
   {bluerov}: {{vehicle: bluerov, address: 2, bitrate_bps: 1000, addressing: strict}}
-{ros2_section(ns)}"""
+""")
     daemon = daemon_of(scene, [topside, bluerov])
     simulator = Simulator(f"{ns}/bluerov/odom")
     try:
@@ -93,20 +91,18 @@ links:
 def test_poses_tf_and_diagnostics_are_published_as_the_scene_asks(daemon_of, dds):
     ns = namespace()
     a, b = unique("a"), unique("b")
-    scene = f"""\
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles:
+    scene = ros2_scene(ns, f"""\
   ship: {{pose: {{static: [10, 20, 0]}}}}
   auv: {{pose: {{path: {{start: [100, 0, 30], legs: [{{to: [100, 50, 30], speed_mps: 0.001}}]}}}}}}
-links:
+""", f"""\
   {a}: {{vehicle: ship, address: 1, gli: [socket]}}
   {b}: {{vehicle: auv, address: 2, gli: [socket]}}
-{ros2_section(ns, '''  frame_id: map
+""", '''  frame_id: map
   publish:
     poses: {rate_hz: 20}
     tf: {rate_hz: 20, reliability: best_effort}
     diagnostics: {rate_hz: 5}
-''')}"""
+''')
     ship = dds(Subscription(f"{ns}/ship/pose", "geometry_msgs/msg/PoseStamped"))
     tf = dds(Subscription("/tf", "tf2_msgs/msg/TFMessage", "best_effort"))
     diagnostics = dds(Subscription("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray"))

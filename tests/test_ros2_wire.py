@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from ros2kit import Publication, Subscription, dds, namespace, ros2_section, wait_until  # noqa: F401  (dds: a fixture)
+from ros2kit import Publication, Subscription, dds, namespace, ros2_scene, wait_until  # noqa: F401  (dds: a fixture)
 from daemon_kit import unique
 from hilgate.client import Link
 from hilgate.ros2 import messages
@@ -115,19 +115,17 @@ def test_odometry_and_pose_stamped_serialize_as_rosbags_does(distro):
 def test_every_message_hilgate_publishes_is_rosbags_cdr_for_humble_and_jazzy(daemon_of, dds):
     ns = namespace()
     link, other = unique("w"), unique("o")
-    scene = f"""\
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles:
+    scene = ros2_scene(ns, f"""\
   rov: {{pose: {{static: [3, 4, 5]}}}}
   buoy: {{pose: {{static: [0, 0, 0]}}}}
-links:
+""", f"""\
   {link}: {{vehicle: rov, address: 1, gli: [ros2, socket]}}
   {other}: {{vehicle: buoy, address: 2, gli: [socket]}}
-{ros2_section(ns, '''  publish:
+""", '''  publish:
     poses: {rate_hz: 20}
     tf: {rate_hz: 20}
     diagnostics: {rate_hz: 5}
-''')}"""
+''')
     subscriptions = {
         "geometry_msgs/msg/PoseStamped": dds(Subscription(f"{ns}/rov/pose", "geometry_msgs/msg/PoseStamped")),
         "tf2_msgs/msg/TFMessage": dds(Subscription("/tf", "tf2_msgs/msg/TFMessage")),
@@ -179,13 +177,11 @@ def test_rosbags_bytes_move_a_vehicle(daemon_of, dds, type_name):
     """A pose serialized by rosbags (Humble's store, then Jazzy's), written to the wire as it is."""
     ns = namespace()
     link = unique("r")
-    scene = f"""\
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles:
+    scene = ros2_scene(ns, f"""\
   rov: {{pose: {{ros2: {{topic: {ns}/rov/pose_in, type: {type_name}, frame: ned, offset: [1, 1, 1]}}}}}}
-links:
+""", f"""\
   {link}: {{vehicle: rov, address: 1, gli: [socket]}}
-{ros2_section(ns)}"""
+""")
     publication = dds(Publication(f"{ns}/rov/pose_in", type_name))
     daemon = daemon_of(scene, [link])
     wait_until(publication.matched, what="hilgate's reader")
