@@ -38,15 +38,17 @@ vehicles:
 HANG_GUARD_S = 90.0
 
 
-def quick_scene(name: str, a: str, b: str) -> str:
-    """Two vl2b links 10 m apart at 1 Mb/s (a frame crosses in microseconds), no pose lines in the trace."""
+def quick_scene(name: str, a: str, b: str, distance_m: float = 10, bitrate_bps: float = 1e6,
+                speed_mps: float = 1500) -> str:
+    """Two vl2b links (addresses 1 and 2) ``distance_m`` apart, no pose lines in the trace; by default 10 m
+    at 1 Mb/s (a frame crosses in microseconds)."""
     return f"""\
 name: {name}
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles: {{va: {{pose: {{static: [0, 0, 0]}}}}, vb: {{pose: {{static: [10, 0, 0]}}}}}}
+channels: {{ac: {{speed_mps: {speed_mps}}}}}
+vehicles: {{va: {{pose: {{static: [0, 0, 0]}}}}, vb: {{pose: {{static: [{distance_m}, 0, 0]}}}}}}
 links:
-  {a}: {{vehicle: va, address: 1, packet: vl2b, bitrate_bps: 1e6}}
-  {b}: {{vehicle: vb, address: 2, packet: vl2b, bitrate_bps: 1e6}}
+  {a}: {{vehicle: va, address: 1, packet: vl2b, bitrate_bps: {bitrate_bps}}}
+  {b}: {{vehicle: vb, address: 2, packet: vl2b, bitrate_bps: {bitrate_bps}}}
 trace: {{poses_s: 0}}
 """
 

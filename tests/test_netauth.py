@@ -20,7 +20,7 @@ import pytest
 
 from daemon_kit import unique  # noqa: E402
 from hilgate.client import Link  # noqa: E402
-from test_multihost import Host, free_port, wait_until  # noqa: E402
+from test_multihost import Host, free_port, two_hosts_scene, wait_until  # noqa: E402
 
 zenoh = pytest.importorskip("zenoh")
 
@@ -39,16 +39,7 @@ def creds(tmp_path_factory):
 
 
 def scene_text(prefix: str, creds: str, a: str, b: str, extra: str = "") -> str:
-    return f"""\
-channels: {{ac: {{speed_mps: {SPEED}}}}}
-zenoh: {{prefix: {prefix}, lease_s: 5, credentials: {creds}{extra}}}
-vehicles:
-  va: {{pose: {{static: [0, 0, 0]}}}}
-  vb: {{pose: {{static: [150, 0, 0]}}}}
-links:
-  {a}: {{vehicle: va, host: A, address: 1, bitrate_bps: 100000, addressing: strict}}
-  {b}: {{vehicle: vb, host: B, address: 2, bitrate_bps: 100000, addressing: strict}}
-"""
+    return two_hosts_scene(f"prefix: {prefix}, lease_s: 5, credentials: {creds}{extra}", a, b, SPEED, 100000)
 
 
 class Lab:
