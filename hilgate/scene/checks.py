@@ -172,6 +172,16 @@ def items(node: Node, path: str) -> list[Node]:
     return node.value
 
 
+def one_or_more(check: Checker) -> Checker:
+    """One value or a list of them (``connect: tcp/a:7447`` or ``connect: [tcp/a:7447, tcp/b:7447]``), each
+    taken by ``check`` at its own path: a tuple."""
+    def values(node: Node, path: str) -> tuple:
+        nodes = [node] if isinstance(node.value, str) else items(node, path)
+        return tuple(check(item, path if item is node else join_path(path, i)) for i, item in enumerate(nodes))
+
+    return values
+
+
 def mapping(node: Node, path: str) -> dict[str, Node]:
     if not node.is_map:
         raise node.error(path, f"must be a mapping of keys, not {describe(node)}")

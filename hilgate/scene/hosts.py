@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from ..core.names import zenoh_prefix_problem
-from .checks import Fields, boolean, describe, items, number, path_value, text
+from .checks import Fields, boolean, describe, number, one_or_more, path_value, text
 from .yaml_nodes import Node
 
 __all__ = ["ZenohSpec", "HOST_NAME", "host_name", "zenoh_spec", "resolve_hosts"]
@@ -56,15 +56,14 @@ def host_name(node: Node, path: str) -> str:
     return value
 
 
-def _endpoints(node: Node, path: str) -> tuple[str, ...]:
-    values = [node] if isinstance(node.value, str) else items(node, path)
-    result = []
-    for i, item in enumerate(values):
-        value = text(item, path if item is node else f"{path}[{i}]")
-        if not ENDPOINT.fullmatch(value):
-            raise item.error(path, f"{value!r} is not a Zenoh endpoint like tcp/192.168.1.10:7447")
-        result.append(value)
-    return tuple(result)
+def _endpoint(node: Node, path: str) -> str:
+    value = text(node, path)
+    if not ENDPOINT.fullmatch(value):
+        raise node.error(path, f"{value!r} is not a Zenoh endpoint like tcp/192.168.1.10:7447")
+    return value
+
+
+_endpoints = one_or_more(_endpoint)
 
 
 def _prefix(node: Node, path: str) -> str:
