@@ -26,13 +26,14 @@ from __future__ import annotations
 
 import logging
 import math
-import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import cv2
 import numpy as np
+
+from .reader_thread import ReaderThread
 
 log = logging.getLogger(__name__)
 
@@ -281,7 +282,7 @@ def open_capture(source: int | str) -> Any:
     return capture
 
 
-class CameraThread:
+class CameraThread(ReaderThread):
     """Reads frames and tracks markers in its own thread; hands each frame's sightings to ``deliver``
     (which must be thread-safe, e.g. the scheduler's ``post``).  A camera that fails is reopened every
     two seconds; a video file that ends is read again from the start."""
@@ -296,15 +297,7 @@ class CameraThread:
         self.fps = 0.0
         self.frames = 0
         self.error: str | None = None
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name=f"camera-{name}", daemon=True)
-
-    def start(self) -> None:
-        self._thread.start()
-
-    def stop(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=5)
+        super().__init__(f"camera-{name}")
 
     def _run(self) -> None:
         window_start, window_frames = time.monotonic(), 0

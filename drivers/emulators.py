@@ -207,7 +207,49 @@ def _open_hosts(spec: dict, scheduler: Any, on_data, on_connect, name: str, on_d
     return TcpHosts(int(spec["tcp"]), scheduler, on_data, on_connect, name, on_disconnect=on_disconnect)
 
 
-class EvologicsEmulator:
+class EmulatedModem:
+    """What every emulated modem is: an endpoint of kind ``emulator`` on its link's port, and the hosts its
+    ``emulate:`` names (a pty, or the clients of a TCP port).  Those that speak a line protocol give each
+    host a codec of its own (the modem side of the protocol, sans I/O: ``codec``), made when the host
+    connects and dropped when it leaves; a subclass opens the hosts (:meth:`_serve_hosts`) once its own
+    state is set, since a pty is a host at once."""
+
+    kind = "emulator"
+    codec: Any = None
+
+    def __init__(self, port: LinkPort, spec: dict, scheduler: Any):
+        self.port = port
+        self.options = spec
+        self.scheduler = scheduler
+
+    def _serve_hosts(self) -> None:
+        self.codecs: dict[Any, Any] = {}
+        self.hosts = _open_hosts(self.options, self.scheduler, self._on_data, self._on_connect, self.port.id,
+                                 lambda host: self.codecs.pop(host, None))
+
+    def _on_connect(self, host: Any) -> None:
+        self.codecs[host] = self.codec()
+
+    def _on_data(self, host: Any, data: bytes) -> None:
+        raise NotImplementedError
+
+    def _codec_of(self, host: Any) -> Any:
+        """``host``'s codec (made here too: a TCP client's first bytes may come before its connect is seen)."""
+        codec = self.codecs.get(host)
+        if codec is None:
+            codec = self.codecs[host] = self.codec()
+        return codec
+
+    def _to_hosts(self, line: bytes) -> None:
+        """``line`` to every host (what a modem prints on its one serial line, to each client on TCP)."""
+        for host in list(self.codecs):
+            host.write(line)
+
+    def close(self) -> None:
+        self.hosts.close()
+
+
+class EvologicsEmulator(EmulatedModem):
     """An EvoLogics S2C modem in front of a simulated link.
 
     Its settings (:mod:`.evologics_settings`) are range-checked and kept as running, stored and factory
@@ -216,13 +258,10 @@ class EvologicsEmulator:
     ``ATZ1``/``ATZ3``/``ATZ4`` empty it).  With ``AT@ZX1`` it reports what the simulated PHY does
     (SENDSTART/SENDEND, RECVSTART/RECVEND/RECVFAILED, BITRATE, SRCLEVEL) at the model's times."""
 
-    kind = "emulator"
+    codec = ModemCodec
 
     def __init__(self, port: LinkPort, spec: dict, scheduler: Any):
-        self.port = port
-        self.options = spec
-        self.scheduler = scheduler
-        self.codecs: dict[Any, ModemCodec] = {}
+        super().__init__(port, spec, scheduler)
         self.firmware = Firmware.from_options(spec.get("firmware"))
         self.settings = Settings(port.address)
         self.pending_ack: AppFrame | None = None
@@ -238,24 +277,17 @@ class EvologicsEmulator:
         self.last_integrity = 150
         self.last_velocity = 0.0
         self.received = False  # AT?P answers zeros until something was received
-        self.hosts = _open_hosts(spec, scheduler, self._on_data, self._on_connect, port.id,
-                                 lambda host: self.codecs.pop(host, None))
-
-    def _on_connect(self, host: Any) -> None:
-        self.codecs[host] = ModemCodec()
+        self._serve_hosts()
 
     @property
     def limits(self) -> ModemLimits:
         """What this modem accepts: the link's ``limits:`` (read anew, a reload may change them)."""
         return limits_for("evologics", self.port.limits)
 
-    def close(self) -> None:
-        self.hosts.close()
-
     # -- host → modem -------------------------------------------------------------------------------
 
     def _on_data(self, host: Any, data: bytes) -> None:
-        codec = self.codecs.setdefault(host, ModemCodec())
+        codec = self._codec_of(host)
         for event in codec.receive_data(data):
             match event:
                 case Command():
@@ -690,7 +722,7 @@ class _S100Host:
         self.resume_timer = None  # while reading is paused: when the line has room again
 
 
-class S100Emulator:
+class S100Emulator(EmulatedModem):
     """A Seatooth S100 in front of a simulated link: a transparent byte pipe on a serial line.
 
     - **The line.** A pty takes no time per byte; the real line takes 10 bits per byte (8N1) at the
@@ -711,14 +743,11 @@ class S100Emulator:
       crosses as 45-byte pieces, as on the real modem, and the far host's framing joins them again.
     """
 
-    kind = "emulator"
     busy = False
     phy = None  # (no PHY reports: hilgate.core.endpoint.Endpoint.phy)
 
     def __init__(self, port: LinkPort, spec: dict, scheduler: Any):
-        self.port = port
-        self.options = spec
-        self.scheduler = scheduler
+        super().__init__(port, spec, scheduler)
         self.baud = int(spec.get("baud", 9600))
         self.rtscts = bool(spec.get("rtscts", False))
         self.speed = scheduler.speed  # line times are wall-clock seconds
@@ -872,7 +901,7 @@ class S100Emulator:
         for state in self.states.values():
             self.scheduler.cancel(state.idle_timer)
             self.scheduler.cancel(state.resume_timer)
-        self.hosts.close()
+        super().close()
 
 
 class EmulatorDoor:

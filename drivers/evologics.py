@@ -19,11 +19,11 @@ import logging
 from collections import deque
 from typing import Any, Callable
 
-from hilgate.core.backend import AppFrame, QueuedBackend
+from hilgate.core.backend import AppFrame
 from hilgate.core.packets import PacketClass, PacketError, Raw
 
 from .evologics_codec import AsyncError, AtProtocolError, Data, HostCodec, Notification, Reply, Unexpected
-from .port import Port
+from .modem_backend import ModemBackend
 from .table import EVOLOGICS_LIMITS, EvologicsOptions  # declared in the backend table, with its scene checks
 
 log = logging.getLogger(__name__)
@@ -31,15 +31,12 @@ log = logging.getLogger(__name__)
 SOUND_SPEED = 1500.0
 
 
-class EvologicsBackend(QueuedBackend):
+class EvologicsBackend(ModemBackend):
     kind = "evologics"
 
     def __init__(self, link_id: str, address: int, packet: PacketClass, options: EvologicsOptions, scheduler: Any,
                  trace: Callable[[dict], Any]):
-        super().__init__(link_id, scheduler, trace, options.queue_frames)
-        self.address = address
-        self.packet = packet
-        self.options = options
+        super().__init__(link_id, address, packet, options, scheduler, trace)
         self.limits = options.limits or EVOLOGICS_LIMITS
         self.codec = HostCodec(eol=options.eol_bytes())
         self.commands: deque[tuple[str, str, bytes | None, tuple, Callable[[Reply], Any] | None]] = deque()
@@ -48,8 +45,7 @@ class EvologicsBackend(QueuedBackend):
         self.sending: AppFrame | None = None
         self.delivery_timer = None
         self.retry_timer = None
-        self.port = Port(options.port, scheduler, self._on_data, self._on_port, baud=options.baud, name=link_id)
-        self.port.open()
+        self._open_port()
 
     # -- Backend ---------------------------------------------------------------------------------
 
@@ -67,7 +63,6 @@ class EvologicsBackend(QueuedBackend):
     def close(self) -> None:
         for timer in (self.inflight_timer, self.delivery_timer, self.retry_timer):
             self.scheduler.cancel(timer)
-        self.port.close()
         super().close()
 
     # -- the port and the init sequence ---------------------------------------------------------------

@@ -23,12 +23,12 @@ import logging
 from collections import deque
 from typing import Any, Callable
 
-from hilgate.core.backend import AppFrame, QueuedBackend
+from hilgate.core.backend import AppFrame
 from hilgate.core.packets import BROADCAST, PacketClass, PacketError, Raw
 
 from .m64_codec import (BadChecksum, BadDatagram, Datagram, Deframer, HostCodec, Malformed, Packet, Refused,
                         Response, frame, packets)
-from .port import Port
+from .modem_backend import ModemBackend
 from .table import M64_LIMITS, M64Options  # declared in the backend table, with its scene checks
 
 log = logging.getLogger(__name__)
@@ -36,15 +36,12 @@ log = logging.getLogger(__name__)
 Reply = Callable[[Response | None], Any]
 
 
-class M64Backend(QueuedBackend):
+class M64Backend(ModemBackend):
     kind = "m64"
 
     def __init__(self, link_id: str, address: int, packet: PacketClass, options: M64Options, scheduler: Any,
                  trace: Callable[[dict], Any]):
-        super().__init__(link_id, scheduler, trace, options.queue_frames)
-        self.address = address
-        self.packet = packet
-        self.options = options
+        super().__init__(link_id, address, packet, options, scheduler, trace)
         self.codec = HostCodec()
         self.deframer = Deframer()
         self.payload_size = 8
@@ -59,8 +56,7 @@ class M64Backend(QueuedBackend):
         self.modem_queue = 0
         self.fresh = True  # the next datagram is the first since a (re)start: it begins with a frame end
         self.last_losses: int | None = None
-        self.port = Port(options.port, scheduler, self._on_data, self._on_port, baud=options.baud, name=link_id)
-        self.port.open()
+        self._open_port()
 
     @property
     def idle(self) -> bool:
@@ -79,7 +75,6 @@ class M64Backend(QueuedBackend):
 
     def close(self) -> None:
         self._cancel_timers()
-        self.port.close()
         super().close()
 
     def _cancel_timers(self) -> None:

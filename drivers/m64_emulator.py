@@ -36,7 +36,7 @@ from hilgate.core.backend import AppFrame, PhyEvent
 from hilgate.core.endpoint import TAKEN, LinkPort
 from hilgate.core.packets import BROADCAST, Raw
 
-from .emulators import _open_hosts
+from .emulators import EmulatedModem
 from .m64_codec import BadChecksum, Command, Malformed, ModemCodec
 
 log = logging.getLogger(__name__)
@@ -55,16 +55,14 @@ CHANNEL_BANDS_KHZ = {1: (31.25, 62.25), 2: (62.25, 93.75), 3: (93.75, 125.0), 4:
 modem channel; neighbouring bands only touch, so they do not overlap."""
 
 
-class M64Emulator:
+class M64Emulator(EmulatedModem):
     """A Water Linked Modem-M64 (the module's docstring)."""
 
-    kind = "emulator"
     busy = False
+    codec = ModemCodec
 
     def __init__(self, port: LinkPort, spec: dict, scheduler: Any):
-        self.port = port
-        self.options = spec
-        self.scheduler = scheduler
+        super().__init__(port, spec, scheduler)
         self.role = str(spec.get("role", "a"))
         self.channel = int(spec.get("channel", 1))
         self.queue: list[bytes] = []
@@ -74,27 +72,22 @@ class M64Emulator:
         self.in_sync = False   # role B: answering A
         self.losses_in_row = 0
         self.answer_timer = None
-        self.codecs: dict[Any, ModemCodec] = {}
         self.slot_timer = None
         self.started = scheduler.now()
         self._tune()
         self._schedule_slot()
-        self.hosts = _open_hosts(spec, scheduler, self._on_data, self._on_connect, port.id,
-                                 lambda host: self.codecs.pop(host, None))
-
-    def _on_connect(self, host: Any) -> None:
-        self.codecs[host] = ModemCodec()
+        self._serve_hosts()
 
     def close(self) -> None:
         self.scheduler.cancel(self.slot_timer)
         self.scheduler.cancel(self.answer_timer)
         self.slot_timer = self.answer_timer = None
-        self.hosts.close()
+        super().close()
 
     # -- host → modem ----------------------------------------------------------------------------------
 
     def _on_data(self, host: Any, data: bytes) -> None:
-        codec = self.codecs.setdefault(host, ModemCodec())
+        codec = self._codec_of(host)
         for event in codec.receive_data(data):
             match event:
                 case Command():
@@ -234,9 +227,7 @@ class M64Emulator:
         payload = frame.payload
         if payload == SYNC or len(payload) != PAYLOAD:
             return TAKEN  # the sync packet: filtered out by the receiving modem
-        line = ModemCodec.packet(payload)
-        for host in list(self.codecs):
-            host.write(line)
+        self._to_hosts(ModemCodec.packet(payload))
         return TAKEN
 
     def state(self, ready: bool) -> None:

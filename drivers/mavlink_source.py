@@ -23,7 +23,6 @@ from __future__ import annotations
 import logging
 import math
 import os
-import threading
 import time
 from typing import Any, Callable
 
@@ -32,6 +31,7 @@ os.environ.setdefault("MAVLINK_DIALECT", "ardupilotmega")
 from pymavlink import mavutil  # noqa: E402
 
 from .mavlink_identity import Identity, identity_problem  # noqa: E402
+from .reader_thread import ReaderThread  # noqa: E402
 
 log = logging.getLogger(__name__)
 
@@ -55,7 +55,7 @@ def global_from_ned(north: float, east: float, origin: tuple[float, float, float
     return lat, lon
 
 
-class MavlinkSource:
+class MavlinkSource(ReaderThread):
     """Feeds ``deliver(position, velocity, attitude)`` (called from this source's thread; make it
     thread-safe) with what the vehicle reports."""
 
@@ -76,17 +76,9 @@ class MavlinkSource:
         self.heartbeat_period = 1.0 / heartbeat_hz
         self.messages = 0
         self.connected = False
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name=f"mavlink-{name}", daemon=True)
+        super().__init__(f"mavlink-{name}")
         self._last_local = -math.inf
         self._asked = False
-
-    def start(self) -> None:
-        self._thread.start()
-
-    def stop(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=5)
 
     def _run(self) -> None:
         while not self._stop.is_set():

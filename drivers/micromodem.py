@@ -21,15 +21,14 @@ data quality factor), and a packet the modem could not decode (bad frames) is co
 from __future__ import annotations
 
 import logging
-from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from hilgate.core.backend import AppFrame, QueuedBackend
+from hilgate.core.backend import AppFrame
 from hilgate.core.packets import BROADCAST, PacketClass, PacketError, Raw
 
 from .micromodem_codec import RATES, BadSentence, HostCodec, Sentence, sentence
-from .port import Port
+from .modem_backend import ModemBackend
 from .table import MICROMODEM_LIMITS, MODES, MicromodemOptions  # declared in the backend table, with its scene checks
 
 log = logging.getLogger(__name__)
@@ -55,23 +54,19 @@ class _Incoming:
     frames: dict[int, bytes] = field(default_factory=dict)
 
 
-class MicromodemBackend(QueuedBackend):
+class MicromodemBackend(ModemBackend):
     kind = "micromodem"
 
     def __init__(self, link_id: str, address: int, packet: PacketClass, options: MicromodemOptions, scheduler: Any,
                  trace: Callable[[dict], Any]):
-        super().__init__(link_id, scheduler, trace, options.queue_frames)
-        self.address = address
-        self.packet = packet
-        self.options = options
+        super().__init__(link_id, address, packet, options, scheduler, trace)
         self.rate = RATES[options.rate]
         self.codec = HostCodec()
         self.sending: _Outgoing | None = None
         self.incoming: _Incoming | None = None
         self.awaiting: tuple[int, AppFrame, set[int]] | None = None  # (dest, frame, frame numbers to be acknowledged)
         self.timer = None
-        self.port = Port(options.port, scheduler, self._on_data, self._on_port, baud=options.baud, name=link_id)
-        self.port.open()
+        self._open_port()
 
     @property
     def idle(self) -> bool:
@@ -94,7 +89,6 @@ class MicromodemBackend(QueuedBackend):
 
     def close(self) -> None:
         self.scheduler.cancel(self.timer)
-        self.port.close()
         super().close()
 
     # -- the port and the start-up ---------------------------------------------------------------------

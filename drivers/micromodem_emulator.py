@@ -41,7 +41,7 @@ from hilgate.core.backend import AppFrame, PhyEvent
 from hilgate.core.endpoint import TAKEN, LinkPort
 from hilgate.core.packets import BROADCAST, PacketError, Raw
 
-from .emulators import _open_hosts
+from .emulators import EmulatedModem
 from .micromodem_codec import (CI_AIRTIME_S, MINIPACKET_S, RATES, BadSentence, ModemCodec, Sentence, hhmmss,
                                sentence)
 
@@ -69,35 +69,26 @@ class _Cycle:
     timer: Any = None
 
 
-class MicromodemEmulator:
+class MicromodemEmulator(EmulatedModem):
     """A WHOI Micro-Modem (the module's docstring)."""
 
-    kind = "emulator"
     busy = False
+    codec = ModemCodec
 
     def __init__(self, port: LinkPort, spec: dict, scheduler: Any):
-        self.port = port
-        self.options = spec
-        self.scheduler = scheduler
+        super().__init__(port, spec, scheduler)
         self.config = dict(CONFIG, SRC=port.address)
         self.cycle: _Cycle | None = None
         self.pings: set[int] = set()  # ids of ping frames awaiting their reply
-        self.codecs: dict[Any, ModemCodec] = {}
-        self.hosts = _open_hosts(spec, scheduler, self._on_data, self._on_connect, port.id,
-                                 lambda host: self.codecs.pop(host, None))
-
-    def _on_connect(self, host: Any) -> None:
-        self.codecs[host] = ModemCodec()
+        self._serve_hosts()
 
     def close(self) -> None:
         if self.cycle is not None:
             self.scheduler.cancel(self.cycle.timer)
-        self.hosts.close()
+        super().close()
 
     def _say(self, kind: str, *fields: object) -> None:
-        line = sentence(kind, *fields)
-        for host in list(self.codecs):
-            host.write(line)
+        self._to_hosts(sentence(kind, *fields))
 
     def _clock(self) -> str:
         return hhmmss(self._epoch() + self.scheduler.now())
@@ -111,7 +102,7 @@ class MicromodemEmulator:
     # -- host → modem --------------------------------------------------------------------------------
 
     def _on_data(self, host: Any, data: bytes) -> None:
-        codec = self.codecs.setdefault(host, ModemCodec())
+        codec = self._codec_of(host)
         for event in codec.receive_data(data):
             match event:
                 case Sentence():

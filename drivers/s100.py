@@ -14,33 +14,28 @@ import logging
 from collections import deque
 from typing import Any, Callable
 
-from hilgate.core.backend import AppFrame, QueuedBackend
+from hilgate.core.backend import AppFrame
 from hilgate.core.packets import Decoded, PacketClass, Raw
 
-from .port import Port
+from .modem_backend import ModemBackend
 from .s100_codec import PIECE, FrameHunter, Notice, Skipped, pieces, wire_class
 from .table import S100_LIMITS, S100Options  # declared in the backend table, with its scene checks
 
 log = logging.getLogger(__name__)
 
 
-class S100Backend(QueuedBackend):
+class S100Backend(ModemBackend):
     kind = "s100"
 
     def __init__(self, link_id: str, address: int, packet: PacketClass, options: S100Options, scheduler: Any,
                  trace: Callable[[dict], Any]):
-        super().__init__(link_id, scheduler, trace, options.queue_frames)
-        self.address = address
-        self.packet = packet
+        super().__init__(link_id, address, packet, options, scheduler, trace)
         self.wire = wire_class(packet)
-        self.options = options
         self.piece = (options.limits or S100_LIMITS).piece_bytes or PIECE  # without RTS/CTS (limits:)
         self.hunter = FrameHunter(packet)
         self.pieces: deque[bytes] = deque()
         self.piece_timer = None
-        self.port = Port(options.port, scheduler, self._on_data, self._on_port, baud=options.baud,
-                         rtscts=options.rtscts, name=link_id)
-        self.port.open()
+        self._open_port(rtscts=options.rtscts)
 
     @property
     def idle(self) -> bool:
@@ -48,7 +43,6 @@ class S100Backend(QueuedBackend):
 
     def close(self) -> None:
         self.scheduler.cancel(self.piece_timer)
-        self.port.close()
         super().close()
 
     def _on_port(self, up: bool, reason: str | None) -> None:

@@ -465,18 +465,20 @@ def _add_zenoh_args(parser: argparse.ArgumentParser) -> None:
 def _tcp_address(value: str) -> str:
     from .daemon.service import parse_tcp
 
-    try:
-        parse_tcp(value)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    return value
+    return _parsed_by(parse_tcp, value)
 
 
 def _web_address(value: str) -> str:
     from .web.server import parse_web
 
+    return _parsed_by(parse_web, value)
+
+
+def _parsed_by(parse, value: str) -> str:
+    """``value`` as it was given, once ``parse`` took it (the parser is imported by the option's own check, so
+    that ``hilgate`` starts without it); its ValueError is argparse's one-line usage error."""
     try:
-        parse_web(value)
+        parse(value)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
     return value

@@ -108,10 +108,11 @@ class Fields:
     def a_depths_values(own: Sequence[float] | None, shared: Sequence[float]) -> Sequence[float]:
         return shared if own is None else own
 
-    def _lookup(self, grid: list[float], strides: tuple[int, int], depths: _Axis, ranges: _Axis,
-                zs: float, zr: float, r: float) -> float:
-        """Trilinear interpolation, clamped at the edges: the axes located inline (this is the per-arrival
-        cost: a handful of float operations and eight list reads)."""
+    def _at(self, grids: tuple[list[float], ...], strides: tuple[int, int], depths: _Axis, ranges: _Axis,
+            zs: float, zr: float, r: float) -> list[float]:
+        """Trilinear interpolation of each of ``grids`` (all on the axes ``depths`` × ``ranges`` and
+        ``strides``), clamped at the edges: the axes located once and inline (this is the per-arrival
+        cost: a handful of float operations and eight list reads a grid)."""
         sources = self.sources
         si, sj = strides
         # source depth
@@ -144,55 +145,9 @@ class Fields:
         else:
             k = int(f)
             wk = f - k
-        g = grid
-        base = i * si + j * sj + k
-        a = g[base] + wk * (g[base + 1] - g[base])
-        b = g[base + sj] + wk * (g[base + sj + 1] - g[base + sj])
-        lower = a + wj * (b - a)
-        if wi == 0.0:
-            return lower
-        base += si
-        a = g[base] + wk * (g[base + 1] - g[base])
-        b = g[base + sj] + wk * (g[base + sj + 1] - g[base + sj])
-        return lower + wi * (a + wj * (b - a) - lower)
-
-    def tl_and_delay(self, r: float, zs: float, zr: float) -> tuple[float, float]:
-        """:meth:`tl_db` and :meth:`delay_s` at once, the grid located once (what an arrival asks)."""
-        ranges = self.ranges
-        if r > ranges.last:
-            return self.tl_db(r, zs, zr), self.delay_s(r, zs, zr)
-        sources, depths = self.sources, self.depths
-        si, sj = self._tl_strides
-        n = sources.n
-        f = (zs - sources.x0) / sources.step if n > 1 else 0.0
-        if f <= 0.0:
-            i, wi = 0, 0.0
-        elif f >= n - 1:
-            i, wi = n - 1, 0.0
-        else:
-            i = int(f)
-            wi = f - i
-        n = depths.n
-        f = (zr - depths.x0) / depths.step
-        if f <= 0.0:
-            j, wj = 0, 0.0
-        elif f >= n - 1:
-            j, wj = n - 2, 1.0
-        else:
-            j = int(f)
-            wj = f - j
-        n = ranges.n
-        f = (r - ranges.x0) / ranges.step
-        if f <= 0.0:
-            k, wk = 0, 0.0
-        else:
-            k = int(f)
-            wk = f - k
-            if k >= n - 1:
-                k, wk = n - 2, 1.0
         base = i * si + j * sj + k
         values = []
-        for g in (self.tl, self.first_on_tl):
+        for g in grids:
             a = g[base] + wk * (g[base + 1] - g[base])
             b = g[base + sj] + wk * (g[base + sj + 1] - g[base + sj])
             lower = a + wj * (b - a)
@@ -202,10 +157,22 @@ class Fields:
                 b = g[up + sj] + wk * (g[up + sj + 1] - g[up + sj])
                 lower += wi * (a + wj * (b - a) - lower)
             values.append(lower)
+        return values
+
+    def _lookup(self, grid: list[float], strides: tuple[int, int], depths: _Axis, ranges: _Axis,
+                zs: float, zr: float, r: float) -> float:
+        return self._at((grid,), strides, depths, ranges, zs, zr, r)[0]
+
+    def tl_and_delay(self, r: float, zs: float, zr: float) -> tuple[float, float]:
+        """:meth:`tl_db` and :meth:`delay_s` at once, the grid located once (what an arrival asks)."""
+        ranges = self.ranges
+        if r > ranges.last:
+            return self.tl_db(r, zs, zr), self.delay_s(r, zs, zr)
+        residual, first = self._at((self.tl, self.first_on_tl), self._tl_strides, self.depths, ranges, zs, zr, r)
         slant = math.hypot(r, zr - zs)
         spherical = 20.0 * math.log10(slant) if slant > 1.0 else 0.0
-        tl = values[0] + spherical
-        return (TL_CAP if tl > TL_CAP else 0.0 if tl < 0.0 else tl), slant / self.mean_speed + values[1]
+        tl = residual + spherical
+        return (TL_CAP if tl > TL_CAP else 0.0 if tl < 0.0 else tl), slant / self.mean_speed + first
 
     def tl_db(self, r: float, zs: float, zr: float) -> float:
         """Transmission loss (dB) at horizontal range ``r`` from a source at depth ``zs`` to a receiver

@@ -6,15 +6,14 @@ from __future__ import annotations
 
 import math
 
-from .trajectories import Vec3
+from .trajectories import Computed, Vec3
 
 
-class Controlled:
+class Controlled(Computed):
     static = False
     max_speed_mps = math.inf
     """(Not its top speed: an application may steer it at any moment, and the medium's grid is not
     told; every transmission computes its distances.)"""
-    attitude = None
 
     def __init__(self, start: Vec3, max_speed_mps: float):
         self.max_speed = float(max_speed_mps)
@@ -62,8 +61,3 @@ class Controlled:
         self.target = None
         self.velocity = None
 
-    def age(self, t: float) -> float:
-        return 0.0
-
-    def stale(self, t: float) -> bool:
-        return False

@@ -16,7 +16,7 @@ from typing import Protocol, Sequence
 
 Vec3 = tuple[float, float, float]
 
-__all__ = ["Vec3", "PoseSource", "Static", "Segment", "Piecewise", "path_segments", "waypoint_segments"]
+__all__ = ["Vec3", "PoseSource", "Computed", "Static", "Segment", "Piecewise", "path_segments", "waypoint_segments"]
 
 
 class PoseSource(Protocol):
@@ -43,22 +43,28 @@ class PoseSource(Protocol):
         """Whether the pose is older than the source trusts (a live one; never a scripted one)."""
 
 
-class Static:
-    static = True
-    max_speed_mps = 0.0
+class Computed:
+    """A pose the model computes itself (scripted in the scene, or steered by an application,
+    ``models.controlled``): always known and never stale, with no attitude."""
+
     attitude = None
-
-    def __init__(self, position: Sequence[float]):
-        self._position: Vec3 = (float(position[0]), float(position[1]), float(position[2]))
-
-    def position(self, t: float) -> Vec3:
-        return self._position
 
     def age(self, t: float) -> float:
         return 0.0
 
     def stale(self, t: float) -> bool:
         return False
+
+
+class Static(Computed):
+    static = True
+    max_speed_mps = 0.0
+
+    def __init__(self, position: Sequence[float]):
+        self._position: Vec3 = (float(position[0]), float(position[1]), float(position[2]))
+
+    def position(self, t: float) -> Vec3:
+        return self._position
 
     def __repr__(self) -> str:
         return f"Static({self._position})"
@@ -83,12 +89,11 @@ class Segment:
         return (p0[0] + f * (p1[0] - p0[0]), p0[1] + f * (p1[1] - p0[1]), p0[2] + f * (p1[2] - p0[2]))
 
 
-class Piecewise:
+class Piecewise(Computed):
     """Motion made of consecutive segments; before the first it sits at the first point, after the
     last at the last point, unless ``loop`` repeats the whole sequence with its period."""
 
     static = False
-    attitude = None
 
     def __init__(self, segments: Sequence[Segment], loop: bool = False):
         if not segments:
@@ -112,12 +117,6 @@ class Piecewise:
             return self.segments[-1].p1
         index = bisect_right(self._starts, t) - 1
         return self.segments[index].at(t)
-
-    def age(self, t: float) -> float:
-        return 0.0
-
-    def stale(self, t: float) -> bool:
-        return False
 
     def __repr__(self) -> str:
         return f"Piecewise({len(self.segments)} segments, loop={self.loop})"

@@ -38,15 +38,17 @@ vehicles:
 HANG_GUARD_S = 90.0
 
 
-def quick_scene(name: str, a: str, b: str) -> str:
-    """Two vl2b links 10 m apart at 1 Mb/s (a frame crosses in microseconds), no pose lines in the trace."""
+def quick_scene(name: str, a: str, b: str, distance_m: float = 10, bitrate_bps: float = 1e6,
+                speed_mps: float = 1500) -> str:
+    """Two vl2b links (addresses 1 and 2) ``distance_m`` apart, no pose lines in the trace; by default 10 m
+    at 1 Mb/s (a frame crosses in microseconds)."""
     return f"""\
 name: {name}
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles: {{va: {{pose: {{static: [0, 0, 0]}}}}, vb: {{pose: {{static: [10, 0, 0]}}}}}}
+channels: {{ac: {{speed_mps: {speed_mps}}}}}
+vehicles: {{va: {{pose: {{static: [0, 0, 0]}}}}, vb: {{pose: {{static: [{distance_m}, 0, 0]}}}}}}
 links:
-  {a}: {{vehicle: va, address: 1, packet: vl2b, bitrate_bps: 1e6}}
-  {b}: {{vehicle: vb, address: 2, packet: vl2b, bitrate_bps: 1e6}}
+  {a}: {{vehicle: va, address: 1, packet: vl2b, bitrate_bps: {bitrate_bps}}}
+  {b}: {{vehicle: vb, address: 2, packet: vl2b, bitrate_bps: {bitrate_bps}}}
 trace: {{poses_s: 0}}
 """
 
@@ -248,6 +250,10 @@ class Daemon:
     def link_status(self, link: str) -> dict:
         return next(l for l in self.status()["links"] if l["id"] == link)
 
+    def vehicle(self, name: str) -> dict:
+        """The vehicle ``name`` as STATUS shows it (position, source, age)."""
+        return next(v for v in self.status()["vehicles"] if v["name"] == name)
+
     def alive(self) -> bool:
         if self.process.poll() is not None:
             raise AssertionError(f"daemon exited with {self.process.returncode}:\n{self.output()}")
@@ -306,6 +312,43 @@ class Daemon:
         self.notify.close()
         self.log.close()
         unlink_queues(self.links)
+
+
+def walk_a_live_vehicle(daemon: Daemon, topside: str, bluerov: str, move_away, fall_silent) -> dict:
+    """The walk every live pose source takes (MAVLink, ROS 2): the vehicle ``bluerov`` 150 m from
+    ``topside`` and 5 m deep hears a frame; ``move_away()`` puts it at 300 m and it hears another;
+    ``fall_silent()`` stops its source, its pose goes stale and is dropped, and a third frame is lost.
+    Returns the vehicle's status at its first pose (the caller checks its source)."""
+    from hilgate.client import Link
+
+    wait_until(lambda: daemon.vehicle("bluerov")["position"] is not None, "the first pose")
+    first = daemon.vehicle("bluerov")
+    assert first["position"] == [150.0, 0.0, 5.0]
+    with Link.open(topside, runtime_dir=daemon.runtime) as top, Link.open(bluerov, runtime_dir=daemon.runtime) as rov:
+        top.send(b"near", dst=2)
+        assert rov.recv(timeout=30).data == b"near"
+        move_away()
+        wait_until(lambda: daemon.vehicle("bluerov")["position"] == [300.0, 0.0, 5.0], "the new pose")
+        top.send(b"away", dst=2)
+        assert rov.recv(timeout=30).data == b"away"
+        fall_silent()
+        wait_until(lambda: daemon.vehicle("bluerov")["position"] is None, "the stale pose dropped")
+        top.send(b"lost", dst=2)
+        assert rov.recv(timeout=1.5) is None
+    return first
+
+
+def assert_the_walk_traced(daemon: Daemon) -> None:
+    """Stop the daemon of :func:`walk_a_live_vehicle` and hold its trace to the walk: 9 bytes on air = 72 ms,
+    then the distance to the vehicle 5 m deep, 150 m then 300 m away; the third frame dropped with no pose."""
+    import math
+
+    daemon.stop()
+    events = daemon.trace_events()
+    enq = {e["pkt"]: e["t"] for e in events if e.get("ev") == "enq"}
+    delays = [round(e["t"] - enq[e["pkt"]], 6) for e in events if e.get("ev") == "rx"]
+    assert delays == [round(0.072 + math.hypot(150, 5) / 1500, 6), round(0.072 + math.hypot(300, 5) / 1500, 6)]
+    assert [e["cause"] for e in events if e.get("ev") == "err"] == ["no_pose"]
 
 
 def peer_events(process: subprocess.Popen, timeout: float = 90.0) -> list[dict]:

@@ -114,3 +114,32 @@ def publications(topic_prefix: str) -> dict[str, tuple[str, bytes]]:
 
 def ros2_section(ns: str, extra: str = "") -> str:
     return f"ros2:\n  domain_id: {DOMAIN}\n  namespace: {ns}\n{extra}"
+
+
+def ros2_scene(ns: str, vehicles: str, links: str, extra: str = "") -> str:
+    """A scene on one acoustic channel whose ``ros2`` section is in this run's domain under ``ns``:
+    ``vehicles`` and ``links`` are the lines of those sections, ``extra`` more lines of ``ros2``."""
+    return f"channels: {{ac: {{speed_mps: 1500}}}}\nvehicles:\n{vehicles}links:\n{links}{ros2_section(ns, extra)}"
+
+
+def node_and_app_scene(ns: str, node_link: str, app_link: str, distance_m: float, bitrate_bps: float,
+                       app_gli: str = "") -> str:
+    """Two vehicles ``distance_m`` apart: ``node_link`` on ROS 2 topics, ``app_link`` for a dccomms application."""
+    return ros2_scene(ns, f"  a: {{pose: {{static: [0, 0, 0]}}}}\n  b: {{pose: {{static: [{distance_m}, 0, 0]}}}}\n",
+                      f"  {node_link}: {{vehicle: a, address: 1, bitrate_bps: {bitrate_bps}, gli: [ros2]}}\n"
+                      f"  {app_link}: {{vehicle: b, address: 2, bitrate_bps: {bitrate_bps}{app_gli}}}\n")
+
+
+@pytest.fixture
+def dds():
+    """DDS entities for a test: ``dds(Subscription(...))`` returns the entity and closes it after the test
+    (before the test's daemons are closed, when the test asks for ``daemon_of`` first)."""
+    opened = []
+
+    def keep(entity):
+        opened.append(entity)
+        return entity
+
+    yield keep
+    for entity in reversed(opened):
+        entity.close()

@@ -11,7 +11,7 @@ import sys
 
 import pytest
 
-from daemon_kit import Daemon, unique
+from daemon_kit import unique
 from hilgate.scene import SceneError, load_scene_text
 from hilgate.sim.simulate import Simulation
 
@@ -68,12 +68,11 @@ def test_an_application_that_is_not_one_or_on_no_simulated_link_is_a_scene_error
         load_scene_text(scene().replace("links: [b]", "links: [nowhere]"))
 
 
-def test_the_same_classes_run_as_processes_against_the_daemon(tmp_path):
+def test_the_same_classes_run_as_processes_against_the_daemon(daemon_of):
     a, b = unique("pa"), unique("pb")
-    daemon = Daemon(tmp_path, scene(a, b, apps=False), [a, b])
+    daemon = daemon_of(scene(a, b, apps=False), [a, b])
     processes = []
     try:
-        daemon.wait_for("READY=1")
         common = ["--runtime-dir", daemon.runtime]
         pong = subprocess.Popen([sys.executable, "-m", "hilgate", "-v", "app", f"{EXAMPLE}:Pong", "--link", b,
                                  "--until", "60", *common], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
@@ -105,7 +104,6 @@ def test_the_same_classes_run_as_processes_against_the_daemon(tmp_path):
         for process in processes:
             process.terminate()
             process.wait(10)
-        daemon.close()
 
 
 def test_hilgate_app_refuses_what_is_not_an_application_in_one_line(tmp_path):

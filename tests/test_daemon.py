@@ -84,17 +84,16 @@ def test_ready_busy_and_req_state_as_dccomms_does(pair):
     assert states[-1] is True and False not in states[2:]
 
 
-def test_a_frame_that_leaves_at_once_still_gets_its_ready(tmp_path):
+def test_a_frame_that_leaves_at_once_still_gets_its_ready(daemon_of):
     """dccomms' ``WritePacket`` marks the PHY BUSY in the application itself, and
     ``WaitForDeviceReadyToTransmit`` (hello_world_tx calls it before every frame) waits for a READY
     from the device.  So every frame an application writes must be answered by a READY once the link
     is free again, even when the frame is on air and gone within the same pass of the loop (a fast
     link, a short frame) and the link's own state never looked BUSY from outside."""
     a, b = unique("a"), unique("b")
-    daemon = Daemon(tmp_path, scene(a, b, bitrate=1e12, tx_delay=0.0), [a, b])
+    daemon = daemon_of(scene(a, b, bitrate=1e12, tx_delay=0.0), [a, b])
     tx = rx = None
     try:
-        daemon.wait_for("READY=1")
         tx = posix_ipc.MessageQueue(f"/{a}_tx_dlnk_phy")
         rx = posix_ipc.MessageQueue(f"/{a}_rx_dlnk_phy")
 
@@ -128,39 +127,34 @@ def test_a_frame_that_leaves_at_once_still_gets_its_ready(tmp_path):
         for queue in (tx, rx):
             if queue is not None:
                 queue.close()
-        daemon.close()
 
 
-def test_socket_clients_over_unix_and_tcp(tmp_path):
+def test_socket_clients_over_unix_and_tcp(daemon_of):
     a, b = unique("a"), unique("b")
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
-    daemon = Daemon(tmp_path, scene(a, b), [a, b], "--tcp", str(port))
-    try:
-        daemon.wait_for("READY=1")
-        with Link.open(a, runtime_dir=daemon.runtime) as la, \
-                Link.open(b, tcp=("127.0.0.1", port), runtime_dir=daemon.runtime) as lb:  # its RUNTIME/tcp.token
-            assert (la.address, lb.address) == (1, 2)
-            assert la.info["packet"] == "vl2b" and la.max_payload == 2048
-            sent_at = time.monotonic()
-            la.send(b"over unix", dst=2)
-            message = lb.recv(timeout=30)
-            seen = time.monotonic() - sent_at
-            assert (message.src, message.dst, message.data) == (1, 2, b"over unix")
-            expected = 0.05 + 14 * 8 / 1000 + 0.1  # a 9-byte payload is 14 bytes on air
-            assert expected - 0.002 <= seen
-            lb.send(b"broadcast back")
-            message = la.recv(timeout=30)
-            assert (message.src, message.dst, message.data) == (2, 255, b"broadcast back")
-            assert la.recv(timeout=0.3) is None
-            with pytest.raises(GliError, match="do not fit"):
-                la.send(b"x" * 3000, dst=2)
-                la.recv(timeout=30)
-        with pytest.raises(GliError, match="no link"):
-            Link.open("nosuchlink", tcp=("127.0.0.1", port), token_file=os.path.join(daemon.runtime, "tcp.token"))
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene(a, b), [a, b], "--tcp", str(port))
+    with Link.open(a, runtime_dir=daemon.runtime) as la, \
+            Link.open(b, tcp=("127.0.0.1", port), runtime_dir=daemon.runtime) as lb:  # its RUNTIME/tcp.token
+        assert (la.address, lb.address) == (1, 2)
+        assert la.info["packet"] == "vl2b" and la.max_payload == 2048
+        sent_at = time.monotonic()
+        la.send(b"over unix", dst=2)
+        message = lb.recv(timeout=30)
+        seen = time.monotonic() - sent_at
+        assert (message.src, message.dst, message.data) == (1, 2, b"over unix")
+        expected = 0.05 + 14 * 8 / 1000 + 0.1  # a 9-byte payload is 14 bytes on air
+        assert expected - 0.002 <= seen
+        lb.send(b"broadcast back")
+        message = la.recv(timeout=30)
+        assert (message.src, message.dst, message.data) == (2, 255, b"broadcast back")
+        assert la.recv(timeout=0.3) is None
+        with pytest.raises(GliError, match="do not fit"):
+            la.send(b"x" * 3000, dst=2)
+            la.recv(timeout=30)
+    with pytest.raises(GliError, match="no link"):
+        Link.open("nosuchlink", tcp=("127.0.0.1", port), token_file=os.path.join(daemon.runtime, "tcp.token"))
 
 
 def test_bad_frames_are_counted_traced_and_dropped(pair):
@@ -198,34 +192,30 @@ def test_a_client_that_vanishes_mid_frame_or_speaks_garbage_changes_nothing(pair
     assert daemon.status()["links"][0]["state"] == "up"
 
 
-def test_a_slow_application_loses_nothing_within_the_backlog_and_the_rest_is_counted(tmp_path):
+def test_a_slow_application_loses_nothing_within_the_backlog_and_the_rest_is_counted(daemon_of):
     a, b = unique("a"), unique("b")
-    daemon = Daemon(tmp_path, scene(a, b, bitrate=1e6, tx_delay=0.0), [a, b], "--gli-backlog", "5")
-    try:
-        daemon.wait_for("READY=1")
-        quiet = daemon.peer(b, "--receive", "0", "--timeout", "0")  # opens b's queues, then reads nothing
-        peer_events(quiet)
-        with Link.open(a, runtime_dir=daemon.runtime) as la:
-            for i in range(30):
-                la.send(b"%02d" % i, dst=2)
-            deadline = time.monotonic() + 60
-            while daemon.link_status(b)["rx_packets"] < 30 and time.monotonic() < deadline:
-                time.sleep(0.1)
-        # b's queue holds 10 messages: BUSY and READY from start-up, READY answering the peer's REQ_STATE,
-        # then 7 frames; 5 more wait in the backlog; the other 18 are dropped and counted
-        assert daemon.link_status(b)["drops"] == 18
-        # now b's application wakes up and reads: it gets the 12 frames in order, none twice (the 5 of the
-        # backlog come once the daemon sees room in the queue: waited for, however long a loaded host takes)
-        reader = daemon.peer(b, "--receive", "12", "--timeout", "60")
-        frames = [e for e in peer_events(reader, 90) if e["ev"] == "frame"]
-        assert [f["payload"] for f in frames] == ["%02d" % i for i in range(12)]
-        more = daemon.peer(b, "--receive", "1", "--timeout", "1")
-        assert not [e for e in peer_events(more) if e["ev"] == "frame"]
-        assert daemon.process.poll() is None
-        daemon.stop()
-        assert sum(e.get("cause") == "app_full" for e in daemon.trace_events()) == 18
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene(a, b, bitrate=1e6, tx_delay=0.0), [a, b], "--gli-backlog", "5")
+    quiet = daemon.peer(b, "--receive", "0", "--timeout", "0")  # opens b's queues, then reads nothing
+    peer_events(quiet)
+    with Link.open(a, runtime_dir=daemon.runtime) as la:
+        for i in range(30):
+            la.send(b"%02d" % i, dst=2)
+        deadline = time.monotonic() + 60
+        while daemon.link_status(b)["rx_packets"] < 30 and time.monotonic() < deadline:
+            time.sleep(0.1)
+    # b's queue holds 10 messages: BUSY and READY from start-up, READY answering the peer's REQ_STATE,
+    # then 7 frames; 5 more wait in the backlog; the other 18 are dropped and counted
+    assert daemon.link_status(b)["drops"] == 18
+    # now b's application wakes up and reads: it gets the 12 frames in order, none twice (the 5 of the
+    # backlog come once the daemon sees room in the queue: waited for, however long a loaded host takes)
+    reader = daemon.peer(b, "--receive", "12", "--timeout", "60")
+    frames = [e for e in peer_events(reader, 90) if e["ev"] == "frame"]
+    assert [f["payload"] for f in frames] == ["%02d" % i for i in range(12)]
+    more = daemon.peer(b, "--receive", "1", "--timeout", "1")
+    assert not [e for e in peer_events(more) if e["ev"] == "frame"]
+    assert daemon.process.poll() is None
+    daemon.stop()
+    assert sum(e.get("cause") == "app_full" for e in daemon.trace_events()) == 18
 
 
 def test_sighup_swaps_a_link_while_an_application_keeps_sending(pair):
@@ -310,30 +300,26 @@ def test_sigterm_leaves_a_complete_trace_and_summary(pair):
     assert "STOPPING=1" in daemon.notifications[-1].split("\n") or daemon.wait_for("STOPPING=1", 5)
 
 
-def test_speed_paces_the_model(tmp_path):
+def test_speed_paces_the_model(daemon_of):
     a, b = unique("a"), unique("b")
-    daemon = Daemon(tmp_path, scene(a, b, bitrate=100, tx_delay=0.0), [a, b], "--speed", "4")
-    try:
-        daemon.wait_for("READY=1")
-        with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
-            start = time.monotonic()
-            la.send(b"fast forward", dst=2)  # 17 B at 100 bit/s + 0.1 s = 1.46 model s
-            message = lb.recv(timeout=30)
-            seen = time.monotonic() - start
-            # the model clock runs 4 times the wall clock: two STATUS stamps t1, t2 lie inside the
-            # outer wall interval and outside the inner one, whatever the load
-            outer_start = time.monotonic()
-            t1 = daemon.status()["time"]
-            inner_start = time.monotonic()
-            time.sleep(0.5)
-            inner = time.monotonic() - inner_start
-            t2 = daemon.status()["time"]
-            outer = time.monotonic() - outer_start
-        assert message.data == b"fast forward"
-        assert 1.46 / 4 - 0.002 <= seen
-        assert 4 * inner - 0.001 <= t2 - t1 <= 4 * outer + 0.001
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene(a, b, bitrate=100, tx_delay=0.0), [a, b], "--speed", "4")
+    with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
+        start = time.monotonic()
+        la.send(b"fast forward", dst=2)  # 17 B at 100 bit/s + 0.1 s = 1.46 model s
+        message = lb.recv(timeout=30)
+        seen = time.monotonic() - start
+        # the model clock runs 4 times the wall clock: two STATUS stamps t1, t2 lie inside the
+        # outer wall interval and outside the inner one, whatever the load
+        outer_start = time.monotonic()
+        t1 = daemon.status()["time"]
+        inner_start = time.monotonic()
+        time.sleep(0.5)
+        inner = time.monotonic() - inner_start
+        t2 = daemon.status()["time"]
+        outer = time.monotonic() - outer_start
+    assert message.data == b"fast forward"
+    assert 1.46 / 4 - 0.002 <= seen
+    assert 4 * inner - 0.001 <= t2 - t1 <= 4 * outer + 0.001
 
 
 def test_a_bad_scene_does_not_start(tmp_path):

@@ -168,11 +168,11 @@ def usbl_fields(text):
     return [float(x) for x in fields[1:]]
 
 
-def test_a_usbl_link_prints_fixes_of_the_geometry_and_within_its_sigma(tmp_path):
+def test_a_usbl_link_prints_fixes_of_the_geometry_and_within_its_sigma(tmp_path, daemon_of):
     a, b, c = unique("ua"), unique("ub"), unique("uc")
     pa, pb, pc = tmp_path / "evo_a", tmp_path / "evo_b", tmp_path / "evo_c"
     sigma_r, sigma_b = 0.5, 2.0
-    daemon = Daemon(tmp_path, f"""\
+    daemon = daemon_of(f"""\
 seed: 5
 channels: {{ac: {{speed_mps: 1500}}}}
 vehicles:
@@ -187,51 +187,47 @@ links:
   {b}: {{vehicle: rov, model: evologics-s2cr-7-17, range_m: [0, 500], address: 2,
         emulate: {{protocol: evologics, pty: {pb}}}}}
 """, [a, b, c])
-    try:
-        daemon.wait_for("READY=1")
-        ca, cb, cc = AtClient(pa), AtClient(pb), AtClient(pc)
-        cb.send(b"AT*SENDIM,2,1,noack,hi")  # before @ZU1: no fix
+    ca, cb, cc = AtClient(pa), AtClient(pb), AtClient(pc)
+    cb.send(b"AT*SENDIM,2,1,noack,hi")  # before @ZU1: no fix
+    assert cb.expect(b"OK")[0] == b"OK"
+    ca.expect(b"RECVIM")
+    assert not [line for line in ca.settle(0.3) if line.startswith(b"USBL")]
+    assert ca.ask(b"AT@ZU1") == b"OK" and cc.ask(b"AT@ZU1") == b"OK"
+    d = math.sqrt(30 ** 2 + 40 ** 2 + 10 ** 2)
+    ranges = []
+    for _ in range(4):
+        cb.send(b"AT*SENDIM,2,255,noack,hi")  # heard by both USBLs
         assert cb.expect(b"OK")[0] == b"OK"
         ca.expect(b"RECVIM")
-        assert not [line for line in ca.settle(0.3) if line.startswith(b"USBL")]
-        assert ca.ask(b"AT@ZU1") == b"OK" and cc.ask(b"AT@ZU1") == b"OK"
-        d = math.sqrt(30 ** 2 + 40 ** 2 + 10 ** 2)
-        ranges = []
-        for _ in range(4):
-            cb.send(b"AT*SENDIM,2,255,noack,hi")  # heard by both USBLs
-            assert cb.expect(b"OK")[0] == b"OK"
-            ca.expect(b"RECVIM")
-            long = usbl_fields(ca.expect(b"USBLLONG")[0])
-            assert long[2] == 2  # the remote's address
-            # mounted with yaw 90°: the transceiver's x is east, its y south; E/N/U is the world's
-            assert long[3:6] == pytest.approx([40, -30, 10], abs=5e-5)
-            assert long[6:9] == pytest.approx([40, 30, -10], abs=5e-5)
-            assert long[9:12] == pytest.approx([0, 0, math.pi / 2], abs=5e-5)
-            assert long[12] == round(d / 1500 * 1e6) and long[15] == 0.0  # ptime µs; accuracy
-            angles = ca.expect(b"USBLANGLES")[0].split(b",")
-            assert len(angles) == 14
-            assert float(angles[6]) == pytest.approx(math.atan2(40, 30), abs=5e-5)  # world bearing
-            noisy = usbl_fields(cc.expect(b"USBLLONG")[0])
-            ranges.append(math.dist((0, 0, 0), noisy[3:6]))
-            # the configured σ, z-bounded.  c's id, so its USBL stream (seed/id/usbl), is new each run: each
-            # bound must hold for any stream.  Range within 5.5 σ_r: P(|z| > 5.5) = 3.8e-8 per fix, 1.5e-7 for
-            # the four (5 σ_r was 5.7e-7 per fix, 2.3e-6 per run).  Position within 5 times the reported
-            # accuracy, whose square is the sum of the three components' variances (0.5 m, ~1.8 m, ~1.8 m): at
-            # most P(χ²₃ > 25·6.6/3.17 = 52) = 3e-11 per fix
-            assert abs(ranges[-1] - d) < 5.5 * sigma_r
-            assert math.dist(noisy[6:9], (40, 30, -10)) < 5 * noisy[15]
-            assert noisy[15] == pytest.approx(math.sqrt(sigma_r ** 2 + 2 * (ranges[-1] * math.radians(sigma_b)) ** 2),
-                                              abs=2e-4)
-        assert len(set(ranges)) == 4  # drawn anew for each fix
-        # after an exchange the USBL started (an ack IM), the fix comes with DELIVEREDIM
-        ca.send(b"AT*SENDIM,1,2,ack,x")
-        assert ca.expect(b"OK")[0] == b"OK"
-        assert ca.expect(b"DELIVEREDIM")[0] == b"DELIVEREDIM,2"
-        assert usbl_fields(ca.expect(b"USBLLONG")[0])[3:6] == pytest.approx([40, -30, 10], abs=5e-5)
-        for client in (ca, cb, cc):
-            client.close()
-    finally:
-        daemon.close()
+        long = usbl_fields(ca.expect(b"USBLLONG")[0])
+        assert long[2] == 2  # the remote's address
+        # mounted with yaw 90°: the transceiver's x is east, its y south; E/N/U is the world's
+        assert long[3:6] == pytest.approx([40, -30, 10], abs=5e-5)
+        assert long[6:9] == pytest.approx([40, 30, -10], abs=5e-5)
+        assert long[9:12] == pytest.approx([0, 0, math.pi / 2], abs=5e-5)
+        assert long[12] == round(d / 1500 * 1e6) and long[15] == 0.0  # ptime µs; accuracy
+        angles = ca.expect(b"USBLANGLES")[0].split(b",")
+        assert len(angles) == 14
+        assert float(angles[6]) == pytest.approx(math.atan2(40, 30), abs=5e-5)  # world bearing
+        noisy = usbl_fields(cc.expect(b"USBLLONG")[0])
+        ranges.append(math.dist((0, 0, 0), noisy[3:6]))
+        # the configured σ, z-bounded.  c's id, so its USBL stream (seed/id/usbl), is new each run: each
+        # bound must hold for any stream.  Range within 5.5 σ_r: P(|z| > 5.5) = 3.8e-8 per fix, 1.5e-7 for
+        # the four (5 σ_r was 5.7e-7 per fix, 2.3e-6 per run).  Position within 5 times the reported
+        # accuracy, whose square is the sum of the three components' variances (0.5 m, ~1.8 m, ~1.8 m): at
+        # most P(χ²₃ > 25·6.6/3.17 = 52) = 3e-11 per fix
+        assert abs(ranges[-1] - d) < 5.5 * sigma_r
+        assert math.dist(noisy[6:9], (40, 30, -10)) < 5 * noisy[15]
+        assert noisy[15] == pytest.approx(math.sqrt(sigma_r ** 2 + 2 * (ranges[-1] * math.radians(sigma_b)) ** 2),
+                                          abs=2e-4)
+    assert len(set(ranges)) == 4  # drawn anew for each fix
+    # after an exchange the USBL started (an ack IM), the fix comes with DELIVEREDIM
+    ca.send(b"AT*SENDIM,1,2,ack,x")
+    assert ca.expect(b"OK")[0] == b"OK"
+    assert ca.expect(b"DELIVEREDIM")[0] == b"DELIVEREDIM,2"
+    assert usbl_fields(ca.expect(b"USBLLONG")[0])[3:6] == pytest.approx([40, -30, 10], abs=5e-5)
+    for client in (ca, cb, cc):
+        client.close()
 
 
 def test_an_ack_im_dropped_before_the_air_is_failed_at_once_and_the_modem_is_free_again(tmp_path):

@@ -6,82 +6,74 @@ import serial
 from daemon_kit import Daemon, unique
 
 
-def test_the_emulated_modem_answers_settings_queries_and_unknown_commands(tmp_path):
+def test_the_emulated_modem_answers_settings_queries_and_unknown_commands(tmp_path, daemon_of):
     link = unique("em")
     pty = tmp_path / "ttyEVO"
-    daemon = Daemon(tmp_path, f"""\
+    daemon = daemon_of(f"""\
 channels: {{ac: {{speed_mps: 1500}}}}
 vehicles: {{v: {{pose: {{static: [0, 0, 0]}}}}}}
 links: {{{link}: {{vehicle: v, address: 4, emulate: {{protocol: evologics, pty: {pty}}}}}}}
 """, [link])
-    try:
-        daemon.wait_for("READY=1")
-        port = serial.Serial(str(pty), 19200, timeout=10)
+    port = serial.Serial(str(pty), 19200, timeout=10)
 
-        def ask(command: str) -> str:
-            port.write(command.encode() + b"\r\n")
-            line = port.read_until(b"\r\n").decode().strip()
-            return line
+    def ask(command: str) -> str:
+        port.write(command.encode() + b"\r\n")
+        line = port.read_until(b"\r\n").decode().strip()
+        return line
 
-        assert ask("AT?AL") == "4"                      # a setting, from the link's address
-        assert ask("AT!AL7") == "OK" and ask("AT?AL") == "7"
-        assert ask("AT!AL") == "ERROR WRONG FORMAT"
-        assert ask("AT?MODE") == "NET"                  # the network interpreter (issue 18: DUNE wants it)
-        assert ask("AT?T") == "0"                       # no delivery yet
-        assert ask("ATI7") == "EvoLogics GmbH"
-        assert ask("AT?NOSUCH") == "ERROR UNKNOWN COMMAND"
-        assert ask("ATH") == "OK"
-        port.close()
-    finally:
-        daemon.close()
+    assert ask("AT?AL") == "4"                      # a setting, from the link's address
+    assert ask("AT!AL7") == "OK" and ask("AT?AL") == "7"
+    assert ask("AT!AL") == "ERROR WRONG FORMAT"
+    assert ask("AT?MODE") == "NET"                  # the network interpreter (issue 18: DUNE wants it)
+    assert ask("AT?T") == "0"                       # no delivery yet
+    assert ask("ATI7") == "EvoLogics GmbH"
+    assert ask("AT?NOSUCH") == "ERROR UNKNOWN COMMAND"
+    assert ask("ATH") == "OK"
+    port.close()
 
 
-def test_settings_are_range_checked_stored_and_restored_and_the_identity_comes_from_the_preset(tmp_path):
+def test_settings_are_range_checked_stored_and_restored_and_the_identity_comes_from_the_preset(tmp_path, daemon_of):
     """Issue 13 items 3, 4, 7: ranges of !AL (1..AM), !AR, !AM, !L, !G, !RI; &W / ATZ0 / &F; the polled
     queries; ATI and ?MODE from ``firmware:``; a malformed SENDIM answered at once, nothing swallowed."""
     link = unique("em")
     pty = tmp_path / "ttyEVO"
-    daemon = Daemon(tmp_path, f"""\
+    daemon = daemon_of(f"""\
 channels: {{ac: {{speed_mps: 1500}}}}
 vehicles: {{v: {{pose: {{static: [0, 0, 0]}}}}}}
 links:
   {link}: {{vehicle: v, address: 4, model: evologics-s2cr-7-17, emulate: {{protocol: evologics, pty: {pty}}},
            firmware: {{version: "2.0", phy: "0.2.1", mac: "2.0.1", mode: "AT"}}}}
 """, [link])
-    try:
-        daemon.wait_for("READY=1")
-        port = serial.Serial(str(pty), 19200, timeout=10)
+    port = serial.Serial(str(pty), 19200, timeout=10)
 
-        def ask(command: str) -> str:
-            port.write(command.encode() + b"\r")
-            return port.read_until(b"\r\n").decode().strip()
+    def ask(command: str) -> str:
+        port.write(command.encode() + b"\r")
+        return port.read_until(b"\r\n").decode().strip()
 
-        assert [ask("ATI0"), ask("ATI1"), ask("ATI7"), ask("AT?MODE")] == [
-            "2.0", "phy: 0.2.1, mac: v2.0.1", "EvoLogics GmbH", "AT"]
-        for command, answer in [
-                ("AT!AL0", "ERROR OUT OF RANGE"), ("AT!AL255", "ERROR OUT OF RANGE"), ("AT!AM13", "ERROR OUT OF RANGE"),
-                ("AT!AM14", "OK"), ("AT!AL15", "ERROR OUT OF RANGE"), ("AT!AL14", "OK"), ("AT!AR15", "ERROR OUT OF RANGE"),
-                ("AT!AR0", "OK"), ("AT!L4", "ERROR OUT OF RANGE"), ("AT!L1", "OK"), ("AT!G2", "ERROR OUT OF RANGE"),
-                ("AT!G1", "OK"), ("AT!RI256", "ERROR OUT OF RANGE"), ("AT!RI255", "OK"), ("AT!RI1.5", "ERROR WRONG FORMAT"),
-                ("AT?AL", "14"), ("AT?AM", "14"), ("AT?L", "1"), ("AT?RI", "255")]:
-            assert ask(command) == answer, command
-        assert ask("AT&W") == "OK" and ask("AT!L2") == "OK" and ask("AT!AL3") == "OK"
-        port.write(b"ATZ0\r")                            # a reboot: no answer, the stored profile runs again
-        assert ask("AT?L") == "1" and ask("AT?AL") == "14"
-        assert ask("AT&F") == "OK" and ask("AT?L") == "3" and ask("AT?AL") == "4" and ask("AT?AM") == "254"
-        # polled queries
-        assert ask("AT?CLOCK").isdigit() and ask("AT!UT1000000") == "OK" and int(ask("AT?UT")) >= 1000000
-        assert ask("AT?BV") == "24.00" and ask("AT?BL") == "1900" and ask("AT?BR") == "1900"
-        assert ask("AT?PC") == "0" and ask("AT?ZD") == "0" and ask("AT?ZO") == "0"
-        assert ask("AT?S") == "ONLINE NORMAL 16384" and ask("AT?DI") == "EMPTY"
-        port.write(b"AT?P\r")
-        assert port.read_until(b"\r\n") == b"0 0\n" * 7 + b"0 0\r\n"   # 8 paths, bare LF between them
-        # a SENDIM without its data: answered at once; the next commands are not swallowed
-        assert ask("AT*SENDIM,5,1,ack") == "ERROR WRONG FORMAT"
-        assert [ask("AT"), ask("AT"), ask("AT")] == ["OK", "OK", "OK"]
-        port.close()
-    finally:
-        daemon.close()
+    assert [ask("ATI0"), ask("ATI1"), ask("ATI7"), ask("AT?MODE")] == [
+        "2.0", "phy: 0.2.1, mac: v2.0.1", "EvoLogics GmbH", "AT"]
+    for command, answer in [
+            ("AT!AL0", "ERROR OUT OF RANGE"), ("AT!AL255", "ERROR OUT OF RANGE"), ("AT!AM13", "ERROR OUT OF RANGE"),
+            ("AT!AM14", "OK"), ("AT!AL15", "ERROR OUT OF RANGE"), ("AT!AL14", "OK"), ("AT!AR15", "ERROR OUT OF RANGE"),
+            ("AT!AR0", "OK"), ("AT!L4", "ERROR OUT OF RANGE"), ("AT!L1", "OK"), ("AT!G2", "ERROR OUT OF RANGE"),
+            ("AT!G1", "OK"), ("AT!RI256", "ERROR OUT OF RANGE"), ("AT!RI255", "OK"), ("AT!RI1.5", "ERROR WRONG FORMAT"),
+            ("AT?AL", "14"), ("AT?AM", "14"), ("AT?L", "1"), ("AT?RI", "255")]:
+        assert ask(command) == answer, command
+    assert ask("AT&W") == "OK" and ask("AT!L2") == "OK" and ask("AT!AL3") == "OK"
+    port.write(b"ATZ0\r")                            # a reboot: no answer, the stored profile runs again
+    assert ask("AT?L") == "1" and ask("AT?AL") == "14"
+    assert ask("AT&F") == "OK" and ask("AT?L") == "3" and ask("AT?AL") == "4" and ask("AT?AM") == "254"
+    # polled queries
+    assert ask("AT?CLOCK").isdigit() and ask("AT!UT1000000") == "OK" and int(ask("AT?UT")) >= 1000000
+    assert ask("AT?BV") == "24.00" and ask("AT?BL") == "1900" and ask("AT?BR") == "1900"
+    assert ask("AT?PC") == "0" and ask("AT?ZD") == "0" and ask("AT?ZO") == "0"
+    assert ask("AT?S") == "ONLINE NORMAL 16384" and ask("AT?DI") == "EMPTY"
+    port.write(b"AT?P\r")
+    assert port.read_until(b"\r\n") == b"0 0\n" * 7 + b"0 0\r\n"   # 8 paths, bare LF between them
+    # a SENDIM without its data: answered at once; the next commands are not swallowed
+    assert ask("AT*SENDIM,5,1,ack") == "ERROR WRONG FORMAT"
+    assert [ask("AT"), ask("AT"), ask("AT")] == ["OK", "OK", "OK"]
+    port.close()
 
 
 def three_modems(tmp_path, bitrate: int = 400) -> tuple[Daemon, list[str], list[int]]:

@@ -11,7 +11,7 @@ way DUNE parses it.  The two modems are 150 m apart on a 1500 m/s channel: one-w
 from __future__ import annotations
 
 from at_client import DUNE_DELIVERED, DUNE_I1, DUNE_RECV, DUNE_RECVIM, AtClient, multipath, unsigned
-from daemon_kit import Daemon, free_port, unique
+from daemon_kit import free_port, unique
 
 TAU_US = 100_000          # 150 m at 1500 m/s
 BITRATE = 1900            # models/evologics-s2cr-7-17.yaml
@@ -56,13 +56,12 @@ def fields(message) -> list[str]:
     return message.text.split(",")[1:]
 
 
-def test_dune_start_up_polling_and_a_message_exchange_parse_as_dune_parses_them(tmp_path):
+def test_dune_start_up_polling_and_a_message_exchange_parse_as_dune_parses_them(daemon_of):
     la, lb = unique("da"), unique("db")
     pa, pb = free_port(), free_port()
-    daemon = Daemon(tmp_path, scene(la, lb, pa, pb), [la, lb], queue_budget_unlimited=True)
+    daemon = daemon_of(scene(la, lb, pa, pb), [la, lb], queue_budget_unlimited=True)
     a = b = None
     try:
-        daemon.wait_for("READY=1")
         a = dune_start(pa, 1)
         b = dune_start(pb, 2)
         assert a.command("?AL") == "1" and b.command("?AL") == "2"
@@ -131,4 +130,3 @@ def test_dune_start_up_polling_and_a_message_exchange_parse_as_dune_parses_them(
         for modem in (a, b):
             if modem is not None:
                 modem.close()
-        daemon.close()

@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from daemon_kit import Daemon, peer_events, unique
+from daemon_kit import peer_events, unique
 from hilgate.scene import load_scene_text
 
 
@@ -38,11 +38,10 @@ def test_who_hears_a_frame_follows_the_packet_class_and_the_mac():
 
 
 @pytest.mark.parametrize("addressing", ["", "strict"])
-def test_a_dccomms_application_that_leaves_the_destination_at_0(tmp_path, addressing):
+def test_a_dccomms_application_that_leaves_the_destination_at_0(daemon_of, addressing):
     a, b = unique("a"), unique("b")
-    daemon = Daemon(tmp_path, scene(a, b, addressing), [a, b])
+    daemon = daemon_of(scene(a, b, addressing), [a, b])
     try:
-        daemon.wait_for("READY=1")
         receiver = daemon.peer(b, "--receive", "3", "--timeout", "60" if not addressing else "3")
         assert next(iter(receiver.stdout.readline, ""))  # its REQ_STATE is out: it is there
         sender = daemon.peer(a, "--send", "3", "--dst", "0", "--size", "20", "--interval", "0.2", "--timeout", "1")
@@ -58,7 +57,6 @@ def test_a_dccomms_application_that_leaves_the_destination_at_0(tmp_path, addres
     finally:
         daemon.stop()
         events = daemon.trace_events()
-        daemon.close()
     if not addressing:
         assert [f["payload"].rstrip(".") for f in frames] == [f"{a}#{i:04d}" for i in range(3)]
         assert all(f["dst"] == 0 for f in frames)  # the virtual area is delivered as the application wrote it

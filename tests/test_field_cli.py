@@ -3,24 +3,20 @@
 
 import pytest
 
-from daemon_kit import Daemon, hilgate, quick_scene, unique
+from daemon_kit import hilgate, quick_scene, unique
 
 
-def test_send_reports_a_frame_the_daemon_refuses_and_exits_1(tmp_path):
+def test_send_reports_a_frame_the_daemon_refuses_and_exits_1(daemon_of):
     a, b = unique("a"), unique("b")
-    daemon = Daemon(tmp_path, quick_scene("cli", a, b), [a, b])
-    try:
-        daemon.wait_for("READY=1")
-        ok = hilgate("send", a, "--to", "2", "--runtime-dir", daemon.runtime, "hello")
-        assert ok.returncode == 0, ok.stderr
-        big = hilgate("send", a, "--to", "2", "--runtime-dir", daemon.runtime, "x" * 5000)
-        assert big.returncode == 1
-        assert "refused" in big.stderr and "Traceback" not in big.stderr
-        lines = hilgate("send", a, "--runtime-dir", daemon.runtime, input="one\n" + "y" * 5000 + "\nthree\n")
-        assert lines.returncode == 1 and lines.stderr.count("refused") == 1
-        assert sum(daemon.link_status(a)["drop_causes"].values()) == 2  # and the daemon counted both
-    finally:
-        daemon.close()
+    daemon = daemon_of(quick_scene("cli", a, b), [a, b])
+    ok = hilgate("send", a, "--to", "2", "--runtime-dir", daemon.runtime, "hello")
+    assert ok.returncode == 0, ok.stderr
+    big = hilgate("send", a, "--to", "2", "--runtime-dir", daemon.runtime, "x" * 5000)
+    assert big.returncode == 1
+    assert "refused" in big.stderr and "Traceback" not in big.stderr
+    lines = hilgate("send", a, "--runtime-dir", daemon.runtime, input="one\n" + "y" * 5000 + "\nthree\n")
+    assert lines.returncode == 1 and lines.stderr.count("refused") == 1
+    assert sum(daemon.link_status(a)["drop_causes"].values()) == 2  # and the daemon counted both
 
 
 @pytest.mark.parametrize("args", [

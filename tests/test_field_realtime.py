@@ -9,7 +9,7 @@ import os
 import signal
 import time
 
-from daemon_kit import Daemon, unique
+from daemon_kit import quick_scene, unique
 from hilgate.client import Link
 
 # 250 bit/s: a 55-byte payload is a 60-byte VariableLength2BPacket, 1.92 s on air; 15 m at
@@ -17,25 +17,10 @@ from hilgate.client import Link
 AIRTIME = 60 * 8 / 250.0
 
 
-def scene(a: str, b: str) -> str:
-    return f"""\
-name: backdating
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles:
-  va: {{pose: {{static: [0, 0, 0]}}}}
-  vb: {{pose: {{static: [15, 0, 0]}}}}
-links:
-  {a}: {{vehicle: va, address: 1, bitrate_bps: 250, packet: vl2b}}
-  {b}: {{vehicle: vb, address: 2, bitrate_bps: 250, packet: vl2b}}
-trace: {{poses_s: 0}}
-"""
-
-
-def test_input_read_after_a_preemption_is_not_back_dated_into_a_collision(tmp_path):
+def test_input_read_after_a_preemption_is_not_back_dated_into_a_collision(daemon_of):
     a, b = unique("a"), unique("b")
-    daemon = Daemon(tmp_path, scene(a, b), [a, b])
+    daemon = daemon_of(quick_scene("backdating", a, b, distance_m=15, bitrate_bps=250), [a, b])
     try:
-        daemon.wait_for("READY=1")
         with Link.open(a, runtime_dir=daemon.runtime) as link_a, Link.open(b, runtime_dir=daemon.runtime) as link_b:
             link_a.send(b"A" * 55, dst=2)
             deadline = time.monotonic() + 30
@@ -57,7 +42,6 @@ def test_input_read_after_a_preemption_is_not_back_dated_into_a_collision(tmp_pa
     finally:
         daemon.stop()
         events = daemon.trace_events()
-        daemon.close()
     assert not [e for e in events if e.get("ev") == "err"], events
     a_rx = next(e for e in events if e["ev"] == "rx" and e["link"] == b)
     b_enq = next(e for e in events if e["ev"] == "enq" and e["link"] == b)

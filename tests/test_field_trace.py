@@ -5,24 +5,20 @@ import json
 import subprocess
 import sys
 
-from daemon_kit import Daemon, unique
+from daemon_kit import unique
 from hilgate.report.tracedata import load_trace, pick_run, trace_runs
 
 
-def test_each_daemon_start_writes_a_run_header(tmp_path):
+def test_each_daemon_start_writes_a_run_header(daemon_of):
     a = unique("a")
-    daemon = Daemon(tmp_path, f"""\
+    daemon = daemon_of(f"""\
 name: header
 channels: {{ac: {{speed_mps: 1500}}}}
 vehicles: {{v: {{pose: {{static: [0, 0, 0]}}}}}}
 links: {{{a}: {{vehicle: v}}}}
 """, [a])
-    try:
-        daemon.wait_for("READY=1")
-    finally:
-        daemon.stop()
-        events = daemon.trace_events()
-        daemon.close()
+    daemon.stop()
+    events = daemon.trace_events()
     header = events[0]
     assert header["ev"] == "run" and header["scene"] == "header" and header["t"] == 0.0
     assert len(header["run"]) == 12 and header["start"].endswith("+00:00") and header["version"]

@@ -57,23 +57,44 @@ def make_fifo(path):
     os.mkfifo(path)
 
 
-@pytest.mark.parametrize("make,words", [
-    (make_file, "is not a pty link (a regular file)"),
-    (make_link, "is a link to"),               # pty: /etc/localtime removed a system file's link before
-    (make_dangling_link, "not to a pty"),
-    (make_directory, "is not a pty link (a directory)"),
-    (make_fifo, "is not a pty link (a FIFO)"),
+def trace_scene(link: str, trace) -> str:
+    return f"""\
+channels: {{ac: {{speed_mps: 1500}}}}
+vehicles: {{v: {{pose: {{static: [0, 0, 0]}}}}}}
+links: {{{link}: {{vehicle: v, address: 4}}}}
+trace: {{file: {trace}}}
+"""
+
+
+PTY = ("tty", emulator_scene, "links.x.emulate.pty")
+TRACE = ("trace.jsonl", trace_scene, "trace.file")
+
+
+@pytest.mark.parametrize("where,make,words", [
+    (PTY, make_file, "is not a pty link (a regular file)"),
+    (PTY, make_link, "is a link to"),               # pty: /etc/localtime removed a system file's link before
+    (PTY, make_dangling_link, "not to a pty"),
+    (PTY, make_directory, "is not a pty link (a directory)"),
+    (PTY, make_fifo, "is not a pty link (a FIFO)"),
+    (TRACE, make_file, "holds something that is not a hilgate trace"),
+    (TRACE, make_link, "is a symbolic link, not a regular file"),
+    (TRACE, make_directory, "is a directory, not a regular file"),
+    (TRACE, make_fifo, "is a FIFO, not a regular file"),
 ])
-def test_a_pty_path_where_something_else_is_is_refused_when_the_scene_loads(tmp_path, make, words):
-    path = tmp_path / "tty"
+def test_a_path_where_something_else_is_is_refused_when_the_scene_loads_and_left_untouched(tmp_path, where, make,
+                                                                                          words):
+    """A pty's path that is no pty link of hilgate's, a trace file that is no trace: the scene does not load,
+    its error names the file, line, key and path, and what is there is left as it was."""
+    name, scene, key = where
+    path = tmp_path / name
     make(path)
     before = os.lstat(path)
     with pytest.raises(SceneError) as caught:
-        load_scene_text(emulator_scene("x", path), str(tmp_path / "scene.yaml"))
+        load_scene_text(scene("x", path), str(tmp_path / "scene.yaml"))
     message = str(caught.value)
-    assert message.startswith(f"{tmp_path / 'scene.yaml'}:4: links.x.emulate.pty: {path}") and words in message
+    assert message.startswith(f"{tmp_path / 'scene.yaml'}:4: {key}: {path}") and words in message
     after = os.lstat(path)
-    assert (after.st_ino, after.st_mode) == (before.st_ino, before.st_mode)  # untouched
+    assert (after.st_ino, after.st_mode) == (before.st_ino, before.st_mode)
 
 
 def test_hilgate_emulate_refuses_the_path_of_a_file_in_one_line(tmp_path):
@@ -95,58 +116,26 @@ def test_the_pty_host_checks_again_when_it_opens(tmp_path):
     assert path.read_text() == "precious\n"
 
 
-def test_a_stale_pty_link_is_replaced_and_the_daemons_own_link_removed_at_stop(tmp_path):
+def test_a_stale_pty_link_is_replaced_and_the_daemons_own_link_removed_at_stop(tmp_path, daemon_of):
     link = unique("pt")
     stale = tmp_path / "ttyEVO"
     stale.symlink_to("/dev/pts/987654")  # what a daemon killed with SIGKILL leaves
     assert pty_link_problem(str(stale)) is None
-    daemon = Daemon(tmp_path, emulator_scene(link, stale), [link])
-    try:
-        daemon.wait_for("READY=1")
-        target = os.readlink(stale)
-        assert target.startswith("/dev/pts/") and target != "/dev/pts/987654"
-        daemon.stop()
-        assert not os.path.lexists(stale)  # its own link, removed
-    finally:
-        daemon.close()
+    daemon = daemon_of(emulator_scene(link, stale), [link])
+    target = os.readlink(stale)
+    assert target.startswith("/dev/pts/") and target != "/dev/pts/987654"
+    daemon.stop()
+    assert not os.path.lexists(stale)  # its own link, removed
 
 
-def test_a_link_that_replaced_the_daemons_own_is_not_removed_at_stop(tmp_path):
+def test_a_link_that_replaced_the_daemons_own_is_not_removed_at_stop(tmp_path, daemon_of):
     link = unique("pt")
     path = tmp_path / "ttyEVO"
-    daemon = Daemon(tmp_path, emulator_scene(link, path), [link])
-    try:
-        daemon.wait_for("READY=1")
-        os.unlink(path)
-        path.symlink_to(tmp_path / "someone-elses")  # another program's link now
-        daemon.stop()
-        assert os.readlink(path) == str(tmp_path / "someone-elses")
-    finally:
-        daemon.close()
-
-
-def trace_scene(link: str, trace) -> str:
-    return f"""\
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles: {{v: {{pose: {{static: [0, 0, 0]}}}}}}
-links: {{{link}: {{vehicle: v, address: 4}}}}
-trace: {{file: {trace}}}
-"""
-
-
-@pytest.mark.parametrize("make,words", [
-    (make_file, "holds something that is not a hilgate trace"),
-    (make_link, "is a symbolic link, not a regular file"),
-    (make_directory, "is a directory, not a regular file"),
-    (make_fifo, "is a FIFO, not a regular file"),
-])
-def test_a_trace_file_that_is_not_a_trace_is_refused_when_the_scene_loads(tmp_path, make, words):
-    path = tmp_path / "trace.jsonl"
-    make(path)
-    with pytest.raises(SceneError) as caught:
-        load_scene_text(trace_scene("x", path), str(tmp_path / "scene.yaml"))
-    assert str(caught.value).startswith(f"{tmp_path / 'scene.yaml'}:4: trace.file: {path}")
-    assert words in str(caught.value)
+    daemon = daemon_of(emulator_scene(link, path), [link])
+    os.unlink(path)
+    path.symlink_to(tmp_path / "someone-elses")  # another program's link now
+    daemon.stop()
+    assert os.readlink(path) == str(tmp_path / "someone-elses")
 
 
 def test_the_command_lines_trace_and_summary_follow_the_same_rules(tmp_path):

@@ -14,29 +14,16 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from daemon_kit import Daemon, unique
+from daemon_kit import Daemon, quick_scene, unique
 from fuzzkit import examples
 from hilgate.gli import wire
 from hilgate.client import Link
-
-SCENE = """\
-name: fuzz
-channels: {{ac: {{speed_mps: 1e9}}}}
-vehicles:
-  va: {{pose: {{static: [0, 0, 0]}}}}
-  vb: {{pose: {{static: [1, 0, 0]}}}}
-links:
-  {a}: {{vehicle: va, address: 1, bitrate_bps: 1e7, packet: vl2b}}
-  {b}: {{vehicle: vb, address: 2, bitrate_bps: 1e7, packet: vl2b}}
-trace: {{poses_s: 0}}
-"""
-
 
 @pytest.fixture(scope="module")
 def daemon(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("fuzz")
     a, b = unique("a"), unique("b")
-    running = Daemon(tmp, SCENE.format(a=a, b=b), [a, b])
+    running = Daemon(tmp, quick_scene("fuzz", a, b, distance_m=1, bitrate_bps=1e7, speed_mps=1e9), [a, b])
     running.a, running.b = a, b
     try:
         running.wait_for("READY=1")

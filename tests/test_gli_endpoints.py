@@ -18,7 +18,7 @@ from hilgate.client import Link
 from hilgate.gli.limits import Limits, budget_problems, describe, open_failure, probe_queue, queue_names, read_limits, scene_need
 from hilgate.scene import SceneError
 from hilgate.scene.load import load_scene
-from tests.daemon_kit import Daemon, unique
+from daemon_kit import unique
 
 
 def scene(links: dict[str, str]) -> str:
@@ -39,39 +39,31 @@ def queue_exists(link: str) -> list[bool]:
     return [probe_queue(name) is not None for name in queue_names(link)]
 
 
-def test_socket_only_links_create_no_queues_and_still_carry_frames(tmp_path):
+def test_socket_only_links_create_no_queues_and_still_carry_frames(daemon_of):
     a, b, both = unique("so"), unique("so"), unique("mq")
-    daemon = Daemon(tmp_path, scene({a: ", gli: [socket]", b: ", gli: socket", both: ""}), [a, b, both])
-    try:
-        daemon.wait_for("READY=1")
-        assert queue_exists(a) == [False, False]
-        assert queue_exists(b) == [False, False]
-        assert queue_exists(both) == [True, True]
-        assert all(os.path.exists(os.path.join(daemon.runtime, "gli", f"{l}.sock")) for l in (a, b, both))
-        with Link.open(b, runtime_dir=daemon.runtime) as receiver, Link.open(a, runtime_dir=daemon.runtime) as sender:
-            sender.send(b"no queue", dst=2)
-            message = receiver.recv(timeout=10)
-        assert message is not None and (message.data, message.src, message.dst) == (b"no queue", 1, 2)
-        assert queue_exists(a) == [False, False]
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene({a: ", gli: [socket]", b: ", gli: socket", both: ""}), [a, b, both])
+    assert queue_exists(a) == [False, False]
+    assert queue_exists(b) == [False, False]
+    assert queue_exists(both) == [True, True]
+    assert all(os.path.exists(os.path.join(daemon.runtime, "gli", f"{l}.sock")) for l in (a, b, both))
+    with Link.open(b, runtime_dir=daemon.runtime) as receiver, Link.open(a, runtime_dir=daemon.runtime) as sender:
+        sender.send(b"no queue", dst=2)
+        message = receiver.recv(timeout=10)
+    assert message is not None and (message.data, message.src, message.dst) == (b"no queue", 1, 2)
+    assert queue_exists(a) == [False, False]
 
 
-def test_queue_only_link_opens_no_socket_and_a_reload_adds_it(tmp_path):
+def test_queue_only_link_opens_no_socket_and_a_reload_adds_it(daemon_of):
     link = unique("mo")
-    daemon = Daemon(tmp_path, scene({link: ", gli: [mq]"}), [link])
-    try:
-        daemon.wait_for("READY=1")
-        sock = os.path.join(daemon.runtime, "gli", f"{link}.sock")
-        assert queue_exists(link) == [True, True]
-        assert not os.path.exists(sock)
-        daemon.reload(scene({link: ", gli: [mq, socket]"}))
-        assert os.path.exists(sock)
-        daemon.reload(scene({link: ", gli: [socket]"}))
-        assert os.path.exists(sock)
-        assert daemon.process.poll() is None
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene({link: ", gli: [mq]"}), [link])
+    sock = os.path.join(daemon.runtime, "gli", f"{link}.sock")
+    assert queue_exists(link) == [True, True]
+    assert not os.path.exists(sock)
+    daemon.reload(scene({link: ", gli: [mq, socket]"}))
+    assert os.path.exists(sock)
+    daemon.reload(scene({link: ", gli: [socket]"}))
+    assert os.path.exists(sock)
+    assert daemon.process.poll() is None
 
 
 def test_bad_gli_is_refused_with_file_line_and_key(tmp_path):
@@ -205,25 +197,21 @@ def test_budget_without_a_listing_counts_the_scenes_own_queues_and_says_the_rest
     assert len(problems) == 1 and "258 new queues and those that exist (how many: unknown)" in problems[0]
 
 
-def test_check_sees_the_queues_a_running_daemon_holds(tmp_path):
+def test_check_sees_the_queues_a_running_daemon_holds(daemon_of):
     """The issue's case: `hilgate check` said "(0 in use)" while a daemon held four queues, because it
     looked for them in an unmounted /dev/mqueue.  Asked of the queue API, they are there either way."""
     a, b = unique("hq"), unique("hq")
     text = scene({a: ", packet: vl1b", b: ", packet: vl1b"})
-    daemon = Daemon(tmp_path, text, [a, b])
-    try:
-        daemon.wait_for("READY=1")
-        assert queue_exists(a) == [True, True] and queue_exists(b) == [True, True]
-        result = subprocess.run([sys.executable, "-m", "hilgate", "check", str(daemon.scene)], capture_output=True,
-                                text=True, timeout=60)
-        assert result.returncode == 0, result.stderr
-        assert "2 of 2 links with POSIX queues: 0 new queues" in result.stdout
-        held = sum(probe_queue(name)[1] for link in (a, b) for name in queue_names(link))
-        assert held >= 4 * 10 * (1 + 271 + 96)  # at least vl1b's size each (dccomms' 8192 when unlimited)
-        if read_limits().listed:
-            used = int(result.stdout.split(" bytes (")[1].split(" in use)")[0])
-            assert used >= held
-        else:
-            assert f"(in use: unknown, {held} by this scene's existing queues)" in result.stdout
-    finally:
-        daemon.close()
+    daemon = daemon_of(text, [a, b])
+    assert queue_exists(a) == [True, True] and queue_exists(b) == [True, True]
+    result = subprocess.run([sys.executable, "-m", "hilgate", "check", str(daemon.scene)], capture_output=True,
+                            text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert "2 of 2 links with POSIX queues: 0 new queues" in result.stdout
+    held = sum(probe_queue(name)[1] for link in (a, b) for name in queue_names(link))
+    assert held >= 4 * 10 * (1 + 271 + 96)  # at least vl1b's size each (dccomms' 8192 when unlimited)
+    if read_limits().listed:
+        used = int(result.stdout.split(" bytes (")[1].split(" in use)")[0])
+        assert used >= held
+    else:
+        assert f"(in use: unknown, {held} by this scene's existing queues)" in result.stdout

@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from daemon_kit import SCENE_HEAD, Daemon, peer_events, two_links, unique
+from daemon_kit import SCENE_HEAD, peer_events, two_links, unique
 
 
 def scene(a: str, b: str, extra_links: str = "", extra: str = "") -> str:
@@ -177,48 +177,43 @@ def test_the_unix_listen_backlog_takes_a_burst_of_connections(pair):
 
 # -- GLI clients -------------------------------------------------------------------------------
 
-def test_clients_per_link_and_in_total_are_capped_with_an_answer(tmp_path):
+def test_clients_per_link_and_in_total_are_capped_with_an_answer(daemon_of):
     from hilgate.client import GliError, Link
 
     a, b = unique("a"), unique("b")
-    daemon = Daemon(tmp_path, scene(a, b), [a, b], "--max-link-clients", "2", "--max-clients", "3")
-    try:
-        daemon.wait_for("READY=1")
-        first, second = Link.open(a, runtime_dir=daemon.runtime), Link.open(a, runtime_dir=daemon.runtime)
-        with pytest.raises(GliError, match="too many clients on link"):
-            Link.open(a, runtime_dir=daemon.runtime)
+    daemon = daemon_of(scene(a, b), [a, b], "--max-link-clients", "2", "--max-clients", "3")
+    first, second = Link.open(a, runtime_dir=daemon.runtime), Link.open(a, runtime_dir=daemon.runtime)
+    with pytest.raises(GliError, match="too many clients on link"):
+        Link.open(a, runtime_dir=daemon.runtime)
 
-        class SlowToSayHello(Link):  # descheduled between connect and HELLO, as on a loaded host
-            def _connected(self):
-                deadline = time.monotonic() + 60
-                while not self.sock.recv(1, socket.MSG_PEEK):  # the daemon's refusal has arrived
-                    assert time.monotonic() < deadline
-                time.sleep(0.2)  # and it has closed the connection by now
+    class SlowToSayHello(Link):  # descheduled between connect and HELLO, as on a loaded host
+        def _connected(self):
+            deadline = time.monotonic() + 60
+            while not self.sock.recv(1, socket.MSG_PEEK):  # the daemon's refusal has arrived
+                assert time.monotonic() < deadline
+            time.sleep(0.2)  # and it has closed the connection by now
 
-        with pytest.raises(GliError, match="too many clients on link"):
-            SlowToSayHello.open(a, runtime_dir=daemon.runtime)
-        third = Link.open(b, runtime_dir=daemon.runtime)
-        with pytest.raises(GliError, match=r"too many clients \(3\)"):
-            Link.open(b, runtime_dir=daemon.runtime)
-        first.close()
-        deadline = time.monotonic() + 60
-        while daemon.link_status(a)["clients"] != 1:  # the daemon has seen it leave
-            assert time.monotonic() < deadline
-            time.sleep(0.01)
-        Link.open(b, runtime_dir=daemon.runtime).close()  # a place is free again
-        second.close()
-        third.close()
-    finally:
-        daemon.close()
+    with pytest.raises(GliError, match="too many clients on link"):
+        SlowToSayHello.open(a, runtime_dir=daemon.runtime)
+    third = Link.open(b, runtime_dir=daemon.runtime)
+    with pytest.raises(GliError, match=r"too many clients \(3\)"):
+        Link.open(b, runtime_dir=daemon.runtime)
+    first.close()
+    deadline = time.monotonic() + 60
+    while daemon.link_status(a)["clients"] != 1:  # the daemon has seen it leave
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    Link.open(b, runtime_dir=daemon.runtime).close()  # a place is free again
+    second.close()
+    third.close()
 
 
-def test_a_gli_client_that_never_reads_is_dropped_past_its_cap_counted_and_traced(tmp_path):
+def test_a_gli_client_that_never_reads_is_dropped_past_its_cap_counted_and_traced(daemon_of):
     from hilgate.client import Link
 
     a, b = unique("a"), unique("b")
-    daemon = Daemon(tmp_path, scene(a, b).replace("bitrate_bps: 10000", "bitrate_bps: 1e9"), [a, b])
+    daemon = daemon_of(scene(a, b).replace("bitrate_bps: 10000", "bitrate_bps: 1e9"), [a, b])
     try:
-        daemon.wait_for("READY=1")
         sleeper = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         sleeper.connect(os.path.join(daemon.runtime, "gli", f"{b}.sock"))  # b's client, never reads
         with Link.open(a, runtime_dir=daemon.runtime) as sender:
@@ -234,18 +229,16 @@ def test_a_gli_client_that_never_reads_is_dropped_past_its_cap_counted_and_trace
     finally:
         daemon.stop()
         events = daemon.trace_events()
-        daemon.close()
     assert any(e.get("cause") == "client_slow" and e["link"] == b for e in events)
 
 
-def test_frames_nobody_was_there_to_read_are_not_counted_as_application_drops(tmp_path):
+def test_frames_nobody_was_there_to_read_are_not_counted_as_application_drops(daemon_of):
     from hilgate.client import Link
 
     a, b, c = unique("a"), unique("b"), unique("c")
     extra = f"  {c}: {{vehicle: vb, address: 3, bitrate_bps: 10000, packet: vl2b}}"
-    daemon = Daemon(tmp_path, scene(a, b, extra), [a, b, c])
+    daemon = daemon_of(scene(a, b, extra), [a, b, c])
     try:
-        daemon.wait_for("READY=1")
         with Link.open(a, runtime_dir=daemon.runtime) as sender, Link.open(b, runtime_dir=daemon.runtime) as reader:
             for i in range(80):
                 sender.send(b"hello %d" % i)  # broadcast: b (a socket client) and c (nobody) hear it
@@ -263,38 +256,33 @@ def test_frames_nobody_was_there_to_read_are_not_counted_as_application_drops(tm
     finally:
         daemon.stop()
         events = daemon.trace_events()
-        daemon.close()
     assert sum(1 for e in events if e.get("cause") == "no_reader" and e["link"] == c) == 16
 
 
-def test_frames_held_for_a_dccomms_application_that_starts_late_survive_its_start(tmp_path):
+def test_frames_held_for_a_dccomms_application_that_starts_late_survive_its_start(daemon_of):
     """Issue 24 item 7: dccomms empties its input queue when it starts (CommsDeviceService::Init ->
     ClearInputQueue) and only then says REQ_STATE; frames that came before are held in the daemon until it
     speaks, so it gets them all, in order (it empties only the daemon's state messages)."""
     from hilgate.client import Link
 
     a, b = unique("a"), unique("b")
-    daemon = Daemon(tmp_path, scene(a, b), [a, b])
-    try:
-        daemon.wait_for("READY=1")
-        with Link.open(a, runtime_dir=daemon.runtime) as sender:
-            for i in range(5):
-                sender.send(b"early %d" % i, dst=2)
-        deadline = time.monotonic() + 60
-        while daemon.link_status(b)["unread"] < 5:
-            assert time.monotonic() < deadline, daemon.link_status(b)
-            time.sleep(0.01)
-        late = daemon.peer(b, "--clear", "--receive", "5", "--timeout", "60")
-        events = peer_events(late)
-        [cleared] = [e["types"] for e in events if e["ev"] == "cleared"]
-        assert cleared and set(cleared) == {2}  # only CMD_STATE messages were in its queue
-        assert [e["payload"].rstrip(".") for e in events if e["ev"] == "frame"] == [f"early {i}" for i in range(5)]
-        assert daemon.link_status(b)["drop_causes"] == {}
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene(a, b), [a, b])
+    with Link.open(a, runtime_dir=daemon.runtime) as sender:
+        for i in range(5):
+            sender.send(b"early %d" % i, dst=2)
+    deadline = time.monotonic() + 60
+    while daemon.link_status(b)["unread"] < 5:
+        assert time.monotonic() < deadline, daemon.link_status(b)
+        time.sleep(0.01)
+    late = daemon.peer(b, "--clear", "--receive", "5", "--timeout", "60")
+    events = peer_events(late)
+    [cleared] = [e["types"] for e in events if e["ev"] == "cleared"]
+    assert cleared and set(cleared) == {2}  # only CMD_STATE messages were in its queue
+    assert [e["payload"].rstrip(".") for e in events if e["ev"] == "frame"] == [f"early {i}" for i in range(5)]
+    assert daemon.link_status(b)["drop_causes"] == {}
 
 
-def test_frames_left_in_the_queue_while_no_daemon_ran_are_counted_and_traced_as_stale(tmp_path):
+def test_frames_left_in_the_queue_while_no_daemon_ran_are_counted_and_traced_as_stale(daemon_of):
     import posix_ipc
 
     sys_path = os.path.join(os.path.dirname(__file__), "peers")
@@ -309,15 +297,13 @@ def test_frames_left_in_the_queue_while_no_daemon_ran_are_counted_and_traced_as_
     for i in range(3):
         queue.send(b"\x00" + encode_vl2b(b"old %d" % i, i, 1, 2))
     queue.close()
-    daemon = Daemon(tmp_path, scene(a, b), [a, b])
+    daemon = daemon_of(scene(a, b), [a, b])
     try:
-        daemon.wait_for("READY=1")
         status = daemon.link_status(a)
         assert status["drop_causes"] == {"stale": 3} and status["tx_packets"] == 0
     finally:
         daemon.stop()
         events = daemon.trace_events()
-        daemon.close()
     assert [e["cause"] for e in events if e.get("link") == a and e["ev"] == "drop"] == ["stale"] * 3
 
 
@@ -357,24 +343,20 @@ def test_a_receive_timeout_does_not_become_the_send_timeout(pair):
     assert errors == []
 
 
-def test_a_reload_of_a_scene_with_a_plugin_mac(tmp_path):
+def test_a_reload_of_a_scene_with_a_plugin_mac(tmp_path, daemon_of):
     import shutil
 
     a, b = unique("a"), unique("b")
     shutil.copy(os.path.join(os.path.dirname(__file__), "example_mac.py"), tmp_path / "tdma_plugin.py")
     text = scene(a, b).replace("packet: vl2b}", "packet: vl2b, mac: {protocol: tdma, slot_s: 0.5}}") + \
-        "plugins: [tdma_plugin.py]\n"
-    daemon = Daemon(tmp_path, text, [a, b])
-    try:
-        daemon.wait_for("READY=1")
-        daemon.scene.write_text(text.replace("slot_s: 0.5", "slot_s: 0.25"))
-        assert daemon.control({"class": "RELOAD"}) == {"class": "RELOAD", "ok": True}
-        assert "Traceback" not in daemon.output()
-    finally:
-        daemon.close()
+        "plugins: [../tdma_plugin.py]\n"  # relative to the scene's file, in a folder of its own under tmp_path
+    daemon = daemon_of(text, [a, b])
+    daemon.scene.write_text(text.replace("slot_s: 0.5", "slot_s: 0.25"))
+    assert daemon.control({"class": "RELOAD"}) == {"class": "RELOAD", "ok": True}
+    assert "Traceback" not in daemon.output()
 
 
-def test_an_application_that_only_listens_gets_a_burst_without_losses(tmp_path):
+def test_an_application_that_only_listens_gets_a_burst_without_losses(daemon_of):
     """It never writes on its queue (no REQ_STATE), but it reads: the daemon sees that and keeps the
     whole backlog for it."""
     import posix_ipc
@@ -382,22 +364,18 @@ def test_an_application_that_only_listens_gets_a_burst_without_losses(tmp_path):
     from hilgate.client import Link
 
     a, b = unique("a"), unique("b")
-    daemon = Daemon(tmp_path, scene(a, b).replace("bitrate_bps: 10000", "bitrate_bps: 1e9"), [a, b])
-    try:
-        daemon.wait_for("READY=1")
-        queue = posix_ipc.MessageQueue(f"/{b}_rx_dlnk_phy")
-        frames = 0
-        with Link.open(a, runtime_dir=daemon.runtime) as sender:
-            sender.send(b"first", dst=2)
-            while frames < 1:  # the listener takes what the daemon put in its queue…
-                message, _ = queue.receive(60)
-                frames += message[0] == 0
-            for i in range(300):  # …so a burst far beyond queue and short backlog reaches it whole
-                sender.send(b"burst %d" % i, dst=2)
-            while frames < 301:
-                message, _ = queue.receive(60)
-                frames += message[0] == 0
-        queue.close()
-        assert daemon.link_status(b)["drop_causes"] == {}
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene(a, b).replace("bitrate_bps: 10000", "bitrate_bps: 1e9"), [a, b])
+    queue = posix_ipc.MessageQueue(f"/{b}_rx_dlnk_phy")
+    frames = 0
+    with Link.open(a, runtime_dir=daemon.runtime) as sender:
+        sender.send(b"first", dst=2)
+        while frames < 1:  # the listener takes what the daemon put in its queue…
+            message, _ = queue.receive(60)
+            frames += message[0] == 0
+        for i in range(300):  # …so a burst far beyond queue and short backlog reaches it whole
+            sender.send(b"burst %d" % i, dst=2)
+        while frames < 301:
+            message, _ = queue.receive(60)
+            frames += message[0] == 0
+    queue.close()
+    assert daemon.link_status(b)["drop_causes"] == {}

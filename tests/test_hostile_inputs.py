@@ -261,33 +261,29 @@ def simple20(seq: int) -> bytes:
     return b"\x55" + payload + binascii.crc_hqx(payload, 0).to_bytes(2, "big")
 
 
-def test_a_long_write_is_timed_by_the_line_across_the_pauses(tmp_path):
+def test_a_long_write_is_timed_by_the_line_across_the_pauses(tmp_path, daemon_of):
     """250 frames written at once (5 500 bytes, 2.9 s of line at 19 200 baud with RTS/CTS): the emulator
     pauses after 2 s worth, resumes while the line is still busy, and every frame reaches the channel
     exactly one line time (22 bytes of 10 bits) after the one before, as without the pauses."""
     ea, eb = unique("la"), unique("lb")
-    daemon = Daemon(tmp_path, s100_scene(tmp_path, ea, eb, 19200, True), [ea, eb])
-    try:
-        daemon.wait_for("READY=1")
-        a = os.open(str(tmp_path / "a"), os.O_RDWR | os.O_NOCTTY)
-        tty.setraw(a)
-        b = open_raw(tmp_path / "b")
-        frames = [simple20(i) for i in range(250)]
-        data = b"".join(f + b"\r\n" for f in frames)
-        os.write(a, data)  # blocking: the kernel takes it while the emulator reads
-        received = b""
-        deadline = time.monotonic() + 120  # a hang guard: 2.9 s of line each way
-        while len(received) < len(data) and time.monotonic() < deadline:
-            try:
-                received += os.read(b, 1 << 16)
-            except BlockingIOError:
-                time.sleep(0.05)
-        assert received == data
-        os.close(a), os.close(b)
-        daemon.stop()
-        enq = [e["t"] for e in daemon.trace_events() if e.get("link") == ea and e["ev"] == "enq"]
-        assert len(enq) == 250
-        gaps = [later - earlier for earlier, later in zip(enq, enq[1:])]
-        assert max(abs(gap - 22 * 10 / 19200) for gap in gaps) <= 2e-9  # the trace rounds to 1 ns
-    finally:
-        daemon.close()
+    daemon = daemon_of(s100_scene(tmp_path, ea, eb, 19200, True), [ea, eb])
+    a = os.open(str(tmp_path / "a"), os.O_RDWR | os.O_NOCTTY)
+    tty.setraw(a)
+    b = open_raw(tmp_path / "b")
+    frames = [simple20(i) for i in range(250)]
+    data = b"".join(f + b"\r\n" for f in frames)
+    os.write(a, data)  # blocking: the kernel takes it while the emulator reads
+    received = b""
+    deadline = time.monotonic() + 120  # a hang guard: 2.9 s of line each way
+    while len(received) < len(data) and time.monotonic() < deadline:
+        try:
+            received += os.read(b, 1 << 16)
+        except BlockingIOError:
+            time.sleep(0.05)
+    assert received == data
+    os.close(a), os.close(b)
+    daemon.stop()
+    enq = [e["t"] for e in daemon.trace_events() if e.get("link") == ea and e["ev"] == "enq"]
+    assert len(enq) == 250
+    gaps = [later - earlier for earlier, later in zip(enq, enq[1:])]
+    assert max(abs(gap - 22 * 10 / 19200) for gap in gaps) <= 2e-9  # the trace rounds to 1 ns

@@ -4,7 +4,6 @@ The fake BlueROV is pymavlink itself, sending HEARTBEAT, LOCAL_POSITION_NED, ATT
 GLOBAL_POSITION_INT to the daemon over UDP loopback, as BlueOS sends them to the topside.
 """
 
-import math
 import socket
 import subprocess
 import sys
@@ -13,7 +12,7 @@ import time
 import pytest
 
 import hilgate.drivers.mavlink_source  # noqa: F401  (sets MAVLink 2 before pymavlink is imported)
-from daemon_kit import Daemon, free_port, in_background, unique, wait_until
+from daemon_kit import assert_the_walk_traced, free_port, in_background, unique, walk_a_live_vehicle
 from hilgate.client import Link
 from hilgate.models.controlled import Controlled
 from hilgate.models.medium import Channel
@@ -121,44 +120,24 @@ vehicles:
 """
 
 
-def status_of(daemon, name):
-    return next(v for v in daemon.status()["vehicles"] if v["name"] == name)
-
-
-def test_fake_bluerov_over_mavlink_moves_the_modem_and_goes_stale(tmp_path):
+def test_fake_bluerov_over_mavlink_moves_the_modem_and_goes_stale(daemon_of):
     port = free_port(socket.SOCK_DGRAM)
     topside, bluerov = unique("top"), unique("rov")
-    daemon = Daemon(tmp_path, live_scene(port, bluerov, topside), [topside, bluerov])
+    daemon = daemon_of(live_scene(port, bluerov, topside), [topside, bluerov])
     vehicle = FakeBlueRov(port)
     try:
-        daemon.wait_for("READY=1")
-        wait_until(lambda: status_of(daemon, "bluerov")["position"] is not None)
-        seen = status_of(daemon, "bluerov")
-        assert seen["position"] == [150.0, 0.0, 5.0] and seen["source"] == "mavlink" and seen["age_s"] is not None  # fresh: a stale one is dropped
-        with Link.open(topside, runtime_dir=daemon.runtime) as top, Link.open(bluerov, runtime_dir=daemon.runtime) as rov:
-            top.send(b"near", dst=2)
-            assert rov.recv(timeout=30).data == b"near"
-            vehicle.position = [300.0, 0.0, 5.0]
-            wait_until(lambda: status_of(daemon, "bluerov")["position"] == [300.0, 0.0, 5.0])
-            top.send(b"away", dst=2)
-            assert rov.recv(timeout=30).data == b"away"
-            vehicle.sending = False  # the tether is cut: silence, stale, dropped
-            wait_until(lambda: status_of(daemon, "bluerov")["position"] is None)
-            top.send(b"lost", dst=2)
-            assert rov.recv(timeout=1.5) is None
-        daemon.stop()
-        events = daemon.trace_events()
-        enq = {e["pkt"]: e["t"] for e in events if e.get("ev") == "enq"}
-        delays = [round(e["t"] - enq[e["pkt"]], 6) for e in events if e.get("ev") == "rx"]
-        # 9 bytes on air = 72 ms, then the distance to the vehicle 5 m deep, 150 m then 300 m away
-        assert delays == [round(0.072 + math.hypot(150, 5) / 1500, 6), round(0.072 + math.hypot(300, 5) / 1500, 6)]
-        assert [e["cause"] for e in events if e.get("ev") == "err"] == ["no_pose"]  # stale, dropped: no position
+        def cut_the_tether():  # silence, stale, dropped
+            vehicle.sending = False
+
+        seen = walk_a_live_vehicle(daemon, topside, bluerov, lambda: setattr(vehicle, "position", [300.0, 0.0, 5.0]),
+                                   cut_the_tether)
+        assert seen["source"] == "mavlink" and seen["age_s"] is not None  # fresh: a stale one is dropped
+        assert_the_walk_traced(daemon)
     finally:
         vehicle.close()
-        daemon.close()
 
 
-def test_applications_steer_controlled_vehicles_and_feedback_reaches_the_autopilot(tmp_path):
+def test_applications_steer_controlled_vehicles_and_feedback_reaches_the_autopilot(daemon_of):
     autopilot_port = free_port(socket.SOCK_DGRAM)
     autopilot = mavutil.mavlink_connection(f"udpin:127.0.0.1:{autopilot_port}", source_system=1)
     follower = unique("fol")
@@ -171,9 +150,8 @@ vehicles:
 links:
   {follower}: {{vehicle: follower, address: 1}}
 """
-    daemon = Daemon(tmp_path, scene, [follower])
+    daemon = daemon_of(scene, [follower])
     try:
-        daemon.wait_for("READY=1")
         with Link.open(follower, runtime_dir=daemon.runtime) as link:
             start = time.monotonic()
             assert link.command({"class": "GOTO", "position": [3, 4, 2]})["ok"]
@@ -195,7 +173,6 @@ links:
         assert all("follower" in line and "controlled" in line for line in lines)
     finally:
         autopilot.close()
-        daemon.close()
 
 
 def test_live_pose_scene_errors(tmp_path):

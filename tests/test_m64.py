@@ -17,7 +17,7 @@ wlmodem = pytest.importorskip("wlmodem")
 from wlmodem import WlModem, WlUDPSocket  # noqa: E402
 from wlmodem import transport as wl_transport  # noqa: E402
 
-from daemon_kit import SCENE_HEAD, Daemon, unique, wait_until  # noqa: E402
+from daemon_kit import SCENE_HEAD, unique, wait_until  # noqa: E402
 from fuzzkit import examples  # noqa: E402
 from hilgate.client import Link  # noqa: E402
 from hilgate.drivers import m64_codec as codec  # noqa: E402
@@ -128,56 +128,51 @@ def close_modems(*modems):
         m._serial.close()
 
 
-def test_wlmodem_connects_configures_queues_flushes_and_receives_between_two_emulated_m64s(tmp_path):
+def test_wlmodem_connects_configures_queues_flushes_and_receives_between_two_emulated_m64s(tmp_path, daemon_of):
     ea, eb = unique("ma"), unique("mb")
-    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb), [ea, eb], "--speed", str(SPEED))
-    try:
-        daemon.wait_for("READY=1")
-        a, b = open_modems(tmp_path / "a", tmp_path / "b")
-        assert a.payload_size == 8 and a.cmd_get_version() == [1, 0, 1]
-        assert a.cmd_configure("a", 4) and b.cmd_configure("b", 4)
-        assert a.request(ord("c")).options == [b"a", b"4"] and b.request(ord("c")).options == [b"b", b"4"]
-        assert not a.cmd_configure("c", 4)  # wrs,n (the library checks the channel itself)
-        assert a.cmd_get_queue_length() == 0
-        assert a.cmd_queue_packet(b"HelloSea") and a.cmd_queue_packet(b"Hi*there")  # '*' as 6th byte: wlmodem's quirk
-        assert b.get_data_packet(timeout=30) == b"HelloSea"
-        assert b.get_data_packet(timeout=30) == b"Hi*there"
-        assert b.cmd_queue_packet(b"HelloTop")
-        assert a.get_data_packet(timeout=30) == b"HelloTop"
-        for _ in range(3):
-            assert a.cmd_queue_packet(b"flushed!")
-        assert a.cmd_get_queue_length() >= 1 and a.cmd_flush_queue() and a.cmd_get_queue_length() == 0
-        diag_a, diag_b = a.cmd_get_diagnostic(), b.cmd_get_diagnostic()
-        assert diag_a["link_up"] and diag_b["link_up"] and diag_b["pkt_cnt"] >= 2 and diag_b["pkt_loss_cnt"] == 0
-        with pytest.raises(wlmodem.WlModemGenericError):
-            a.cmd_queue_packet(b"too long for a packet")
-        close_modems(a, b)
-        daemon.stop()
-        events = daemon.trace_events()
-        tx_a = {e["pkt"]: e["t"] for e in events if e.get("link") == ea and e["ev"] == "tx"}
-        tx_b = {e["pkt"]: e["t"] for e in events if e.get("link") == eb and e["ev"] == "tx"}
-        rx_b = [e for e in events if e.get("link") == eb and e["ev"] == "rx"]
-        rx_a = [e for e in events if e.get("link") == ea and e["ev"] == "rx"]
-        # role A sends every second of model time; B answers 50 ms after A's packet has reached it
-        slots = sorted(tx_a.values())
-        assert [round(t2 - t1, 9) for t1, t2 in zip(slots, slots[1:])] == [1.0] * (len(slots) - 1)
-        answers = sorted(tx_b.values())
-        assert all(any(round(tb - ta, 9) == round(AIRTIME + 0.1 + 0.05, 9) for ta in slots) for tb in answers)
-        # each packet reaches the host after its air time, 150 m at 1500 m/s and the decoding delay
-        assert rx_b and all(round(e["t"] - tx_a[e["pkt"]], 9) == round(AIRTIME + 0.1 + RX_DELAY, 9) for e in rx_b)
-        assert rx_a and all(round(e["t"] - tx_b[e["pkt"]], 9) == round(AIRTIME + 0.1 + RX_DELAY, 9) for e in rx_a)
-        flushed = [e for e in events if e["ev"] == "drop" and e.get("link") == ea]
-        assert flushed and {e["cause"] for e in flushed} == {"flushed"}
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene(tmp_path, ea, eb), [ea, eb], "--speed", str(SPEED))
+    a, b = open_modems(tmp_path / "a", tmp_path / "b")
+    assert a.payload_size == 8 and a.cmd_get_version() == [1, 0, 1]
+    assert a.cmd_configure("a", 4) and b.cmd_configure("b", 4)
+    assert a.request(ord("c")).options == [b"a", b"4"] and b.request(ord("c")).options == [b"b", b"4"]
+    assert not a.cmd_configure("c", 4)  # wrs,n (the library checks the channel itself)
+    assert a.cmd_get_queue_length() == 0
+    assert a.cmd_queue_packet(b"HelloSea") and a.cmd_queue_packet(b"Hi*there")  # '*' as 6th byte: wlmodem's quirk
+    assert b.get_data_packet(timeout=30) == b"HelloSea"
+    assert b.get_data_packet(timeout=30) == b"Hi*there"
+    assert b.cmd_queue_packet(b"HelloTop")
+    assert a.get_data_packet(timeout=30) == b"HelloTop"
+    for _ in range(3):
+        assert a.cmd_queue_packet(b"flushed!")
+    assert a.cmd_get_queue_length() >= 1 and a.cmd_flush_queue() and a.cmd_get_queue_length() == 0
+    diag_a, diag_b = a.cmd_get_diagnostic(), b.cmd_get_diagnostic()
+    assert diag_a["link_up"] and diag_b["link_up"] and diag_b["pkt_cnt"] >= 2 and diag_b["pkt_loss_cnt"] == 0
+    with pytest.raises(wlmodem.WlModemGenericError):
+        a.cmd_queue_packet(b"too long for a packet")
+    close_modems(a, b)
+    daemon.stop()
+    events = daemon.trace_events()
+    tx_a = {e["pkt"]: e["t"] for e in events if e.get("link") == ea and e["ev"] == "tx"}
+    tx_b = {e["pkt"]: e["t"] for e in events if e.get("link") == eb and e["ev"] == "tx"}
+    rx_b = [e for e in events if e.get("link") == eb and e["ev"] == "rx"]
+    rx_a = [e for e in events if e.get("link") == ea and e["ev"] == "rx"]
+    # role A sends every second of model time; B answers 50 ms after A's packet has reached it
+    slots = sorted(tx_a.values())
+    assert [round(t2 - t1, 9) for t1, t2 in zip(slots, slots[1:])] == [1.0] * (len(slots) - 1)
+    answers = sorted(tx_b.values())
+    assert all(any(round(tb - ta, 9) == round(AIRTIME + 0.1 + 0.05, 9) for ta in slots) for tb in answers)
+    # each packet reaches the host after its air time, 150 m at 1500 m/s and the decoding delay
+    assert rx_b and all(round(e["t"] - tx_a[e["pkt"]], 9) == round(AIRTIME + 0.1 + RX_DELAY, 9) for e in rx_b)
+    assert rx_a and all(round(e["t"] - tx_b[e["pkt"]], 9) == round(AIRTIME + 0.1 + RX_DELAY, 9) for e in rx_a)
+    flushed = [e for e in events if e["ev"] == "drop" and e.get("link") == ea]
+    assert flushed and {e["cause"] for e in flushed} == {"flushed"}
 
 
-def test_a_wlmodem_datagram_crosses_two_emulated_m64s_both_ways(tmp_path):
+def test_a_wlmodem_datagram_crosses_two_emulated_m64s_both_ways(tmp_path, daemon_of):
     ea, eb = unique("ma"), unique("mb")
-    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb), [ea, eb], "--speed", str(SPEED))
+    daemon = daemon_of(scene(tmp_path, ea, eb), [ea, eb], "--speed", str(SPEED))
     sockets = []
     try:
-        daemon.wait_for("READY=1")
         a, b = open_modems(tmp_path / "a", tmp_path / "b")
         assert a.cmd_configure("a", 2) and b.cmd_configure("b", 2)
         sa, sb = WlUDPSocket(a), WlUDPSocket(b)
@@ -190,37 +185,32 @@ def test_a_wlmodem_datagram_crosses_two_emulated_m64s_both_ways(tmp_path):
     finally:
         for s in sockets:
             s.stop()
-        daemon.close()
 
 
-def test_packets_the_model_loses_show_in_wcd_and_in_the_trace_and_channels_do_not_meet(tmp_path):
+def test_packets_the_model_loses_show_in_wcd_and_in_the_trace_and_channels_do_not_meet(tmp_path, daemon_of):
     ea, eb = unique("ma"), unique("mb")
     # B's receiver loses half of what it hears (its error model); A hears B perfectly
-    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb, error_b="0.5"), [ea, eb], "--speed", str(SPEED))
-    try:
-        daemon.wait_for("READY=1")
-        a, b = open_modems(tmp_path / "a", tmp_path / "b")
-        assert a.cmd_configure("a", 3) and b.cmd_configure("b", 3)
-        wait_until(lambda: (d := b.cmd_get_diagnostic()) and d["pkt_loss_cnt"] >= 2 and d["pkt_cnt"] >= 2 or None)
-        # A moves to channel 5: B hears nothing of it any more (another band), so its figures stop once
-        # what was on its way has arrived (the model's time, read from the live trace: 3 s after the move)
-        assert a.cmd_configure("a", 5)
-        moved = wait_until(lambda: next((e["t"] for e in daemon.trace_so_far() if e["ev"] == "band"
-                                         and e["link"] == ea and e["band_khz"] == [156.0, 187.0]), None))
-        wait_until(lambda: any(e["t"] > moved + 3 for e in daemon.trace_so_far()) or None)
-        final = b.cmd_get_diagnostic()
-        close_modems(a, b)
-        daemon.stop()
-        events = daemon.trace_events()
-        heard = [e for e in events if e.get("link") == eb and e.get("src") == ea and e["ev"] in ("rx", "err")]
-        lost = [e for e in heard if e["ev"] == "err"]
-        assert lost and {e["cause"] for e in lost} <= {"prop", "col"}
-        # B counts every packet from its A that reached it, good or lost: the model's own lines
-        assert final["pkt_loss_cnt"] == len(lost)
-        assert final["pkt_cnt"] == len(heard) - len(lost)
-        assert not [e for e in heard if e["t"] > moved + 2.0]  # nothing from channel 5 reached channel 3
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene(tmp_path, ea, eb, error_b="0.5"), [ea, eb], "--speed", str(SPEED))
+    a, b = open_modems(tmp_path / "a", tmp_path / "b")
+    assert a.cmd_configure("a", 3) and b.cmd_configure("b", 3)
+    wait_until(lambda: (d := b.cmd_get_diagnostic()) and d["pkt_loss_cnt"] >= 2 and d["pkt_cnt"] >= 2 or None)
+    # A moves to channel 5: B hears nothing of it any more (another band), so its figures stop once
+    # what was on its way has arrived (the model's time, read from the live trace: 3 s after the move)
+    assert a.cmd_configure("a", 5)
+    moved = wait_until(lambda: next((e["t"] for e in daemon.trace_so_far() if e["ev"] == "band"
+                                     and e["link"] == ea and e["band_khz"] == [156.0, 187.0]), None))
+    wait_until(lambda: any(e["t"] > moved + 3 for e in daemon.trace_so_far()) or None)
+    final = b.cmd_get_diagnostic()
+    close_modems(a, b)
+    daemon.stop()
+    events = daemon.trace_events()
+    heard = [e for e in events if e.get("link") == eb and e.get("src") == ea and e["ev"] in ("rx", "err")]
+    lost = [e for e in heard if e["ev"] == "err"]
+    assert lost and {e["cause"] for e in lost} <= {"prop", "col"}
+    # B counts every packet from its A that reached it, good or lost: the model's own lines
+    assert final["pkt_loss_cnt"] == len(lost)
+    assert final["pkt_cnt"] == len(heard) - len(lost)
+    assert not [e for e in heard if e["t"] > moved + 2.0]  # nothing from channel 5 reached channel 3
 
 
 # -- hilgate's driver against the emulator -------------------------------------------------------------
@@ -239,46 +229,41 @@ def driver_scene(tmp_path, da, ea, eb, packet, db=None):
 """
 
 
-def test_hilgate_drivers_carry_frames_application_to_application_through_emulated_m64s(tmp_path):
+def test_hilgate_drivers_carry_frames_application_to_application_through_emulated_m64s(tmp_path, daemon_of):
     da, db, ea, eb = unique("da"), unique("db"), unique("ea"), unique("eb")
-    daemon = Daemon(tmp_path, driver_scene(tmp_path, da, ea, eb, "vl2b", db), [da, db, ea, eb], "--speed", str(SPEED))
-    try:
-        daemon.wait_for("READY=1")
-        daemon.wait_up(da, db)
-        with Link.open(da, runtime_dir=daemon.runtime) as la, Link.open(db, runtime_dir=daemon.runtime) as lb:
-            la.send(b"hello, \x00\n* m64", dst=2)
-            message = lb.recv(timeout=60)
-            assert message is not None and message.data == b"hello, \x00\n* m64"
-            lb.send(b"back", dst=1)
-            message = la.recv(timeout=60)
-            assert message is not None and message.data == b"back"
-        wait_until(lambda: [e for e in daemon.trace_so_far() if e["ev"] == "modem_stats" and e["link"] == db] or None)
-        daemon.stop()
-        events = daemon.trace_events()
-        # the frame went as one WlUDPSocket datagram in 8-byte packets, one per slot of A, each reaching the
-        # far emulated modem after exactly air time + 150 m + decoding
-        real = 1 + 2 + len(b"hello, \x00\n* m64") + 2  # vl2b on air: preamble, length, payload, CRC-16
-        data_packets = codec.packets(codec.frame(b"\x00" * real))
-        tx_a = {e["pkt"]: e["t"] for e in events if e.get("link") == ea and e["ev"] == "tx"}
-        rx_b = [e for e in events if e.get("link") == eb and e["ev"] == "rx"]
-        assert all(round(e["t"] - tx_a[e["pkt"]], 9) == round(AIRTIME + 0.1 + RX_DELAY, 9) for e in rx_b)
-        assert [e["size"] for e in events if e.get("link") == da and e["ev"] == "tx"] == [real]
-        assert [e["size"] for e in events if e.get("link") == db and e["ev"] == "rx"] == [real]
-        assert len(data_packets) == 3
-        stats = [e for e in events if e["ev"] == "modem_stats" and e["link"] == db]
-        assert stats and stats[-1]["link_up"] and stats[-1]["pkt_loss_cnt"] == 0
-        assert not [e for e in events if e["ev"] in ("drop", "err") and e.get("link") in (da, db)]
-    finally:
-        daemon.close()
+    daemon = daemon_of(driver_scene(tmp_path, da, ea, eb, "vl2b", db), [da, db, ea, eb], "--speed", str(SPEED))
+    daemon.wait_up(da, db)
+    with Link.open(da, runtime_dir=daemon.runtime) as la, Link.open(db, runtime_dir=daemon.runtime) as lb:
+        la.send(b"hello, \x00\n* m64", dst=2)
+        message = lb.recv(timeout=60)
+        assert message is not None and message.data == b"hello, \x00\n* m64"
+        lb.send(b"back", dst=1)
+        message = la.recv(timeout=60)
+        assert message is not None and message.data == b"back"
+    wait_until(lambda: [e for e in daemon.trace_so_far() if e["ev"] == "modem_stats" and e["link"] == db] or None)
+    daemon.stop()
+    events = daemon.trace_events()
+    # the frame went as one WlUDPSocket datagram in 8-byte packets, one per slot of A, each reaching the
+    # far emulated modem after exactly air time + 150 m + decoding
+    real = 1 + 2 + len(b"hello, \x00\n* m64") + 2  # vl2b on air: preamble, length, payload, CRC-16
+    data_packets = codec.packets(codec.frame(b"\x00" * real))
+    tx_a = {e["pkt"]: e["t"] for e in events if e.get("link") == ea and e["ev"] == "tx"}
+    rx_b = [e for e in events if e.get("link") == eb and e["ev"] == "rx"]
+    assert all(round(e["t"] - tx_a[e["pkt"]], 9) == round(AIRTIME + 0.1 + RX_DELAY, 9) for e in rx_b)
+    assert [e["size"] for e in events if e.get("link") == da and e["ev"] == "tx"] == [real]
+    assert [e["size"] for e in events if e.get("link") == db and e["ev"] == "rx"] == [real]
+    assert len(data_packets) == 3
+    stats = [e for e in events if e["ev"] == "modem_stats" and e["link"] == db]
+    assert stats and stats[-1]["link_up"] and stats[-1]["pkt_loss_cnt"] == 0
+    assert not [e for e in events if e["ev"] in ("drop", "err") and e.get("link") in (da, db)]
 
 
-def test_a_wlmodem_datagram_application_and_a_dccomms_application_understand_each_other(tmp_path):
+def test_a_wlmodem_datagram_application_and_a_dccomms_application_understand_each_other(tmp_path, daemon_of):
     """hilgate's driver on one modem, Water Linked's WlUDPSocket on the other: raw frames are datagrams."""
     da, ea, eb = unique("da"), unique("ea"), unique("eb")
-    daemon = Daemon(tmp_path, driver_scene(tmp_path, da, ea, eb, "raw"), [da, ea, eb], "--speed", str(SPEED))
+    daemon = daemon_of(driver_scene(tmp_path, da, ea, eb, "raw"), [da, ea, eb], "--speed", str(SPEED))
     sockets = []
     try:
-        daemon.wait_for("READY=1")
         daemon.wait_up(da)
         (b,) = open_modems(tmp_path / "b")
         assert b.cmd_configure("b", 2)
@@ -293,4 +278,3 @@ def test_a_wlmodem_datagram_application_and_a_dccomms_application_understand_eac
     finally:
         for s in sockets:
             s.stop()
-        daemon.close()

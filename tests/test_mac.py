@@ -23,6 +23,12 @@ def tx_times(net, link, kind=None):
             if ev == "tx" and l == link and (kind is None or net.events.kinds[pkt] == kind)]
 
 
+def handshake(net, sender="a", receiver="b") -> tuple[list, list, list, list]:
+    """When the four frames of a handshake went on air: the sender's RTS, the receiver's CTS, the DATA, the ACK."""
+    return (tx_times(net, sender, "rts"), tx_times(net, receiver, "cts"), tx_times(net, sender, "data"),
+            tx_times(net, receiver, "ack"))
+
+
 # -- S-FAMA ------------------------------------------------------------------------------------------
 # 1500 m/s, 1000 bit/s, max range 300 m: tau_max = 0.2 s, 5-byte RTS/CTS = 0.04 s, slot = 0.24 s.
 
@@ -42,10 +48,7 @@ def test_sfama_two_node_exchange_starts_on_the_slot_boundaries():
     net.run(5)
     # RTS at the first boundary after 0.1 (slot 1); CTS at the next (slot 2); DATA at slot 3;
     # DATA (0.16 s) reaches b by 0.98, so n = ceil((0.16 + 0.2) / 0.24) = 2 slots; ACK at slot 5.
-    assert tx_times(net, "a", "rts") == [0.24]
-    assert tx_times(net, "b", "cts") == [0.48]
-    assert tx_times(net, "a", "data") == [0.72]
-    assert tx_times(net, "b", "ack") == [1.2]
+    assert handshake(net) == ([0.24], [0.48], [0.72], [1.2])
     assert [round(t, 9) for t, _ in net.delivered["b"]] == [0.98]
     assert not net.modems["a"].mac.holding and net.modems["a"].idle
 
@@ -93,10 +96,7 @@ def test_sfama_slot_is_sized_from_the_largest_control_frame_the_ack_included():
     # RTS at 0, CTS at 1.4, DATA at 2.8 (0.8 s on air, arrives by 2.8 + 0.8 + 0.9333 = 4.5333),
     # n = ceil((0.8 + 1.0) / 1.4) = 2; ACK at the next boundary (5.6), heard by 5.6 + 0.4 + 0.9333 = 6.9333,
     # before the end of the ACK slot (slot 4, ending at 7.0)
-    assert tx_times(net, "a", "rts") == [0.0]
-    assert tx_times(net, "b", "cts") == [1.4]
-    assert tx_times(net, "a", "data") == [2.8]
-    assert tx_times(net, "b", "ack") == [5.6]
+    assert handshake(net) == ([0.0], [1.4], [2.8], [5.6])
     assert [round(t, 9) for t, _ in net.delivered["b"]] == [round(2.8 + 0.8 + 1400 / 1500, 9)]
     assert [ev for _, ev, *_ in net.events.events if ev in ("retx", "backoff", "giveup", "dup")] == []
     assert not net.modems["a"].mac.holding and net.modems["a"].idle

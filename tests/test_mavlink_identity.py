@@ -13,7 +13,7 @@ import time
 import pytest
 
 import hilgate.drivers.mavlink_source  # noqa: F401  (sets MAVLink 2 before pymavlink is imported)
-from daemon_kit import Daemon, free_port, in_background, unique, wait_until
+from daemon_kit import free_port, in_background, unique, wait_until
 from hilgate.scene import SceneError, load_scene_text
 from pymavlink import mavutil
 
@@ -81,7 +81,7 @@ links:
 """
 
 
-def test_by_default_a_vehicle_gets_nothing_and_asked_rates_come_from_a_companion(tmp_path):
+def test_by_default_a_vehicle_gets_nothing_and_asked_rates_come_from_a_companion(daemon_of):
     quiet_port, rates_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM)
     link = unique("mq")
     vehicles = f"""\
@@ -89,11 +89,10 @@ def test_by_default_a_vehicle_gets_nothing_and_asked_rates_come_from_a_companion
   rates:
     pose: {{mavlink: {{url: "udpin:127.0.0.1:{rates_port}", system_id: 2, message_rates: {{ATTITUDE: 5}}}}}}
 """
-    daemon = Daemon(tmp_path, SCENE.format(vehicles=vehicles, link=link, first="quiet"), [link])
+    daemon = daemon_of(SCENE.format(vehicles=vehicles, link=link, first="quiet"), [link])
     quiet = Vehicle(f"udpout:127.0.0.1:{quiet_port}", system_id=1)
     rates = Vehicle(f"udpout:127.0.0.1:{rates_port}", system_id=2)
     try:
-        daemon.wait_for("READY=1")
         wait_until(lambda: position(daemon, "quiet") == [4.0, 3.0, 2.0] and position(daemon, "rates") is not None)
         wait_until(lambda: rates.messages("COMMAND_LONG"), "the scene asked for message rates")
         time.sleep(3.0)  # three heartbeat periods: a heartbeat hilgate sent would have arrived by now
@@ -108,10 +107,9 @@ def test_by_default_a_vehicle_gets_nothing_and_asked_rates_come_from_a_companion
     finally:
         quiet.close()
         rates.close()
-        daemon.close()
 
 
-def test_an_asked_heartbeat_is_an_onboard_peripherals_and_feedback_goes_as_the_same(tmp_path):
+def test_an_asked_heartbeat_is_an_onboard_peripherals_and_feedback_goes_as_the_same(daemon_of):
     link = unique("mh")
     # both vehicles are routers that stream only to endpoints they have heard from: hilgate speaks first
     configured = Vehicle("udpin:127.0.0.1:0", system_id=1)
@@ -128,9 +126,8 @@ def test_an_asked_heartbeat_is_an_onboard_peripherals_and_feedback_goes_as_the_s
     feedback: {{url: "udpout:127.0.0.1:{feedback_port}", message: vision_position_estimate, rate_hz: 10}}
   companion: {{pose: {{mavlink: {{url: "udpout:127.0.0.1:{companion.port}", system_id: 3, heartbeat: true}}}}}}
 """
-    daemon = Daemon(tmp_path, SCENE.format(vehicles=vehicles, link=link, first="configured"), [link])
+    daemon = daemon_of(SCENE.format(vehicles=vehicles, link=link, first="configured"), [link])
     try:
-        daemon.wait_for("READY=1")
         wait_until(lambda: position(daemon, "configured") == [4.0, 3.0, 2.0], "no pose: hilgate never spoke")
         wait_until(lambda: position(daemon, "companion") == [4.0, 3.0, 2.0], "no pose: hilgate never spoke")
         wait_until(lambda: len(configured.messages("HEARTBEAT")) >= 3 and len(companion.messages("HEARTBEAT")) >= 2)
@@ -150,7 +147,6 @@ def test_an_asked_heartbeat_is_an_onboard_peripherals_and_feedback_goes_as_the_s
         configured.close()
         companion.close()
         autopilot.close()
-        daemon.close()
 
 
 def mavlink_scene(options: str) -> str:

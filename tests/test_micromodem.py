@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 
 pytest.importorskip("acomms")
 
-from daemon_kit import SCENE_HEAD, HERE, Daemon, unique  # noqa: E402
+from daemon_kit import SCENE_HEAD, HERE, unique  # noqa: E402
 from fuzzkit import examples  # noqa: E402
 from hilgate.client import Link  # noqa: E402
 from hilgate.drivers.micromodem_codec import (RATES, BadSentence, HostCodec, ModemCodec, Sentence,  # noqa: E402
@@ -89,81 +89,69 @@ def run_peer(tmp_path, scenario, timeout=240):
     return [json.loads(line) for line in result.stdout.splitlines() if line.startswith("{")]
 
 
-def test_acomms_sends_packets_at_two_rates_an_acknowledged_one_and_a_ping_through_emulated_micromodems(tmp_path):
+def test_acomms_sends_packets_at_two_rates_an_acknowledged_one_and_a_ping_through_emulated_micromodems(tmp_path, daemon_of):
     ea, eb = unique("ma"), unique("mb")
-    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb), [ea, eb], "--speed", str(SPEED))
-    try:
-        daemon.wait_for("READY=1")
-        results = run_peer(tmp_path, "exchange")
-        daemon.stop()
-        assert results[0] == {"event": "ids", "a": 1, "b": 2}  # $CCCFQ,SRC -> $CACFG,SRC,<the link's address>
-        packets = [r for r in results if r["event"] == "packet"]
-        rate1 = b"three frames at rate one: " * 7
-        assert [bytes.fromhex(f) for f in packets[0]["frames"]] == [rate1[:64], rate1[64:128], rate1[128:182]]
-        rate5 = bytes(range(256)) * 3 + b"tail"
-        assert [bytes.fromhex(f) for f in packets[1]["frames"]] == [rate5[:256], rate5[256:512], rate5[512:768], b"tail"]
-        rssi = round(-20 - 20 * math.log10(150) - 0.15)  # hilgate.models.link_budget at 150 m; integrity (the
-        # data quality factor) falls from 250 at 0 m to 50 at the preset's 3000 m: 240 at 150 m
-        for packet, rate, count in ((packets[0], 1, 3), (packets[1], 5, 4)):
-            assert (packet["src"], packet["dest"]) == (1, 2)
-            assert packet["cst"] == {"mode": 0, "rate_num": rate, "num_frames": count, "bad_frames_num": 0,
-                                     "mfd_pow": rssi, "snr_in": float(rssi + 100), "dqf": 240, "src": 1, "dest": 2}
-        assert bytes.fromhex(packets[2]["frames"][0]) == b"FH-FSK, rate 0"
-        acked = next(r for r in results if r["event"] == "acked")
-        assert acked["acks"] == [[1, 2, 1, True], [1, 2, 2, True]]
-        ping = next(r for r in results if r["event"] == "ping")
-        assert ping["owtt"] == 0.1  # 150 m at 1500 m/s, measured by the model from the round trip
-        assert results[-1] == {"event": "done", "a": "Idle", "b": "Idle"}  # every cycle finished
-        events = daemon.trace_events()
-        tx = {e["pkt"]: e for e in events if e.get("link") == ea and e["ev"] == "tx" and "kind" not in e}
-        rx = [e for e in events if e.get("link") == eb and e["ev"] == "rx" and e["pkt"] in tx]
-        # on the channel each packet takes its rate's air time (whole frames) and 0.1 s of propagation
-        sizes = {e["size"]: round(e["t"] - tx[e["pkt"]]["t"], 9) for e in rx}
-        assert sizes[3 * 64] == round(0.3 + 3 * 64 * 8 / 525 + 0.1, 9)  # rate 1, 3 frames (and rate 2: 560 bit/s)
-        assert sizes[4 * 256] == round(0.3 + 4 * 256 * 8 / 5400 + 0.1, 9)  # rate 5, 4 frames
-        assert sizes[32] == round(32 * 8 / 80 + 0.1, 9)  # rate 0: FH-FSK, no probe
-        acks = [e for e in events if e.get("link") == eb and e["ev"] == "tx" and e.get("kind") == "modem_ack"]
-        assert len(acks) == 2  # the acknowledged packet's and the ping's reply, on the channel
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene(tmp_path, ea, eb), [ea, eb], "--speed", str(SPEED))
+    results = run_peer(tmp_path, "exchange")
+    daemon.stop()
+    assert results[0] == {"event": "ids", "a": 1, "b": 2}  # $CCCFQ,SRC -> $CACFG,SRC,<the link's address>
+    packets = [r for r in results if r["event"] == "packet"]
+    rate1 = b"three frames at rate one: " * 7
+    assert [bytes.fromhex(f) for f in packets[0]["frames"]] == [rate1[:64], rate1[64:128], rate1[128:182]]
+    rate5 = bytes(range(256)) * 3 + b"tail"
+    assert [bytes.fromhex(f) for f in packets[1]["frames"]] == [rate5[:256], rate5[256:512], rate5[512:768], b"tail"]
+    rssi = round(-20 - 20 * math.log10(150) - 0.15)  # hilgate.models.link_budget at 150 m; integrity (the
+    # data quality factor) falls from 250 at 0 m to 50 at the preset's 3000 m: 240 at 150 m
+    for packet, rate, count in ((packets[0], 1, 3), (packets[1], 5, 4)):
+        assert (packet["src"], packet["dest"]) == (1, 2)
+        assert packet["cst"] == {"mode": 0, "rate_num": rate, "num_frames": count, "bad_frames_num": 0,
+                                 "mfd_pow": rssi, "snr_in": float(rssi + 100), "dqf": 240, "src": 1, "dest": 2}
+    assert bytes.fromhex(packets[2]["frames"][0]) == b"FH-FSK, rate 0"
+    acked = next(r for r in results if r["event"] == "acked")
+    assert acked["acks"] == [[1, 2, 1, True], [1, 2, 2, True]]
+    ping = next(r for r in results if r["event"] == "ping")
+    assert ping["owtt"] == 0.1  # 150 m at 1500 m/s, measured by the model from the round trip
+    assert results[-1] == {"event": "done", "a": "Idle", "b": "Idle"}  # every cycle finished
+    events = daemon.trace_events()
+    tx = {e["pkt"]: e for e in events if e.get("link") == ea and e["ev"] == "tx" and "kind" not in e}
+    rx = [e for e in events if e.get("link") == eb and e["ev"] == "rx" and e["pkt"] in tx]
+    # on the channel each packet takes its rate's air time (whole frames) and 0.1 s of propagation
+    sizes = {e["size"]: round(e["t"] - tx[e["pkt"]]["t"], 9) for e in rx}
+    assert sizes[3 * 64] == round(0.3 + 3 * 64 * 8 / 525 + 0.1, 9)  # rate 1, 3 frames (and rate 2: 560 bit/s)
+    assert sizes[4 * 256] == round(0.3 + 4 * 256 * 8 / 5400 + 0.1, 9)  # rate 5, 4 frames
+    assert sizes[32] == round(32 * 8 / 80 + 0.1, 9)  # rate 0: FH-FSK, no probe
+    acks = [e for e in events if e.get("link") == eb and e["ev"] == "tx" and e.get("kind") == "modem_ack"]
+    assert len(acks) == 2  # the acknowledged packet's and the ping's reply, on the channel
 
 
-def test_a_packet_the_model_loses_shows_in_the_receivers_statistics_and_in_the_trace(tmp_path):
+def test_a_packet_the_model_loses_shows_in_the_receivers_statistics_and_in_the_trace(tmp_path, daemon_of):
     ea, eb = unique("ma"), unique("mb")
-    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb, error_b="1"), [ea, eb], "--speed", str(SPEED))
-    try:
-        daemon.wait_for("READY=1")
-        results = run_peer(tmp_path, "lost")
-        daemon.stop()
-        assert {"event": "cst", "mode": 1, "num_frames": 3, "bad_frames_num": 3} in results
-        assert not [r for r in results if r["event"] == "packet"]
-        assert {"event": "acks", "count": 0} in results  # no acknowledgement for what never arrived
-        assert results[-1] == {"event": "done", "a": "Idle", "b": "Idle"}
-        lost = [e for e in daemon.trace_events() if e["ev"] == "err" and e.get("link") == eb]
-        assert [(e["src"], e["cause"], e["size"]) for e in lost] == [(ea, "prop", 3 * 64)]
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene(tmp_path, ea, eb, error_b="1"), [ea, eb], "--speed", str(SPEED))
+    results = run_peer(tmp_path, "lost")
+    daemon.stop()
+    assert {"event": "cst", "mode": 1, "num_frames": 3, "bad_frames_num": 3} in results
+    assert not [r for r in results if r["event"] == "packet"]
+    assert {"event": "acks", "count": 0} in results  # no acknowledgement for what never arrived
+    assert results[-1] == {"event": "done", "a": "Idle", "b": "Idle"}
+    lost = [e for e in daemon.trace_events() if e["ev"] == "err" and e.get("link") == eb]
+    assert [(e["src"], e["cause"], e["size"]) for e in lost] == [(ea, "prop", 3 * 64)]
 
 
-def test_a_host_that_gives_no_data_gets_a_data_timeout_and_the_cycle_ends(tmp_path):
+def test_a_host_that_gives_no_data_gets_a_data_timeout_and_the_cycle_ends(tmp_path, daemon_of):
     ea, eb = unique("ma"), unique("mb")
-    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb), [ea, eb], "--speed", str(SPEED))
-    try:
-        daemon.wait_for("READY=1")
-        port = serial.Serial(str(tmp_path / "a"), 19200, timeout=30)
-        port.write(b"$CCCYC,0,1,2,1,0,3\r\n")
-        lines = [port.read_until(b"\n") for _ in range(3)]
-        assert lines[0] == sentence("CACYC", 0, 1, 2, 1, 0, 3)
-        assert lines[1].startswith(b"$CADRQ,") and lines[1].split(b",")[2:6] == [b"1", b"2", b"0", b"64"]
-        assert lines[2].startswith(b"$CAERR,") and b",DATA_TIMEOUT,1," in lines[2]
-        port.write(b"$CCCYC,0,1,2,9,0,3\r\n$CCXYZ\r\n$CCCYC,0,1,2,1,0,3*00\r\n")  # a bad rate, unknown, bad checksum
-        errors = [port.read_until(b"\n") for _ in range(3)]
-        assert all(line.startswith(b"$CAERR,") for line in errors), errors
-        port.write(b"$CCCYC,0,1,2,1,0,1\r\n")  # the modem is free again: the cycle ended
-        assert port.read_until(b"\n") == sentence("CACYC", 0, 1, 2, 1, 0, 1)
-        port.close()
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene(tmp_path, ea, eb), [ea, eb], "--speed", str(SPEED))
+    port = serial.Serial(str(tmp_path / "a"), 19200, timeout=30)
+    port.write(b"$CCCYC,0,1,2,1,0,3\r\n")
+    lines = [port.read_until(b"\n") for _ in range(3)]
+    assert lines[0] == sentence("CACYC", 0, 1, 2, 1, 0, 3)
+    assert lines[1].startswith(b"$CADRQ,") and lines[1].split(b",")[2:6] == [b"1", b"2", b"0", b"64"]
+    assert lines[2].startswith(b"$CAERR,") and b",DATA_TIMEOUT,1," in lines[2]
+    port.write(b"$CCCYC,0,1,2,9,0,3\r\n$CCXYZ\r\n$CCCYC,0,1,2,1,0,3*00\r\n")  # a bad rate, unknown, bad checksum
+    errors = [port.read_until(b"\n") for _ in range(3)]
+    assert all(line.startswith(b"$CAERR,") for line in errors), errors
+    port.write(b"$CCCYC,0,1,2,1,0,1\r\n")  # the modem is free again: the cycle ended
+    assert port.read_until(b"\n") == sentence("CACYC", 0, 1, 2, 1, 0, 1)
+    port.close()
 
 
 # -- hilgate's driver against the emulator -----------------------------------------------------------------
@@ -181,41 +169,37 @@ def driver_scene(tmp_path, da, db, ea, eb, rate=1, ack=True, packet="vl2b"):
 """
 
 
-def test_hilgate_drivers_carry_frames_application_to_application_through_emulated_micromodems(tmp_path):
+def test_hilgate_drivers_carry_frames_application_to_application_through_emulated_micromodems(tmp_path, daemon_of):
     da, db, ea, eb = unique("da"), unique("db"), unique("ea"), unique("eb")
-    daemon = Daemon(tmp_path, driver_scene(tmp_path, da, db, ea, eb), [da, db, ea, eb], "--speed", str(SPEED))
-    try:
-        daemon.wait_for("READY=1")
-        daemon.wait_up(da, db)
-        sent = [b"short", b"x" * 150]  # one frame; three frames of rate 1 (155 bytes of vl2b on air)
-        with Link.open(da, runtime_dir=daemon.runtime) as la, Link.open(db, runtime_dir=daemon.runtime) as lb:
-            for payload in sent:
-                la.send(payload, dst=2)
-                message = lb.recv(timeout=60)
-                assert message is not None and message.data == payload and message.src == 1
-            lb.send(b"back", dst=1)
-            message = la.recv(timeout=60)
-            assert message is not None and message.data == b"back" and message.src == 2
-            la.send(b"y" * 200, dst=2)  # 205 bytes on air: more than rate 1's 3 x 64
-            with pytest.raises(Exception, match="do not fit a rate-1 packet of the Micro-Modem"):
-                la.recv(timeout=30)
-        deadline = time.monotonic() + 60
-        while sum(e["ev"] == "delivered" for e in daemon.trace_so_far() if e.get("link") == da) < 2:
-            assert time.monotonic() < deadline, "acknowledgements never traced"
-            time.sleep(0.05)
-        daemon.stop()
-        events = daemon.trace_events()
-        assert [(e["size"], e["frames"]) for e in events if e.get("link") == da and e["ev"] == "tx"] == [(10, 1), (155, 3)]
-        assert [e["size"] for e in events if e.get("link") == db and e["ev"] == "rx"] == [10, 155]
-        stats = [e for e in events if e.get("link") == db and e["ev"] == "modem_stats"]
-        assert [(e["mode"], e["rate"], e["frames"], e["bad_frames"]) for e in stats] == [(0, 1, 1, 0), (0, 1, 3, 0)]
-        # on the simulated channel each packet took its rate's air time for whole frames plus 0.1 s, exactly
-        tx = {e["pkt"]: e["t"] for e in events if e.get("link") == ea and e["ev"] == "tx" and "kind" not in e}
-        rx = [e for e in events if e.get("link") == eb and e["ev"] == "rx" and e["pkt"] in tx]
-        assert [round(e["t"] - tx[e["pkt"]], 9) for e in rx] == [round(0.3 + n * 64 * 8 / 525 + 0.1, 9) for n in (1, 3)]
-        losses = [(e["link"], e["cause"]) for e in events if e["ev"] in ("drop", "err") and e.get("link") in (da, db)]
-        assert losses == [(da, "size")]  # the 200-byte frame, refused when the application sent it
-    finally:
-        daemon.close()
+    daemon = daemon_of(driver_scene(tmp_path, da, db, ea, eb), [da, db, ea, eb], "--speed", str(SPEED))
+    daemon.wait_up(da, db)
+    sent = [b"short", b"x" * 150]  # one frame; three frames of rate 1 (155 bytes of vl2b on air)
+    with Link.open(da, runtime_dir=daemon.runtime) as la, Link.open(db, runtime_dir=daemon.runtime) as lb:
+        for payload in sent:
+            la.send(payload, dst=2)
+            message = lb.recv(timeout=60)
+            assert message is not None and message.data == payload and message.src == 1
+        lb.send(b"back", dst=1)
+        message = la.recv(timeout=60)
+        assert message is not None and message.data == b"back" and message.src == 2
+        la.send(b"y" * 200, dst=2)  # 205 bytes on air: more than rate 1's 3 x 64
+        with pytest.raises(Exception, match="do not fit a rate-1 packet of the Micro-Modem"):
+            la.recv(timeout=30)
+    deadline = time.monotonic() + 60
+    while sum(e["ev"] == "delivered" for e in daemon.trace_so_far() if e.get("link") == da) < 2:
+        assert time.monotonic() < deadline, "acknowledgements never traced"
+        time.sleep(0.05)
+    daemon.stop()
+    events = daemon.trace_events()
+    assert [(e["size"], e["frames"]) for e in events if e.get("link") == da and e["ev"] == "tx"] == [(10, 1), (155, 3)]
+    assert [e["size"] for e in events if e.get("link") == db and e["ev"] == "rx"] == [10, 155]
+    stats = [e for e in events if e.get("link") == db and e["ev"] == "modem_stats"]
+    assert [(e["mode"], e["rate"], e["frames"], e["bad_frames"]) for e in stats] == [(0, 1, 1, 0), (0, 1, 3, 0)]
+    # on the simulated channel each packet took its rate's air time for whole frames plus 0.1 s, exactly
+    tx = {e["pkt"]: e["t"] for e in events if e.get("link") == ea and e["ev"] == "tx" and "kind" not in e}
+    rx = [e for e in events if e.get("link") == eb and e["ev"] == "rx" and e["pkt"] in tx]
+    assert [round(e["t"] - tx[e["pkt"]], 9) for e in rx] == [round(0.3 + n * 64 * 8 / 525 + 0.1, 9) for n in (1, 3)]
+    losses = [(e["link"], e["cause"]) for e in events if e["ev"] in ("drop", "err") and e.get("link") in (da, db)]
+    assert losses == [(da, "size")]  # the 200-byte frame, refused when the application sent it
 
 

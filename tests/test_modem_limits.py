@@ -11,7 +11,7 @@ import sys
 import pytest
 
 from at_pty_client import AtClient
-from daemon_kit import SCENE_HEAD, Daemon, unique
+from daemon_kit import SCENE_HEAD, unique
 from hilgate.client import GliError, Link
 from hilgate.core.packets import PacketError
 from hilgate.drivers.table import EVOLOGICS_LIMITS
@@ -37,54 +37,50 @@ def refusal(link, payload, dst):
     ("burst", "", 1024),                 # im: false on the driver, send_as: burst on the simulated link
     ("im", "modes: {im: 32}", 32),       # a link's own figure binds driver, emulator and simulated link alike
 ])
-def test_the_simulated_link_refuses_what_the_driver_refuses_with_the_same_words(tmp_path, mode, modes, most):
+def test_the_simulated_link_refuses_what_the_driver_refuses_with_the_same_words(tmp_path, mode, modes, most, daemon_of):
     d, e, s = unique("drv"), unique("emu"), unique("sim")
     pty = tmp_path / "evo"
     im = "true" if mode == "im" else "false"
     preset = "model: evologics-s2cr-7-17, packet: vl2b" + (f", limits: {{{modes}}}" if modes else "")
     sim_limits = ", ".join(filter(None, [f"send_as: {mode}", modes]))
-    daemon = Daemon(tmp_path, f"""\
+    daemon = daemon_of(f"""\
 {SCENE_HEAD}links:
   {d}: {{vehicle: va, backend: evologics, port: {pty}, address: 1, im: {im}, {preset}}}
   {e}: {{vehicle: va, address: 1, emulate: {{protocol: evologics, pty: {pty}}}, {preset}}}
   {s}: {{vehicle: vb, address: 2, model: evologics-s2cr-7-17, packet: vl2b, limits: {{{sim_limits}}}}}
 """, [d, e, s])
-    try:
-        daemon.wait_for("READY=1")
-        daemon.wait_up(d)
-        too_large = b"x" * (most - VL2B + 1)
-        fits = b"y" * (most - VL2B)
-        with Link.open(d, runtime_dir=daemon.runtime) as ld, Link.open(s, runtime_dir=daemon.runtime) as ls:
-            by_driver = refusal(ld, too_large, 2)
-            by_sim = refusal(ls, too_large, 1)
-            what = "an instant message" if mode == "im" else "a burst"
-            hint = "; use a smaller packet class" + (" or bursts (at most 1024)" if mode == "im" else "")
-            assert by_driver == by_sim == \
-                f"size: {most + 1} bytes on air do not fit {what} of the EvoLogics modem (at most {most}){hint}"
-            # a frame at the limit crosses: driver -> emulated modem -> channel -> simulated link, and back
-            assert refusal(ld, fits, 2) is None
-            message = ls.recv(timeout=60)
-            assert message is not None and message.data == fits
-            assert refusal(ls, fits, 1) is None
-            message = ld.recv(timeout=60)
-            assert message is not None and message.data == fits
-            for link in (d, s):  # counted as a refused frame of the application's, on both
-                assert daemon.link_status(link)["drop_causes"] == {"size": 1}
-        daemon.stop()
-        events = daemon.trace_events()
-        for link in (d, s):
-            [drop] = [ev for ev in events if ev.get("link") == link and ev["ev"] == "drop"]
-            assert (drop["cause"], drop["src"], drop["size"]) == ("size", "app", len(too_large))
-        # refused when sent: it never reached a modem's queue, the emulator's nor the simulated one's
-        assert [ev["size"] for ev in events if ev["ev"] == "enq" and ev.get("link") in (e, s)] == [most, most]
-    finally:
-        daemon.close()
+    daemon.wait_up(d)
+    too_large = b"x" * (most - VL2B + 1)
+    fits = b"y" * (most - VL2B)
+    with Link.open(d, runtime_dir=daemon.runtime) as ld, Link.open(s, runtime_dir=daemon.runtime) as ls:
+        by_driver = refusal(ld, too_large, 2)
+        by_sim = refusal(ls, too_large, 1)
+        what = "an instant message" if mode == "im" else "a burst"
+        hint = "; use a smaller packet class" + (" or bursts (at most 1024)" if mode == "im" else "")
+        assert by_driver == by_sim == \
+            f"size: {most + 1} bytes on air do not fit {what} of the EvoLogics modem (at most {most}){hint}"
+        # a frame at the limit crosses: driver -> emulated modem -> channel -> simulated link, and back
+        assert refusal(ld, fits, 2) is None
+        message = ls.recv(timeout=60)
+        assert message is not None and message.data == fits
+        assert refusal(ls, fits, 1) is None
+        message = ld.recv(timeout=60)
+        assert message is not None and message.data == fits
+        for link in (d, s):  # counted as a refused frame of the application's, on both
+            assert daemon.link_status(link)["drop_causes"] == {"size": 1}
+    daemon.stop()
+    events = daemon.trace_events()
+    for link in (d, s):
+        [drop] = [ev for ev in events if ev.get("link") == link and ev["ev"] == "drop"]
+        assert (drop["cause"], drop["src"], drop["size"]) == ("size", "app", len(too_large))
+    # refused when sent: it never reached a modem's queue, the emulator's nor the simulated one's
+    assert [ev["size"] for ev in events if ev["ev"] == "enq" and ev.get("link") in (e, s)] == [most, most]
 
 
-def test_the_emulated_modem_refuses_each_mode_beyond_its_link_limits(tmp_path):
+def test_the_emulated_modem_refuses_each_mode_beyond_its_link_limits(tmp_path, daemon_of):
     a, b = unique("ea"), unique("eb")
     pa = tmp_path / "evo_a"
-    daemon = Daemon(tmp_path, f"""\
+    daemon = daemon_of(f"""\
 channels: {{ac: {{speed_mps: 1500}}}}
 vehicles:
   va: {{pose: {{static: [0, 0, 0]}}}}
@@ -94,16 +90,12 @@ links:
         limits: {{modes: {{im: 10, ims: 11, pbm: 12, burst: 13}}}}}}
   {b}: {{vehicle: vb, model: evologics-s2cr-7-17, address: 2}}
 """, [a, b])
-    try:
-        daemon.wait_for("READY=1")
-        ca = AtClient(pa)
-        for command, most in ((b"*SENDIM", 10), (b"*SENDIMS", 11), (b"*SENDPBM", 12), (b"*SEND", 13)):
-            extra = {b"*SENDIM": b"noack,", b"*SENDIMS": b",", b"*SENDPBM": b"", b"*SEND": b""}[command]
-            for size, answer in ((most + 1, b"ERROR OUT OF RANGE"), (most, b"OK")):
-                assert ca.ask(b"AT%s,%d,2,%s%s" % (command, size, extra, b"z" * size)) == answer, (command, size)
-        ca.close()
-    finally:
-        daemon.close()
+    ca = AtClient(pa)
+    for command, most in ((b"*SENDIM", 10), (b"*SENDIMS", 11), (b"*SENDPBM", 12), (b"*SEND", 13)):
+        extra = {b"*SENDIM": b"noack,", b"*SENDIMS": b",", b"*SENDPBM": b"", b"*SEND": b""}[command]
+        for size, answer in ((most + 1, b"ERROR OUT OF RANGE"), (most, b"OK")):
+            assert ca.ask(b"AT%s,%d,2,%s%s" % (command, size, extra, b"z" * size)) == answer, (command, size)
+    ca.close()
 
 
 def test_the_presets_state_their_modems_limits_and_check_prints_them(tmp_path):

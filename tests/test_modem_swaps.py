@@ -11,7 +11,7 @@ plugged in): an M64 of role A transmits every second, and would share the channe
 
 import pytest
 
-from daemon_kit import Daemon, unique, wait_until
+from daemon_kit import unique, wait_until
 from hilgate.client import Link
 
 SPEED = 4
@@ -43,35 +43,31 @@ links:
 
 
 @pytest.mark.parametrize("modem", ["m64", "micromodem"])
-def test_a_link_moves_between_simulated_and_real_modem_with_the_application_untouched(tmp_path, modem):
+def test_a_link_moves_between_simulated_and_real_modem_with_the_application_untouched(tmp_path, modem, daemon_of):
     ap, far, ea = unique("ap"), unique("far"), unique("ea")
-    daemon = Daemon(tmp_path, scene(tmp_path, ap, far, ea, modem, real=False), [ap, far, ea], "--speed", str(SPEED))
-    try:
-        daemon.wait_for("READY=1")
-        with Link.open(ap, runtime_dir=daemon.runtime) as la, Link.open(far, runtime_dir=daemon.runtime) as lf:
-            la.send(b"simulated", dst=2)
-            message = lf.recv(timeout=60)
-            assert message is not None and message.data == b"simulated"
-            daemon.reload(scene(tmp_path, ap, far, ea, modem, real=True))
-            daemon.wait_up(ap)  # the driver has configured the emulated modem on the pty
-            la.send(b"through the real modem's driver", dst=2)
-            message = lf.recv(timeout=60)
-            assert message is not None and message.data == b"through the real modem's driver"
-            daemon.reload(scene(tmp_path, ap, far, ea, modem, real=False))
-            # what the removed emulated modem had on the air finishes as the physics says: wait (in model time,
-            # from the live trace: the pose samples go on) until it has, or the next frame meets it
-            # (the trace is flushed every half second: wait for the second reload's own line, not the first's)
-            reloads = wait_until(lambda: (lambda r: r if len(r) >= 2 else None)(
-                [e["t"] for e in daemon.trace_so_far() if e["ev"] == "reload"]), "the second reload in the trace")
-            wait_until(lambda: any(e["t"] > reloads[-1] + 3 for e in daemon.trace_so_far()), "the model's clock")
-            la.send(b"simulated again", dst=2)
-            message = lf.recv(timeout=60)
-            assert message is not None and message.data == b"simulated again"
-        daemon.stop()
-        events = daemon.trace_events()
-        kinds = [e["state"] for e in events if e["ev"] == "link" and e.get("link") == ap]
-        assert "up" in kinds  # the driver's own link state, in phase 2
-        assert [e["size"] for e in events if e["ev"] == "tx" and e.get("link") == ap and "pkt" not in e] == [
-            1 + 2 + len(b"through the real modem's driver") + 2]  # vl2b on air, sent by the driver
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene(tmp_path, ap, far, ea, modem, real=False), [ap, far, ea], "--speed", str(SPEED))
+    with Link.open(ap, runtime_dir=daemon.runtime) as la, Link.open(far, runtime_dir=daemon.runtime) as lf:
+        la.send(b"simulated", dst=2)
+        message = lf.recv(timeout=60)
+        assert message is not None and message.data == b"simulated"
+        daemon.reload(scene(tmp_path, ap, far, ea, modem, real=True))
+        daemon.wait_up(ap)  # the driver has configured the emulated modem on the pty
+        la.send(b"through the real modem's driver", dst=2)
+        message = lf.recv(timeout=60)
+        assert message is not None and message.data == b"through the real modem's driver"
+        daemon.reload(scene(tmp_path, ap, far, ea, modem, real=False))
+        # what the removed emulated modem had on the air finishes as the physics says: wait (in model time,
+        # from the live trace: the pose samples go on) until it has, or the next frame meets it
+        # (the trace is flushed every half second: wait for the second reload's own line, not the first's)
+        reloads = wait_until(lambda: (lambda r: r if len(r) >= 2 else None)(
+            [e["t"] for e in daemon.trace_so_far() if e["ev"] == "reload"]), "the second reload in the trace")
+        wait_until(lambda: any(e["t"] > reloads[-1] + 3 for e in daemon.trace_so_far()), "the model's clock")
+        la.send(b"simulated again", dst=2)
+        message = lf.recv(timeout=60)
+        assert message is not None and message.data == b"simulated again"
+    daemon.stop()
+    events = daemon.trace_events()
+    kinds = [e["state"] for e in events if e["ev"] == "link" and e.get("link") == ap]
+    assert "up" in kinds  # the driver's own link state, in phase 2
+    assert [e["size"] for e in events if e["ev"] == "tx" and e.get("link") == ap and "pkt" not in e] == [
+        1 + 2 + len(b"through the real modem's driver") + 2]  # vl2b on air, sent by the driver

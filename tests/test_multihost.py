@@ -150,6 +150,21 @@ links:
 """
 
 
+def two_hosts_scene(zenoh: str, a: str, b: str, speed_mps: float, bitrate_bps: float) -> str:
+    """Link ``a`` (address 1) on host A and ``b`` (address 2) on host B, 150 m apart, strictly addressed;
+    ``zenoh`` is what the scene's ``zenoh`` section holds."""
+    return f"""\
+channels: {{ac: {{speed_mps: {speed_mps}}}}}
+zenoh: {{{zenoh}}}
+vehicles:
+  va: {{pose: {{static: [0, 0, 0]}}}}
+  vb: {{pose: {{static: [150, 0, 0]}}}}
+links:
+  {a}: {{vehicle: va, host: A, address: 1, bitrate_bps: {bitrate_bps}, addressing: strict}}
+  {b}: {{vehicle: vb, host: B, address: 2, bitrate_bps: {bitrate_bps}, addressing: strict}}
+"""
+
+
 def airtime(payload: int) -> float:
     return (1 + 2 + payload + 2) * 8 / 1000  # vl2b: preamble, length, payload, CRC at 1000 b/s
 
@@ -363,16 +378,7 @@ def test_a_clock_offset_shifts_arrivals_and_a_late_one_is_delivered_at_once_and_
     # slow sound (1 s of flight at 150 m) and a 2 s offset: B's arrivals keep 3 s of slack for a busy host
     # to hear the transmission in, and A's are late by more than a busy host's delay could explain
     speed, offset = 150.0, 2.0
-    scene = f"""\
-channels: {{ac: {{speed_mps: {speed}}}}}
-zenoh: {{prefix: {prefix}, credentials: {CREDS}}}
-vehicles:
-  va: {{pose: {{static: [0, 0, 0]}}}}
-  vb: {{pose: {{static: [150, 0, 0]}}}}
-links:
-  {a}: {{vehicle: va, host: A, address: 1, bitrate_bps: 1000, addressing: strict}}
-  {b}: {{vehicle: vb, host: B, address: 2, bitrate_bps: 1000, addressing: strict}}
-"""
+    scene = two_hosts_scene(f"prefix: {prefix}, credentials: {CREDS}", a, b, speed, 1000)
     pa = free_port()
     A = Host(tmp_path, "A", scene, [a], pa)
     B = Host(tmp_path, "B", scene, [b], free_port(), [pa], extra=("--clock-offset-s", str(-offset)))

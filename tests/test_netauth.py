@@ -8,6 +8,7 @@ of its own: it may try anything); what stops it is the daemons' configuration, n
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -19,7 +20,7 @@ import pytest
 
 from daemon_kit import unique  # noqa: E402
 from hilgate.client import Link  # noqa: E402
-from test_multihost import Host, free_port, wait_until  # noqa: E402
+from test_multihost import Host, free_port, two_hosts_scene, wait_until  # noqa: E402
 
 zenoh = pytest.importorskip("zenoh")
 
@@ -38,16 +39,7 @@ def creds(tmp_path_factory):
 
 
 def scene_text(prefix: str, creds: str, a: str, b: str, extra: str = "") -> str:
-    return f"""\
-channels: {{ac: {{speed_mps: {SPEED}}}}}
-zenoh: {{prefix: {prefix}, lease_s: 5, credentials: {creds}{extra}}}
-vehicles:
-  va: {{pose: {{static: [0, 0, 0]}}}}
-  vb: {{pose: {{static: [150, 0, 0]}}}}
-links:
-  {a}: {{vehicle: va, host: A, address: 1, bitrate_bps: 100000, addressing: strict}}
-  {b}: {{vehicle: vb, host: B, address: 2, bitrate_bps: 100000, addressing: strict}}
-"""
+    return two_hosts_scene(f"prefix: {prefix}, lease_s: 5, credentials: {creds}{extra}", a, b, SPEED, 100000)
 
 
 class Lab:
@@ -107,6 +99,23 @@ def attacker(port: int, identity_dir: str | None = None, tls: bool = True, ca: s
     return zenoh.open(config)
 
 
+@contextlib.contextmanager
+def intruder(lab, credentials: str, *overheard: str):
+    """Two sessions with the credentials ``credentials`` (``hosts/C``, ``apps/app-2``) on host A's port, both let
+    in: one that speaks, and one that listens on the keys ``overheard`` (under the lab's prefix: a session
+    hears its own puts, so it is another one).  Yields the speaker and the keys heard; closes both after."""
+    speaker, listener = (attacker(lab.ports[0], os.path.join(lab.creds, credentials)) for _ in range(2))
+    heard: list[str] = []
+    try:
+        wait_until(lambda: peers(speaker) and peers(listener), what=f"{credentials} to be let in")
+        for key in overheard:
+            listener.declare_subscriber(f"{lab.prefix}/{key}", lambda s: heard.append(str(s.key_expr)))
+        yield speaker, heard
+    finally:
+        speaker.close()
+        listener.close()
+
+
 def peers(session) -> list:
     return list(session.info.peers_zid())
 
@@ -157,12 +166,7 @@ def test_without_credentials_a_peer_cannot_even_connect(lab):
 
 def test_another_hosts_credentials_cannot_speak_for_a_host_or_reach_applications(lab):
     A = lab.hosts["A"]
-    evil = attacker(lab.ports[0], os.path.join(lab.creds, "hosts", "C"))
-    listener = attacker(lab.ports[0], os.path.join(lab.creds, "hosts", "C"))  # (a session hears its own puts)
-    heard = []
-    try:
-        wait_until(lambda: peers(evil) and peers(listener), what="C's certificate to be let in (a host of the lab)")
-        listener.declare_subscriber(f"{lab.prefix}/link/**", lambda s: heard.append(str(s.key_expr)))
+    with intruder(lab, "hosts/C", "link/**") as (evil, heard):  # C's certificate: a host of the lab
         with lab.app(lab.a) as la, Link.open(lab.b, runtime_dir=lab.hosts["B"].daemon.runtime) as lb:
             # as host B, a frame from B's link to A's: refused by A's access control
             evil.put(f"{lab.prefix}/tx/B/ac", transmission("B", lab.b, lab.a, b"forged as B"))
@@ -181,9 +185,6 @@ def test_another_hosts_credentials_cannot_speak_for_a_host_or_reach_applications
         assert A.daemon.link_status(lab.a)["rx_packets"] == 1
         assert heard == []  # C subscribed to every link key, and heard no frame of A's
         assert next(h for h in A.status()["network"]["hosts"] if h["host"] == "B")["heard"] == 1
-    finally:
-        evil.close()
-        listener.close()
 
 
 # -- an application's credentials --------------------------------------------------------------------------
@@ -191,13 +192,7 @@ def test_another_hosts_credentials_cannot_speak_for_a_host_or_reach_applications
 
 def test_an_applications_credentials_reach_link_keys_only(lab):
     A = lab.hosts["A"]
-    app = attacker(lab.ports[0], os.path.join(lab.creds, "apps", "app-2"))
-    listener = attacker(lab.ports[0], os.path.join(lab.creds, "apps", "app-2"))  # (a session hears its own puts)
-    heard = []
-    try:
-        wait_until(lambda: peers(app) and peers(listener), what="app-2 to be let in")
-        listener.declare_subscriber(f"{lab.prefix}/tx/**", lambda s: heard.append(str(s.key_expr)))
-        listener.declare_subscriber(f"{lab.prefix}/pose/**", lambda s: heard.append(str(s.key_expr)))
+    with intruder(lab, "apps/app-2", "tx/**", "pose/**") as (app, heard):
         app.liveliness().declare_token(f"{lab.prefix}/alive/A/host/0123")
         app.put(f"{lab.prefix}/tx/B/ac", transmission("B", lab.b, lab.a, b"forged by an app"))
         app.put(f"{lab.prefix}/link/A/{lab.a}/send/app-1", b"\x02as app-1")  # under another app's name
@@ -212,9 +207,6 @@ def test_an_applications_credentials_reach_link_keys_only(lab):
         assert heard == []
         assert A.sees("B") and lab.counters().get("forged") is None
         assert [h["host"] for h in A.status()["network"]["hosts"]] == ["B"]
-    finally:
-        app.close()
-        listener.close()
 
 
 # -- forged liveliness -------------------------------------------------------------------------------------

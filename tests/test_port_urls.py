@@ -19,7 +19,7 @@ import pytest
 import serial
 import serial.rfc2217
 
-from daemon_kit import Daemon, unique
+from daemon_kit import unique
 from hilgate.core.backend import AppFrame
 from hilgate.client import Link
 from hilgate.drivers.port import port_problem
@@ -79,22 +79,34 @@ def test_cp2110_is_refused_when_hidapi_is_missing():
 # -- real peers ---------------------------------------------------------------------------------------
 
 
-class EchoServer:
-    """A TCP server on a free loopback port that sends back what it gets (a modem in loopback)."""
+class LoopbackServer:
+    """A TCP server on a free loopback port; each connection it accepts is handed to :meth:`accepted`."""
 
     def __init__(self):
         self.listener = socket.create_server(("127.0.0.1", 0))
         self.port = self.listener.getsockname()[1]
-        self.thread = threading.Thread(target=self._serve, daemon=True)
-        self.thread.start()
+        threading.Thread(target=self._serve, daemon=True).start()
 
     def _serve(self):
         while True:
             try:
                 conn, _ = self.listener.accept()
-            except OSError:
+            except OSError:  # closed: the test is over
                 return
-            threading.Thread(target=self._echo, args=(conn,), daemon=True).start()
+            self.accepted(conn)
+
+    def accepted(self, conn) -> None:
+        conn.close()
+
+    def close(self):
+        self.listener.close()
+
+
+class EchoServer(LoopbackServer):
+    """Sends back what it gets (a modem in loopback), to each client on a thread of its own."""
+
+    def accepted(self, conn):
+        threading.Thread(target=self._echo, args=(conn,), daemon=True).start()
 
     @staticmethod
     def _echo(conn):
@@ -102,33 +114,23 @@ class EchoServer:
             while data := conn.recv(4096):
                 conn.sendall(data)
 
-    def close(self):
-        self.listener.close()
 
-
-class Rfc2217Server:
+class Rfc2217Server(LoopbackServer):
     """pyserial's RFC 2217 server side (``PortManager``, as in its ``rfc2217_server.py`` example) in
-    front of a ``loop://`` serial port, on a free loopback port: a networked serial port in loopback.
-    One client at a time; :meth:`drop` cuts the current one off (the network cable pulled)."""
+    front of a ``loop://`` serial port: a networked serial port in loopback.  One client at a time;
+    :meth:`drop` cuts the current one off (the network cable pulled)."""
 
     def __init__(self):
-        self.listener = socket.create_server(("127.0.0.1", 0))
-        self.port = self.listener.getsockname()[1]
         self.lock = threading.Lock()
         self.conn = None
         self.clients = 0
-        threading.Thread(target=self._serve, daemon=True).start()
+        super().__init__()
 
-    def _serve(self):
-        while True:
-            try:
-                conn, _ = self.listener.accept()
-            except OSError:
-                return
-            with self.lock:
-                self.conn = conn
-                self.clients += 1
-            self._client(conn)
+    def accepted(self, conn):
+        with self.lock:
+            self.conn = conn
+            self.clients += 1
+        self._client(conn)
 
     def _client(self, conn):
         device = serial.serial_for_url("loop://", timeout=0.05)
@@ -159,7 +161,7 @@ class Rfc2217Server:
             self.conn.shutdown(socket.SHUT_RDWR)
 
     def close(self):
-        self.listener.close()
+        super().close()
         if self.conn is not None:
             self.conn.close()
 
@@ -207,46 +209,39 @@ def echoes(daemon, link, payloads):
 PAYLOADS = [b"ping %d\r\n\0+++AT" % i for i in range(3)]
 
 
-def test_a_driver_link_on_loop_url_comes_up_and_echoes(tmp_path):
-    link = unique("lo")
-    daemon = Daemon(tmp_path, one_link_scene(link, "loop://"), [link])
-    try:
-        daemon.wait_for("READY=1")
-        wait_state(daemon, link, "up")
-        assert echoes(daemon, link, PAYLOADS) == PAYLOADS
-        assert "fileno" not in daemon.output()
-    finally:
-        daemon.close()
+def a_link_that_echoes(daemon_of, url: str) -> tuple:
+    """A daemon with one driver link on ``url``, whose far end echoes: the link comes up and every payload
+    comes back as it was sent.  Returns the daemon and the link."""
+    link = unique("u")
+    daemon = daemon_of(one_link_scene(link, url), [link])
+    wait_state(daemon, link, "up")
+    assert echoes(daemon, link, PAYLOADS) == PAYLOADS
+    return daemon, link
 
 
-def test_a_driver_link_on_rfc2217_comes_up_echoes_and_comes_back_after_the_network_drops(tmp_path):
-    link = unique("rf")
+def test_a_driver_link_on_loop_url_comes_up_and_echoes(daemon_of):
+    daemon, _ = a_link_that_echoes(daemon_of, "loop://")
+    assert "fileno" not in daemon.output()
+
+
+def test_a_driver_link_on_rfc2217_comes_up_echoes_and_comes_back_after_the_network_drops(daemon_of):
     server = Rfc2217Server()
-    daemon = Daemon(tmp_path, one_link_scene(link, f"rfc2217://127.0.0.1:{server.port}"), [link])
     try:
-        daemon.wait_for("READY=1")
-        wait_state(daemon, link, "up")
-        assert echoes(daemon, link, PAYLOADS) == PAYLOADS
+        daemon, link = a_link_that_echoes(daemon_of, f"rfc2217://127.0.0.1:{server.port}")
         server.drop()
         wait_state(daemon, link, "down")
         wait_state(daemon, link, "up")
         assert server.clients == 2
         assert echoes(daemon, link, PAYLOADS) == PAYLOADS
     finally:
-        daemon.close()
         server.close()
 
 
-def test_a_driver_link_on_socket_url_comes_up_and_echoes(tmp_path):
-    link = unique("so")
+def test_a_driver_link_on_socket_url_comes_up_and_echoes(daemon_of):
     server = EchoServer()
-    daemon = Daemon(tmp_path, one_link_scene(link, f"socket://127.0.0.1:{server.port}"), [link])
     try:
-        daemon.wait_for("READY=1")
-        wait_state(daemon, link, "up")
-        assert echoes(daemon, link, PAYLOADS) == PAYLOADS
+        a_link_that_echoes(daemon_of, f"socket://127.0.0.1:{server.port}")
     finally:
-        daemon.close()
         server.close()
 
 
@@ -270,14 +265,13 @@ def read_until(fd, wanted: bytes, timeout=10.0, meanwhile=lambda: time.sleep(0.0
     return got
 
 
-def test_a_driver_link_on_spy_url_reads_and_writes_through_pyserial_so_the_spy_sees_it(tmp_path):
+def test_a_driver_link_on_spy_url_reads_and_writes_through_pyserial_so_the_spy_sees_it(tmp_path, daemon_of):
     link = unique("sp")
     master, slave = raw_pty()
     spy_log = tmp_path / "spy.txt"
     vl2b = packet_class("vl2b")
-    daemon = Daemon(tmp_path, one_link_scene(link, f"spy://{os.ttyname(slave)}?file={spy_log}"), [link])
+    daemon = daemon_of(one_link_scene(link, f"spy://{os.ttyname(slave)}?file={spy_log}"), [link])
     try:
-        daemon.wait_for("READY=1")
         wait_state(daemon, link, "up")
         with Link.open(link, runtime_dir=daemon.runtime) as app:
             app.send(b"to the modem", dst=1)
@@ -289,18 +283,16 @@ def test_a_driver_link_on_spy_url_reads_and_writes_through_pyserial_so_the_spy_s
         assert any(" TX " in line and "to the modem" in line for line in lines), lines
         assert any(" RX " in line and "from the modem" in line for line in lines), lines
     finally:
-        daemon.close()
         os.close(master)
         os.close(slave)
 
 
-def test_a_port_that_cannot_be_opened_shows_down_and_is_warned_once(tmp_path):
+def test_a_port_that_cannot_be_opened_shows_down_and_is_warned_once(daemon_of):
     link = unique("dn")
     refusing = socket.socket()  # bound and never listening: connections are refused, and the port is ours
     refusing.bind(("127.0.0.1", 0))
-    daemon = Daemon(tmp_path, one_link_scene(link, f"socket://127.0.0.1:{refusing.getsockname()[1]}"), [link])
+    daemon = daemon_of(one_link_scene(link, f"socket://127.0.0.1:{refusing.getsockname()[1]}"), [link])
     try:
-        daemon.wait_for("READY=1")
         wait_state(daemon, link, "down")
 
         def lines(level):  # the daemon logs "… LEVEL logger: message", whatever comes before LEVEL
@@ -317,7 +309,6 @@ def test_a_port_that_cannot_be_opened_shows_down_and_is_warned_once(tmp_path):
         row = next(line for line in table.stdout.splitlines() if line.startswith(link))
         assert " down " in row and "Connection refused" in row  # hilgate status says why
     finally:
-        daemon.close()
         refusing.close()
 
 

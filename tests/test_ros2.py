@@ -10,14 +10,13 @@ never applied.  tests/test_ros2_wire.py holds the bytes and the type hashes agai
 from __future__ import annotations
 
 import math
-import subprocess
-import sys
 import threading
 
 import pytest
 
-from ros2kit import DOMAIN, Publication, Subscription, namespace, publications, ros2_section, wait_until
-from daemon_kit import Daemon, unique
+from ros2kit import (DOMAIN, Publication, Subscription, dds, namespace, node_and_app_scene,  # noqa: F401 (dds: a fixture)
+                     publications, ros2_scene, wait_until)
+from daemon_kit import Daemon, assert_the_walk_traced, hilgate, peer_events, unique, walk_a_live_vehicle
 from hilgate.client import Link
 from hilgate.ros2.idl import message_class
 from hilgate.ros2.messages import user_data
@@ -56,178 +55,128 @@ class Simulator:
         self.publication.close()
 
 
-def status_of(daemon, name):
-    return next(v for v in daemon.status()["vehicles"] if v["name"] == name)
-
-
-def test_odometry_at_50_hz_moves_the_vehicle_and_the_delay_follows(tmp_path):
+def test_odometry_at_50_hz_moves_the_vehicle_and_the_delay_follows(daemon_of):
     ns = namespace()
     topside, bluerov = unique("top"), unique("rov")
-    scene = f"""\
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles:
+    scene = ros2_scene(ns, f"""\
   topside: {{pose: {{static: [0, 0, 0]}}}}
   bluerov:
     pose: {{ros2: {{topic: {ns}/bluerov/odom, type: nav_msgs/msg/Odometry, frame_id: odom}}}}
     stale_after_s: 1.0
     stale: drop
-links:
+""", f"""\
   {topside}: {{vehicle: topside, address: 1, bitrate_bps: 1000, addressing: strict}}
   {bluerov}: {{vehicle: bluerov, address: 2, bitrate_bps: 1000, addressing: strict}}
-{ros2_section(ns)}"""
-    daemon = Daemon(tmp_path, scene, [topside, bluerov])
+""")
+    daemon = daemon_of(scene, [topside, bluerov])
     simulator = Simulator(f"{ns}/bluerov/odom")
     try:
-        daemon.wait_for("READY=1")
-        wait_until(lambda: status_of(daemon, "bluerov")["position"] is not None, what="the first pose")
-        seen = status_of(daemon, "bluerov")
-        assert seen["position"] == [150.0, 0.0, 5.0] and seen["source"] == "ros2"  # ENU → NED
-        with Link.open(topside, runtime_dir=daemon.runtime) as top, Link.open(bluerov, runtime_dir=daemon.runtime) as rov:
-            top.send(b"near", dst=2)
-            assert rov.recv(timeout=30).data == b"near"
-            simulator.enu = (0.0, 300.0, -5.0)
-            wait_until(lambda: status_of(daemon, "bluerov")["position"] == [300.0, 0.0, 5.0], what="the new pose")
-            top.send(b"away", dst=2)
-            assert rov.recv(timeout=30).data == b"away"
-            simulator.sending = False  # the simulator stops: silence, stale, dropped
-            wait_until(lambda: status_of(daemon, "bluerov")["position"] is None, what="the stale pose dropped")
-            top.send(b"lost", dst=2)
-            assert rov.recv(timeout=1.5) is None
-        printed = subprocess.run([sys.executable, "-m", "hilgate", "status", "--runtime-dir", daemon.runtime],
-                                 capture_output=True, text=True, timeout=60).stdout
+        def stop_the_simulator():  # silence, stale, dropped
+            simulator.sending = False
+
+        seen = walk_a_live_vehicle(daemon, topside, bluerov, lambda: setattr(simulator, "enu", (0.0, 300.0, -5.0)),
+                                   stop_the_simulator)
+        assert seen["source"] == "ros2"  # ENU → NED
+        printed = hilgate("status", "--runtime-dir", daemon.runtime).stdout
         assert f"ROS 2: domain {DOMAIN} on loopback, namespace {ns}" in printed and f"{ns}/bluerov/odom" in printed
         ros2 = daemon.status()["ros2"]
         (source,) = ros2["poses_in"]
         assert source["refused"] == {} and source["topic"] == f"{ns}/bluerov/odom"
         assert 0 < source["applied"] <= source["messages"] <= simulator.sent
-        daemon.stop()
-        events = daemon.trace_events()
-        enq = {e["pkt"]: e["t"] for e in events if e.get("ev") == "enq"}
-        delays = [round(e["t"] - enq[e["pkt"]], 6) for e in events if e.get("ev") == "rx"]
-        # 9 bytes on air = 72 ms, then the distance to the vehicle 5 m deep, 150 m then 300 m away
-        assert delays == [round(0.072 + math.hypot(150, 5) / 1500, 6), round(0.072 + math.hypot(300, 5) / 1500, 6)]
-        assert [e["cause"] for e in events if e.get("ev") == "err"] == ["no_pose"]  # stale, dropped: no position
+        assert_the_walk_traced(daemon)
     finally:
         simulator.close()
-        daemon.close()
 
 
-def test_poses_tf_and_diagnostics_are_published_as_the_scene_asks(tmp_path):
+def test_poses_tf_and_diagnostics_are_published_as_the_scene_asks(daemon_of, dds):
     ns = namespace()
     a, b = unique("a"), unique("b")
-    scene = f"""\
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles:
+    scene = ros2_scene(ns, f"""\
   ship: {{pose: {{static: [10, 20, 0]}}}}
   auv: {{pose: {{path: {{start: [100, 0, 30], legs: [{{to: [100, 50, 30], speed_mps: 0.001}}]}}}}}}
-links:
+""", f"""\
   {a}: {{vehicle: ship, address: 1, gli: [socket]}}
   {b}: {{vehicle: auv, address: 2, gli: [socket]}}
-{ros2_section(ns, '''  frame_id: map
+""", '''  frame_id: map
   publish:
     poses: {rate_hz: 20}
     tf: {rate_hz: 20, reliability: best_effort}
     diagnostics: {rate_hz: 5}
-''')}"""
-    ship = Subscription(f"{ns}/ship/pose", "geometry_msgs/msg/PoseStamped")
-    tf = Subscription("/tf", "tf2_msgs/msg/TFMessage", "best_effort")
-    diagnostics = Subscription("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
-    daemon = Daemon(tmp_path, scene, [a, b])
-    try:
-        daemon.wait_for("READY=1")
-        pose = ship.wait(2)[-1]
-        assert pose.header.frame_id == "map"
-        assert (pose.pose.position.x, pose.pose.position.y, pose.pose.position.z) == (20.0, 10.0, -0.0)  # ENU
-        assert (pose.pose.orientation.x, pose.pose.orientation.y, pose.pose.orientation.z, pose.pose.orientation.w) \
-            == (0.0, 0.0, 0.0, 1.0)
-        ours = [m for m in tf.wait(1) if any(t.child_frame_id == "ship" for t in m.transforms)]
-        wait_until(lambda: any(any(t.child_frame_id == "auv" for t in m.transforms) for m in tf.samples),
-                   what="the AUV's transform")
-        transforms = {t.child_frame_id: t for m in tf.samples for t in m.transforms if t.header.frame_id == "map"}
-        assert ours and transforms["auv"].transform.translation.x == pytest.approx(0.0, abs=0.1)
-        assert transforms["auv"].transform.translation.y == 100.0 and transforms["auv"].transform.translation.z == -30.0
-        report = wait_until(lambda: next((m for m in diagnostics.samples
-                                          if any(s.name == f"hilgate: {a}" for s in m.status)), None),
-                            what="a diagnostic of link a")
-        status = {s.name: s for s in report.status}
-        mine = status[f"hilgate: {a}"]
-        values = {kv.key: kv.value for kv in mine.values}
-        assert mine.level == 0 and mine.message == "ready" and mine.hardware_id == "sim"
-        assert values["state"] == "up" and values["tx_packets"] == "0" and values["ready"] == "True"
-        with Link.open(a, runtime_dir=daemon.runtime) as link:
-            link.send(b"hello", dst=2)
-            wait_until(lambda: any(kv.key == "tx_packets" and kv.value == "1" for m in diagnostics.samples
-                                   for s in m.status if s.name == f"hilgate: {a}" for kv in s.values),
-                       what="the counter in /diagnostics")
-        # nothing was published the scene did not ask for: no link topics (their gli has no ros2)
-        assert not any(f"/{a}/" in topic or f"/{b}/" in topic for topic in publications(ns))
-        published = daemon.status()["ros2"]
-        assert published["domain_id"] > -1 and published["interfaces"] == ["loopback"]
-        assert published["published"]["poses"] > 0 and published["failed"] == 0
-    finally:
-        for subscription in (ship, tf, diagnostics):
-            subscription.close()
-        daemon.close()
+''')
+    ship = dds(Subscription(f"{ns}/ship/pose", "geometry_msgs/msg/PoseStamped"))
+    tf = dds(Subscription("/tf", "tf2_msgs/msg/TFMessage", "best_effort"))
+    diagnostics = dds(Subscription("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray"))
+    daemon = daemon_of(scene, [a, b])
+    pose = ship.wait(2)[-1]
+    assert pose.header.frame_id == "map"
+    assert (pose.pose.position.x, pose.pose.position.y, pose.pose.position.z) == (20.0, 10.0, -0.0)  # ENU
+    assert (pose.pose.orientation.x, pose.pose.orientation.y, pose.pose.orientation.z, pose.pose.orientation.w) \
+        == (0.0, 0.0, 0.0, 1.0)
+    ours = [m for m in tf.wait(1) if any(t.child_frame_id == "ship" for t in m.transforms)]
+    wait_until(lambda: any(any(t.child_frame_id == "auv" for t in m.transforms) for m in tf.samples),
+               what="the AUV's transform")
+    transforms = {t.child_frame_id: t for m in tf.samples for t in m.transforms if t.header.frame_id == "map"}
+    assert ours and transforms["auv"].transform.translation.x == pytest.approx(0.0, abs=0.1)
+    assert transforms["auv"].transform.translation.y == 100.0 and transforms["auv"].transform.translation.z == -30.0
+    report = wait_until(lambda: next((m for m in diagnostics.samples
+                                      if any(s.name == f"hilgate: {a}" for s in m.status)), None),
+                        what="a diagnostic of link a")
+    status = {s.name: s for s in report.status}
+    mine = status[f"hilgate: {a}"]
+    values = {kv.key: kv.value for kv in mine.values}
+    assert mine.level == 0 and mine.message == "ready" and mine.hardware_id == "sim"
+    assert values["state"] == "up" and values["tx_packets"] == "0" and values["ready"] == "True"
+    with Link.open(a, runtime_dir=daemon.runtime) as link:
+        link.send(b"hello", dst=2)
+        wait_until(lambda: any(kv.key == "tx_packets" and kv.value == "1" for m in diagnostics.samples
+                               for s in m.status if s.name == f"hilgate: {a}" for kv in s.values),
+                   what="the counter in /diagnostics")
+    # nothing was published the scene did not ask for: no link topics (their gli has no ros2)
+    assert not any(f"/{a}/" in topic or f"/{b}/" in topic for topic in publications(ns))
+    published = daemon.status()["ros2"]
+    assert published["domain_id"] > -1 and published["interfaces"] == ["loopback"]
+    assert published["published"]["poses"] > 0 and published["failed"] == 0
 
 
-def test_a_ros2_node_and_a_dccomms_application_talk_through_two_links(tmp_path):
+def test_a_ros2_node_and_a_dccomms_application_talk_through_two_links(daemon_of, dds):
     ns = namespace()
     node_link, app_link = unique("node"), unique("app")
-    scene = f"""\
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles:
-  a: {{pose: {{static: [0, 0, 0]}}}}
-  b: {{pose: {{static: [300, 0, 0]}}}}
-links:
-  {node_link}: {{vehicle: a, address: 1, bitrate_bps: 2000, gli: [ros2]}}
-  {app_link}: {{vehicle: b, address: 2, bitrate_bps: 2000}}
-{ros2_section(ns)}"""
     Frame = message_class("hilgate_msgs/msg/Frame")
-    recv = Subscription(f"{ns}/{node_link}/recv", "hilgate_msgs/msg/Frame")
-    ready = Subscription(f"{ns}/{node_link}/ready", "std_msgs/msg/Bool", durability="transient_local")
-    send = Publication(f"{ns}/{node_link}/send", "hilgate_msgs/msg/Frame")
-    daemon = Daemon(tmp_path, scene, [node_link, app_link])
-    try:
-        daemon.wait_for("READY=1")
-        assert ready.wait(1)[-1].data is True  # the state a node that starts late gets at once
-        application = daemon.peer(app_link, "--send", "1", "--dst", "1", "--receive", "1", "--timeout", "60")
-        heard = recv.wait(1)[0]  # the dccomms application's frame reaches the node
-        assert (heard.src, heard.dst, bytes(heard.data)) == (2, 1, f"{app_link}#0000".encode()[:10])
-        assert heard.model_time > 0.2 and heard.stamp.sec > 1_600_000_000
-        wait_until(lambda: send.matched(), what="hilgate's reader of the send topic")
-        send.write(Frame(dst=2, data=b"from ROS 2"))  # and the node answers
-        events = __import__("daemon_kit").peer_events(application)
-        frames = [e for e in events if e["ev"] == "frame"]
-        assert [(f["payload"], f["src"], f["dst"], f["crc_ok"]) for f in frames] == [("from ROS 2", 1, 2, True)]
-        wait_until(lambda: len(ready.samples) >= 3, what="BUSY and READY again")  # it went BUSY while sending
-        assert [s.data for s in ready.samples][-2:] == [False, True]
-        # the type hash of each endpoint hilgate opened, in its USER_DATA, as a Jazzy node reads it
-        seen = wait_until(lambda: (lambda p: p if len(p) == 3 else None)(publications(ns)), what="three writers")
-        # (hilgate's recv and ready, and this test's own send)
-        assert seen[f"rt{ns}/{node_link}/recv"] == ("hilgate_msgs::msg::dds_::Frame_", user_data("hilgate_msgs/msg/Frame"))
-        assert seen[f"rt{ns}/{node_link}/ready"] == ("std_msgs::msg::dds_::Bool_", user_data("std_msgs/msg/Bool"))
-    finally:
-        for entity in (recv, ready, send):
-            entity.close()
-        daemon.close()
+    recv = dds(Subscription(f"{ns}/{node_link}/recv", "hilgate_msgs/msg/Frame"))
+    ready = dds(Subscription(f"{ns}/{node_link}/ready", "std_msgs/msg/Bool", durability="transient_local"))
+    send = dds(Publication(f"{ns}/{node_link}/send", "hilgate_msgs/msg/Frame"))
+    daemon = daemon_of(node_and_app_scene(ns, node_link, app_link, 300, 2000), [node_link, app_link])
+    assert ready.wait(1)[-1].data is True  # the state a node that starts late gets at once
+    application = daemon.peer(app_link, "--send", "1", "--dst", "1", "--receive", "1", "--timeout", "60")
+    heard = recv.wait(1)[0]  # the dccomms application's frame reaches the node
+    assert (heard.src, heard.dst, bytes(heard.data)) == (2, 1, f"{app_link}#0000".encode()[:10])
+    assert heard.model_time > 0.2 and heard.stamp.sec > 1_600_000_000
+    wait_until(lambda: send.matched(), what="hilgate's reader of the send topic")
+    send.write(Frame(dst=2, data=b"from ROS 2"))  # and the node answers
+    events = peer_events(application)
+    frames = [e for e in events if e["ev"] == "frame"]
+    assert [(f["payload"], f["src"], f["dst"], f["crc_ok"]) for f in frames] == [("from ROS 2", 1, 2, True)]
+    wait_until(lambda: len(ready.samples) >= 3, what="BUSY and READY again")  # it went BUSY while sending
+    assert [s.data for s in ready.samples][-2:] == [False, True]
+    # the type hash of each endpoint hilgate opened, in its USER_DATA, as a Jazzy node reads it
+    seen = wait_until(lambda: (lambda p: p if len(p) == 3 else None)(publications(ns)), what="three writers")
+    # (hilgate's recv and ready, and this test's own send)
+    assert seen[f"rt{ns}/{node_link}/recv"] == ("hilgate_msgs::msg::dds_::Frame_", user_data("hilgate_msgs/msg/Frame"))
+    assert seen[f"rt{ns}/{node_link}/ready"] == ("std_msgs::msg::dds_::Bool_", user_data("std_msgs/msg/Bool"))
 
 
 # -- hostile and broken nodes -------------------------------------------------------------------------
 
 
-def test_poses_that_are_no_poses_are_counted_and_never_applied(tmp_path):
+def test_poses_that_are_no_poses_are_counted_and_never_applied(daemon_of, dds):
     ns = namespace()
     link = unique("h")
-    scene = f"""\
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles:
-  rov: {{pose: {{ros2: {{topic: {ns}/rov/pose_in, type: geometry_msgs/msg/PoseStamped, frame_id: odom}}}}}}
-links:
-  {link}: {{vehicle: rov, address: 1, gli: [socket]}}
-{ros2_section(ns)}"""
+    scene = ros2_scene(
+        ns, f"  rov: {{pose: {{ros2: {{topic: {ns}/rov/pose_in, type: geometry_msgs/msg/PoseStamped, frame_id: odom}}}}}}\n",
+        f"  {link}: {{vehicle: rov, address: 1, gli: [socket]}}\n")
     PoseStamped = message_class("geometry_msgs/msg/PoseStamped")
-    publication = Publication(f"{ns}/rov/pose_in", "geometry_msgs/msg/PoseStamped")
-    daemon = Daemon(tmp_path, scene, [link])
+    publication = dds(Publication(f"{ns}/rov/pose_in", "geometry_msgs/msg/PoseStamped"))
+    daemon = daemon_of(scene, [link])
 
     def pose(x, y, z, frame="odom"):
         message = PoseStamped()
@@ -236,81 +185,62 @@ links:
         message.pose.orientation.w = 1.0
         return message
 
-    try:
-        daemon.wait_for("READY=1")
-        wait_until(publication.matched, what="hilgate's reader")
-        publication.write(pose(1.0, 2.0, -3.0))
-        wait_until(lambda: status_of(daemon, "rov")["position"] == [2.0, 1.0, 3.0], what="the good pose")
-        publication.write(pose(math.nan, 0.0, 0.0))
-        publication.write(pose(0.0, math.inf, 0.0))
-        publication.write(pose(1e300, 0.0, 0.0))
-        publication.write(pose(7.0, 7.0, 7.0, frame="map"))  # another frame than the scene's
-        # CDR that Cyclone DDS passes (it refuses truncated samples itself) but that is no text: a frame id
-        # in Latin-1, as a tool that is not ROS might write it
-        latin = pose(0.0, 0.0, 0.0, frame="od").serialize().replace(b"od\x00", b"\xf6d\x00")
-        publication.write_raw(latin)
-        publication.write_raw(latin)
-        publication.write(pose(4.0, 5.0, -6.0))  # and a good one after them all is taken
-        wait_until(lambda: status_of(daemon, "rov")["position"] == [5.0, 4.0, 6.0], what="the last good pose")
-        source = wait_until(lambda: (lambda s: s if sum(s["refused"].values()) == 6 else None)(
-            daemon.status()["ros2"]["poses_in"][0]), what="six refusals")
-        assert source["refused"] == {"not_finite": 2, "out_of_range": 1, "frame_id": 1, "decode": 2}
-        assert source["messages"] == 6  # the decoded ones: two good, four refused
-        assert source["applied"] == 2
-        assert daemon.process.poll() is None and "Traceback" not in daemon.output()
-    finally:
-        publication.close()
-        daemon.close()
+    wait_until(publication.matched, what="hilgate's reader")
+    publication.write(pose(1.0, 2.0, -3.0))
+    wait_until(lambda: daemon.vehicle("rov")["position"] == [2.0, 1.0, 3.0], what="the good pose")
+    publication.write(pose(math.nan, 0.0, 0.0))
+    publication.write(pose(0.0, math.inf, 0.0))
+    publication.write(pose(1e300, 0.0, 0.0))
+    publication.write(pose(7.0, 7.0, 7.0, frame="map"))  # another frame than the scene's
+    # CDR that Cyclone DDS passes (it refuses truncated samples itself) but that is no text: a frame id
+    # in Latin-1, as a tool that is not ROS might write it
+    latin = pose(0.0, 0.0, 0.0, frame="od").serialize().replace(b"od\x00", b"\xf6d\x00")
+    publication.write_raw(latin)
+    publication.write_raw(latin)
+    publication.write(pose(4.0, 5.0, -6.0))  # and a good one after them all is taken
+    wait_until(lambda: daemon.vehicle("rov")["position"] == [5.0, 4.0, 6.0], what="the last good pose")
+    source = wait_until(lambda: (lambda s: s if sum(s["refused"].values()) == 6 else None)(
+        daemon.status()["ros2"]["poses_in"][0]), what="six refusals")
+    assert source["refused"] == {"not_finite": 2, "out_of_range": 1, "frame_id": 1, "decode": 2}
+    assert source["messages"] == 6  # the decoded ones: two good, four refused
+    assert source["applied"] == 2
+    assert daemon.process.poll() is None and "Traceback" not in daemon.output()
 
 
-def test_frames_a_node_floods_or_breaks_are_counted_by_cause_and_none_is_lost_uncounted(tmp_path):
+def test_frames_a_node_floods_or_breaks_are_counted_by_cause_and_none_is_lost_uncounted(daemon_of, dds):
     ns = namespace()
     node_link, app_link = unique("f"), unique("g")
-    scene = f"""\
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles:
-  a: {{pose: {{static: [0, 0, 0]}}}}
-  b: {{pose: {{static: [15, 0, 0]}}}}
-links:
-  {node_link}: {{vehicle: a, address: 1, bitrate_bps: 1000000, gli: [ros2]}}
-  {app_link}: {{vehicle: b, address: 2, bitrate_bps: 1000000, gli: [socket]}}
-{ros2_section(ns)}"""
     Frame = message_class("hilgate_msgs/msg/Frame")
-    send = Publication(f"{ns}/{node_link}/send", "hilgate_msgs/msg/Frame")
-    daemon = Daemon(tmp_path, scene, [node_link, app_link])
+    send = dds(Publication(f"{ns}/{node_link}/send", "hilgate_msgs/msg/Frame"))
+    daemon = daemon_of(node_and_app_scene(ns, node_link, app_link, 15, 1000000, ", gli: [socket]"), [node_link, app_link])
     flood = 400
-    try:
-        daemon.wait_for("READY=1")
-        wait_until(send.matched, what="hilgate's reader")
-        send.write(Frame(dst=2, data=bytes(70_000)))   # more than any packet class carries
-        send.write(Frame(dst=2, data=bytes(3000)))     # more than this link's packet class carries
-        for i in range(flood):                          # far faster than the door lets one writer send
-            send.write(Frame(dst=2, data=i.to_bytes(2, "big")))
-        total = flood + 2
+    wait_until(send.matched, what="hilgate's reader")
+    send.write(Frame(dst=2, data=bytes(70_000)))   # more than any packet class carries
+    send.write(Frame(dst=2, data=bytes(3000)))     # more than this link's packet class carries
+    for i in range(flood):                          # far faster than the door lets one writer send
+        send.write(Frame(dst=2, data=i.to_bytes(2, "big")))
+    total = flood + 2
 
-        def accounted():
-            events = daemon.trace_events()
-            enq = sum(1 for e in events if e.get("ev") == "enq" and e.get("src") == node_link)
-            drops = {}
-            for e in events:
-                if e.get("ev") == "drop" and e.get("link") == node_link:
-                    drops[e["cause"]] = drops.get(e["cause"], 0) + e.get("n", 1)
-            return (enq, drops) if enq + sum(drops.values()) == total else None
+    def accounted():
+        events = daemon.trace_events()
+        enq = sum(1 for e in events if e.get("ev") == "enq" and e.get("src") == node_link)
+        drops = {}
+        for e in events:
+            if e.get("ev") == "drop" and e.get("link") == node_link:
+                drops[e["cause"]] = drops.get(e["cause"], 0) + e.get("n", 1)
+        return (enq, drops) if enq + sum(drops.values()) == total else None
 
-        enq, drops = wait_until(accounted, what="every frame sent or counted")
-        assert drops["bad_frame"] == 2 and drops.get("rate", 0) + drops.get("client_queue", 0) > 0
-        assert set(drops) <= {"bad_frame", "rate", "client_queue"} and enq >= 64
-        assert daemon.process.poll() is None and "Traceback" not in daemon.output()
-        assert sum(daemon.link_status(node_link)["drop_causes"].values()) == total - enq
-    finally:
-        send.close()
-        daemon.close()
+    enq, drops = wait_until(accounted, what="every frame sent or counted")
+    assert drops["bad_frame"] == 2 and drops.get("rate", 0) + drops.get("client_queue", 0) > 0
+    assert set(drops) <= {"bad_frame", "rate", "client_queue"} and enq >= 64
+    assert daemon.process.poll() is None and "Traceback" not in daemon.output()
+    assert sum(daemon.link_status(node_link)["drop_causes"].values()) == total - enq
 
 
 # -- the domain and reloads ----------------------------------------------------------------------------------
 
 
-def test_domain_from_ros_domain_id_and_reloads_that_add_a_link_or_would_move_the_domain(tmp_path):
+def test_domain_from_ros_domain_id_and_reloads_that_add_a_link_or_would_move_the_domain(daemon_of, dds):
     ns = namespace()
     first, second = unique("p"), unique("q")
     base = f"""\
@@ -321,21 +251,16 @@ links:
   {first}: {{vehicle: a, address: 1, gli: [ros2]}}
 """
     section = f"ros2: {{namespace: {ns}}}\n"
-    daemon = Daemon(tmp_path, base + section, [first, second], env={"ROS_DOMAIN_ID": str(DOMAIN)})
-    ready = Subscription(f"{ns}/{second}/ready", "std_msgs/msg/Bool", durability="transient_local")
-    try:
-        daemon.wait_for("READY=1")
-        assert daemon.status()["ros2"]["domain_id"] == DOMAIN
-        daemon.reload(base + f"  {second}: {{vehicle: a, address: 2, gli: [socket, ros2]}}\n" + section)
-        assert ready.wait(1)[-1].data is True  # the new link's topics, on the running participant
-        moved = base + f"ros2: {{namespace: {ns}, domain_id: {(DOMAIN + 1) % 233}}}\n"
-        daemon.scene.write_text(moved)
-        reply = daemon.control({"class": "RELOAD"})
-        assert reply["ok"] is False and "restart it to change them" in reply["error"]
-        assert daemon.status()["ros2"]["domain_id"] == DOMAIN and daemon.link_status(second)["state"] == "up"
-    finally:
-        ready.close()
-        daemon.close()
+    daemon = daemon_of(base + section, [first, second], env={"ROS_DOMAIN_ID": str(DOMAIN)})
+    ready = dds(Subscription(f"{ns}/{second}/ready", "std_msgs/msg/Bool", durability="transient_local"))
+    assert daemon.status()["ros2"]["domain_id"] == DOMAIN
+    daemon.reload(base + f"  {second}: {{vehicle: a, address: 2, gli: [socket, ros2]}}\n" + section)
+    assert ready.wait(1)[-1].data is True  # the new link's topics, on the running participant
+    moved = base + f"ros2: {{namespace: {ns}, domain_id: {(DOMAIN + 1) % 233}}}\n"
+    daemon.scene.write_text(moved)
+    reply = daemon.control({"class": "RELOAD"})
+    assert reply["ok"] is False and "restart it to change them" in reply["error"]
+    assert daemon.status()["ros2"]["domain_id"] == DOMAIN and daemon.link_status(second)["state"] == "up"
 
 
 def test_a_ros_domain_id_that_is_no_domain_is_refused_in_one_line(tmp_path):

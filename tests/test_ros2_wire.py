@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from ros2kit import Publication, Subscription, namespace, ros2_section, wait_until
-from daemon_kit import Daemon, unique
+from ros2kit import Publication, Subscription, dds, namespace, ros2_scene, wait_until  # noqa: F401  (dds: a fixture)
+from daemon_kit import unique
 from hilgate.client import Link
 from hilgate.ros2 import messages
 from hilgate.ros2.idl import message_class
@@ -112,114 +112,98 @@ def test_odometry_and_pose_stamped_serialize_as_rosbags_does(distro):
 
 # -- what a live daemon puts on the wire ------------------------------------------------------------
 
-def test_every_message_hilgate_publishes_is_rosbags_cdr_for_humble_and_jazzy(tmp_path):
+def test_every_message_hilgate_publishes_is_rosbags_cdr_for_humble_and_jazzy(daemon_of, dds):
     ns = namespace()
     link, other = unique("w"), unique("o")
-    scene = f"""\
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles:
+    scene = ros2_scene(ns, f"""\
   rov: {{pose: {{static: [3, 4, 5]}}}}
   buoy: {{pose: {{static: [0, 0, 0]}}}}
-links:
+""", f"""\
   {link}: {{vehicle: rov, address: 1, gli: [ros2, socket]}}
   {other}: {{vehicle: buoy, address: 2, gli: [socket]}}
-{ros2_section(ns, '''  publish:
+""", '''  publish:
     poses: {rate_hz: 20}
     tf: {rate_hz: 20}
     diagnostics: {rate_hz: 5}
-''')}"""
+''')
     subscriptions = {
-        "geometry_msgs/msg/PoseStamped": Subscription(f"{ns}/rov/pose", "geometry_msgs/msg/PoseStamped"),
-        "tf2_msgs/msg/TFMessage": Subscription("/tf", "tf2_msgs/msg/TFMessage"),
-        "diagnostic_msgs/msg/DiagnosticArray": Subscription("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray"),
-        "hilgate_msgs/msg/Frame": Subscription(f"{ns}/{link}/recv", "hilgate_msgs/msg/Frame"),
-        "std_msgs/msg/Bool": Subscription(f"{ns}/{link}/ready", "std_msgs/msg/Bool", durability="transient_local"),
+        "geometry_msgs/msg/PoseStamped": dds(Subscription(f"{ns}/rov/pose", "geometry_msgs/msg/PoseStamped")),
+        "tf2_msgs/msg/TFMessage": dds(Subscription("/tf", "tf2_msgs/msg/TFMessage")),
+        "diagnostic_msgs/msg/DiagnosticArray": dds(Subscription("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")),
+        "hilgate_msgs/msg/Frame": dds(Subscription(f"{ns}/{link}/recv", "hilgate_msgs/msg/Frame")),
+        "std_msgs/msg/Bool": dds(Subscription(f"{ns}/{link}/ready", "std_msgs/msg/Bool", durability="transient_local")),
     }
-    daemon = Daemon(tmp_path, scene, [link, other])
-    try:
-        daemon.wait_for("READY=1")
-        with Link.open(other, runtime_dir=daemon.runtime) as sender:
-            sender.send(bytes(range(40)), dst=1)
-            subscriptions["hilgate_msgs/msg/Frame"].wait(1)
-        for name, subscription in subscriptions.items():
-            subscription.wait(1)
-        stores = {distro: store(distro) for distro in STORES}
-        for name, subscription in subscriptions.items():
-            for raw, sample in list(zip(subscription.raw, subscription.samples))[:5]:
-                sent = message_class(name).serialize(sample)  # what hilgate handed to DDS
-                # RTPS carries a payload in 4-byte units: the wire adds zeros to the end, which every
-                # reader (rosbags, Fast DDS, Cyclone) leaves unread
-                assert raw == sent + bytes(-len(sent) % 4), name
-                for distro, ts in stores.items():
-                    message = ts.deserialize_cdr(raw, name)
-                    assert bytes(ts.serialize_cdr(message, name)) == sent, (distro, name)
-        # and the same messages built in rosbags from the values they should carry
-        ts = stores["jazzy"]
-        T = ts.types
-        pose = subscriptions["geometry_msgs/msg/PoseStamped"].samples[0]
-        expected = T["geometry_msgs/msg/PoseStamped"](
-            header=T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=pose.header.stamp.sec,
-                                                                                  nanosec=pose.header.stamp.nanosec),
-                                            frame_id="world"),
-            pose=T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=4.0, y=3.0, z=-5.0),
-                                             orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)))
-        assert bytes(ts.serialize_cdr(expected, "geometry_msgs/msg/PoseStamped")) == \
-            subscriptions["geometry_msgs/msg/PoseStamped"].raw[0]  # 76 bytes: no padding
-        frame = subscriptions["hilgate_msgs/msg/Frame"].samples[0]
-        import numpy
+    daemon = daemon_of(scene, [link, other])
+    with Link.open(other, runtime_dir=daemon.runtime) as sender:
+        sender.send(bytes(range(40)), dst=1)
+        subscriptions["hilgate_msgs/msg/Frame"].wait(1)
+    for name, subscription in subscriptions.items():
+        subscription.wait(1)
+    stores = {distro: store(distro) for distro in STORES}
+    for name, subscription in subscriptions.items():
+        for raw, sample in list(zip(subscription.raw, subscription.samples))[:5]:
+            sent = message_class(name).serialize(sample)  # what hilgate handed to DDS
+            # RTPS carries a payload in 4-byte units: the wire adds zeros to the end, which every
+            # reader (rosbags, Fast DDS, Cyclone) leaves unread
+            assert raw == sent + bytes(-len(sent) % 4), name
+            for distro, ts in stores.items():
+                message = ts.deserialize_cdr(raw, name)
+                assert bytes(ts.serialize_cdr(message, name)) == sent, (distro, name)
+    # and the same messages built in rosbags from the values they should carry
+    ts = stores["jazzy"]
+    T = ts.types
+    pose = subscriptions["geometry_msgs/msg/PoseStamped"].samples[0]
+    expected = T["geometry_msgs/msg/PoseStamped"](
+        header=T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=pose.header.stamp.sec,
+                                                                              nanosec=pose.header.stamp.nanosec),
+                                        frame_id="world"),
+        pose=T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=4.0, y=3.0, z=-5.0),
+                                         orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)))
+    assert bytes(ts.serialize_cdr(expected, "geometry_msgs/msg/PoseStamped")) == \
+        subscriptions["geometry_msgs/msg/PoseStamped"].raw[0]  # 76 bytes: no padding
+    frame = subscriptions["hilgate_msgs/msg/Frame"].samples[0]
+    import numpy
 
-        expected = T["hilgate_msgs/msg/Frame"](
-            stamp=T["builtin_interfaces/msg/Time"](sec=frame.stamp.sec, nanosec=frame.stamp.nanosec),
-            src=2, dst=1, model_time=frame.model_time, data=numpy.arange(40, dtype=numpy.uint8))
-        assert bytes(ts.serialize_cdr(expected, "hilgate_msgs/msg/Frame")) == subscriptions["hilgate_msgs/msg/Frame"].raw[0]
-        ready = bytes(ts.serialize_cdr(T["std_msgs/msg/Bool"](data=True), "std_msgs/msg/Bool"))
-        assert ready + bytes(3) == subscriptions["std_msgs/msg/Bool"].raw[0]
-    finally:
-        for subscription in subscriptions.values():
-            subscription.close()
-        daemon.close()
+    expected = T["hilgate_msgs/msg/Frame"](
+        stamp=T["builtin_interfaces/msg/Time"](sec=frame.stamp.sec, nanosec=frame.stamp.nanosec),
+        src=2, dst=1, model_time=frame.model_time, data=numpy.arange(40, dtype=numpy.uint8))
+    assert bytes(ts.serialize_cdr(expected, "hilgate_msgs/msg/Frame")) == subscriptions["hilgate_msgs/msg/Frame"].raw[0]
+    ready = bytes(ts.serialize_cdr(T["std_msgs/msg/Bool"](data=True), "std_msgs/msg/Bool"))
+    assert ready + bytes(3) == subscriptions["std_msgs/msg/Bool"].raw[0]
 
 
 @pytest.mark.parametrize("type_name", READ)
-def test_rosbags_bytes_move_a_vehicle(tmp_path, type_name):
+def test_rosbags_bytes_move_a_vehicle(daemon_of, dds, type_name):
     """A pose serialized by rosbags (Humble's store, then Jazzy's), written to the wire as it is."""
     ns = namespace()
     link = unique("r")
-    scene = f"""\
-channels: {{ac: {{speed_mps: 1500}}}}
-vehicles:
+    scene = ros2_scene(ns, f"""\
   rov: {{pose: {{ros2: {{topic: {ns}/rov/pose_in, type: {type_name}, frame: ned, offset: [1, 1, 1]}}}}}}
-links:
+""", f"""\
   {link}: {{vehicle: rov, address: 1, gli: [socket]}}
-{ros2_section(ns)}"""
-    publication = Publication(f"{ns}/rov/pose_in", type_name)
-    daemon = Daemon(tmp_path, scene, [link])
-    try:
-        daemon.wait_for("READY=1")
-        wait_until(publication.matched, what="hilgate's reader")
-        for i, distro in enumerate(STORES):
-            ts = store(distro)
-            T = ts.types
-            header = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=1, nanosec=2), frame_id="odom")
-            pose = T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=10.0 + i, y=20.0, z=30.0),
-                                               orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0))
-            import numpy
+""")
+    publication = dds(Publication(f"{ns}/rov/pose_in", type_name))
+    daemon = daemon_of(scene, [link])
+    wait_until(publication.matched, what="hilgate's reader")
+    for i, distro in enumerate(STORES):
+        ts = store(distro)
+        T = ts.types
+        header = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=1, nanosec=2), frame_id="odom")
+        pose = T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=10.0 + i, y=20.0, z=30.0),
+                                           orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0))
+        import numpy
 
-            covariance = numpy.zeros(36)
-            if type_name == "geometry_msgs/msg/PoseStamped":
-                message = T[type_name](header=header, pose=pose)
-            elif type_name == "geometry_msgs/msg/PoseWithCovarianceStamped":
-                message = T[type_name](header=header, pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=covariance))
-            else:
-                zero = T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
-                message = T[type_name](header=header, child_frame_id="base_link",
-                                       pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=covariance),
-                                       twist=T["geometry_msgs/msg/TwistWithCovariance"](
-                                           twist=T["geometry_msgs/msg/Twist"](linear=zero, angular=zero), covariance=covariance))
-            publication.write_raw(bytes(ts.serialize_cdr(message, type_name)))
-            want = [11.0 + i, 21.0, 31.0]
-            wait_until(lambda: next(v for v in daemon.status()["vehicles"] if v["name"] == "rov")["position"] == want,
-                       what=f"the pose from rosbags' {distro} bytes")
-    finally:
-        publication.close()
-        daemon.close()
+        covariance = numpy.zeros(36)
+        if type_name == "geometry_msgs/msg/PoseStamped":
+            message = T[type_name](header=header, pose=pose)
+        elif type_name == "geometry_msgs/msg/PoseWithCovarianceStamped":
+            message = T[type_name](header=header, pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=covariance))
+        else:
+            zero = T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
+            message = T[type_name](header=header, child_frame_id="base_link",
+                                   pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=covariance),
+                                   twist=T["geometry_msgs/msg/TwistWithCovariance"](
+                                       twist=T["geometry_msgs/msg/Twist"](linear=zero, angular=zero), covariance=covariance))
+        publication.write_raw(bytes(ts.serialize_cdr(message, type_name)))
+        want = [11.0 + i, 21.0, 31.0]
+        wait_until(lambda: daemon.vehicle("rov")["position"] == want, what=f"the pose from rosbags' {distro} bytes")

@@ -20,7 +20,7 @@ import serial
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from daemon_kit import SCENE_HEAD, Daemon, peer_events, unique
+from daemon_kit import SCENE_HEAD, peer_events, unique
 from fuzzkit import examples
 from hilgate.core.packets import packet_class
 from hilgate.core.scheduler import VirtualScheduler
@@ -99,117 +99,97 @@ def read_lines(port: serial.Serial, count: int) -> list[bytes]:
     return lines
 
 
-def test_frames_reach_the_channel_when_their_cr_lf_would_have_crossed_the_line(tmp_path):
+def test_frames_reach_the_channel_when_their_cr_lf_would_have_crossed_the_line(tmp_path, daemon_of):
     ea, eb = unique("sa"), unique("sb")
-    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb, baud=1200), [ea, eb])
-    try:
-        daemon.wait_for("READY=1")
-        a = serial.Serial(str(tmp_path / "a"), 1200, timeout=10)
-        b = serial.Serial(str(tmp_path / "b"), 1200, timeout=10)
-        frames = [simple20(1), simple20(2)]
-        a.write(b"".join(f + b"\r\n" for f in frames))  # 44 bytes at once; a pty takes no time
-        assert read_lines(b, 2) == [f + b"\r\n" for f in frames]
-        a.close(), b.close()
-        daemon.stop()
-        events = daemon.trace_events()
-        enq = [e["t"] for e in events if e.get("link") == ea and e["ev"] == "enq"]
-        # the second frame's CR LF is in 22 bytes (frame + CR LF) of 10 bits at 1200 baud after the first's
-        assert len(enq) == 2 and abs((enq[1] - enq[0]) - 22 * 10 / 1200) <= 2e-9  # the trace rounds to 1 ns
-        assert [e["size"] for e in events if e.get("link") == eb and e["ev"] == "rx"] == [20, 20]
-        assert not [e for e in events if e["ev"] == "drop"]
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene(tmp_path, ea, eb, baud=1200), [ea, eb])
+    a = serial.Serial(str(tmp_path / "a"), 1200, timeout=10)
+    b = serial.Serial(str(tmp_path / "b"), 1200, timeout=10)
+    frames = [simple20(1), simple20(2)]
+    a.write(b"".join(f + b"\r\n" for f in frames))  # 44 bytes at once; a pty takes no time
+    assert read_lines(b, 2) == [f + b"\r\n" for f in frames]
+    a.close(), b.close()
+    daemon.stop()
+    events = daemon.trace_events()
+    enq = [e["t"] for e in events if e.get("link") == ea and e["ev"] == "enq"]
+    # the second frame's CR LF is in 22 bytes (frame + CR LF) of 10 bits at 1200 baud after the first's
+    assert len(enq) == 2 and abs((enq[1] - enq[0]) - 22 * 10 / 1200) <= 2e-9  # the trace rounds to 1 ns
+    assert [e["size"] for e in events if e.get("link") == eb and e["ev"] == "rx"] == [20, 20]
+    assert not [e for e in events if e["ev"] == "drop"]
 
 
-def test_received_frames_reach_the_host_at_the_lines_pace(tmp_path):
+def test_received_frames_reach_the_host_at_the_lines_pace(tmp_path, daemon_of):
     """At 300 baud a 22-byte line takes 0.733 s each way: the far host cannot have the frame before
     in-line + air time + propagation + out-line (a lower bound only: the machine may be slow)."""
     ea, eb = unique("sa"), unique("sb")
-    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb, baud=300, rtscts=True), [ea, eb])
-    try:
-        daemon.wait_for("READY=1")
-        a = serial.Serial(str(tmp_path / "a"), 300, timeout=10)
-        b = serial.Serial(str(tmp_path / "b"), 300, timeout=10)
-        start = time.monotonic()
-        a.write(simple20(7) + b"\r\n")
-        assert read_lines(b, 1) == [simple20(7) + b"\r\n"]
-        seen = time.monotonic() - start
-        model = 22 * 10 / 300 + 20 * 8 / 1000 + 150 / 1500 + 22 * 10 / 300
-        assert seen >= model - 0.002, (seen, model)
-        a.close(), b.close()
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene(tmp_path, ea, eb, baud=300, rtscts=True), [ea, eb])
+    a = serial.Serial(str(tmp_path / "a"), 300, timeout=10)
+    b = serial.Serial(str(tmp_path / "b"), 300, timeout=10)
+    start = time.monotonic()
+    a.write(simple20(7) + b"\r\n")
+    assert read_lines(b, 1) == [simple20(7) + b"\r\n"]
+    seen = time.monotonic() - start
+    model = 22 * 10 / 300 + 20 * 8 / 1000 + 150 / 1500 + 22 * 10 / 300
+    assert seen >= model - 0.002, (seen, model)
+    a.close(), b.close()
 
 
-def test_bytes_that_are_no_frame_pass_through_as_the_real_pipe_would(tmp_path):
+def test_bytes_that_are_no_frame_pass_through_as_the_real_pipe_would(tmp_path, daemon_of):
     ea, eb = unique("sa"), unique("sb")
-    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb, baud=115200), [ea, eb])
-    try:
-        daemon.wait_for("READY=1")
-        a = serial.Serial(str(tmp_path / "a"), 115200, timeout=10)
-        b = serial.Serial(str(tmp_path / "b"), 115200, timeout=10)
-        text = b"$GPGGA,123519,4807.038,N*47"  # no 0x55 ('U') in it: no SimplePacket preamble
-        a.write(text + b"\r\n")
-        assert read_lines(b, 1) == [text + b"\r\n"]
-        bad = bytearray(simple20(3))
-        bad[5] ^= 0xFF  # a frame with a bad CRC is bytes like any other for the modem
-        a.write(bytes(bad) + b"\r\n")
-        assert read_lines(b, 1) == [bytes(bad) + b"\r\n"]
-        a.write(b"hello" + simple20(4) + b"\r\n")  # text without CR LF, then a frame: both, in order
-        assert read_lines(b, 1) == [b"hello" + simple20(4) + b"\r\n"]
-        a.close(), b.close()
-        daemon.stop()
-        events = daemon.trace_events()
-        # on air: the text and the bad frame with their CR LF, as written; "hello"; the good frame (its CR LF
-        # is the S100's packet end, added back by the far modem)
-        assert [e["size"] for e in events if e.get("link") == ea and e["ev"] == "tx"] == [len(text) + 2, 22, 5, 20]
-        # the emulators took everything; the far link's applications get what a bridge on the receiving side
-        # makes of the bytes (issue 24 item 5): the good frame, and every byte of the rest counted and traced
-        # as making no frame, with the hunter's reason (the bad frame's CRC costs its preamble byte, then the
-        # rest has none)
-        drops = [(e["link"], e["cause"], e["size"], e.get("reason")) for e in events if e["ev"] in ("drop", "err")]
-        assert drops == [(eb, "not_a_frame", len(text) + 2, "no preamble"), (eb, "not_a_frame", 1, "crc"),
-                         (eb, "not_a_frame", 21, "no preamble"), (eb, "not_a_frame", 5, "no preamble")]
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene(tmp_path, ea, eb, baud=115200), [ea, eb])
+    a = serial.Serial(str(tmp_path / "a"), 115200, timeout=10)
+    b = serial.Serial(str(tmp_path / "b"), 115200, timeout=10)
+    text = b"$GPGGA,123519,4807.038,N*47"  # no 0x55 ('U') in it: no SimplePacket preamble
+    a.write(text + b"\r\n")
+    assert read_lines(b, 1) == [text + b"\r\n"]
+    bad = bytearray(simple20(3))
+    bad[5] ^= 0xFF  # a frame with a bad CRC is bytes like any other for the modem
+    a.write(bytes(bad) + b"\r\n")
+    assert read_lines(b, 1) == [bytes(bad) + b"\r\n"]
+    a.write(b"hello" + simple20(4) + b"\r\n")  # text without CR LF, then a frame: both, in order
+    assert read_lines(b, 1) == [b"hello" + simple20(4) + b"\r\n"]
+    a.close(), b.close()
+    daemon.stop()
+    events = daemon.trace_events()
+    # on air: the text and the bad frame with their CR LF, as written; "hello"; the good frame (its CR LF
+    # is the S100's packet end, added back by the far modem)
+    assert [e["size"] for e in events if e.get("link") == ea and e["ev"] == "tx"] == [len(text) + 2, 22, 5, 20]
+    # the emulators took everything; the far link's applications get what a bridge on the receiving side
+    # makes of the bytes (issue 24 item 5): the good frame, and every byte of the rest counted and traced
+    # as making no frame, with the hunter's reason (the bad frame's CRC costs its preamble byte, then the
+    # rest has none)
+    drops = [(e["link"], e["cause"], e["size"], e.get("reason")) for e in events if e["ev"] in ("drop", "err")]
+    assert drops == [(eb, "not_a_frame", len(text) + 2, "no preamble"), (eb, "not_a_frame", 1, "crc"),
+                     (eb, "not_a_frame", 21, "no preamble"), (eb, "not_a_frame", 5, "no preamble")]
 
 
-def test_without_flow_control_a_long_write_overflows_and_the_loss_is_traced(tmp_path):
+def test_without_flow_control_a_long_write_overflows_and_the_loss_is_traced(tmp_path, daemon_of):
     ea, eb = unique("sa"), unique("sb")
     burst = b"".join(simple20(i) + b"\r\n" for i in range(5))  # 110 bytes at once, not paced
     kept = expected_kept(len(burst), Fraction(10, 19200), Fraction(1000, 8))
     assert kept == 52
-    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb, baud=19200), [ea, eb])
-    try:
-        daemon.wait_for("READY=1")
-        a = serial.Serial(str(tmp_path / "a"), 19200, timeout=10)
-        a.write(burst)
-        deadline = time.monotonic() + 15
-        while time.monotonic() < deadline and daemon.link_status(ea)["drop_causes"].get("overflow", 0) == 0:
-            time.sleep(0.1)
-        a.close()
-        daemon.stop()
-        drops = [e for e in daemon.trace_events() if e["ev"] == "drop" and e.get("link") == ea]
-        assert [(e["cause"], e["size"]) for e in drops] == [("overflow", len(burst) - kept)]
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene(tmp_path, ea, eb, baud=19200), [ea, eb])
+    a = serial.Serial(str(tmp_path / "a"), 19200, timeout=10)
+    a.write(burst)
+    deadline = time.monotonic() + 15
+    while time.monotonic() < deadline and daemon.link_status(ea)["drop_causes"].get("overflow", 0) == 0:
+        time.sleep(0.1)
+    a.close()
+    daemon.stop()
+    drops = [e for e in daemon.trace_events() if e["ev"] == "drop" and e.get("link") == ea]
+    assert [(e["cause"], e["size"]) for e in drops] == [("overflow", len(burst) - kept)]
 
 
-def test_with_flow_control_the_same_write_is_carried_whole(tmp_path):
+def test_with_flow_control_the_same_write_is_carried_whole(tmp_path, daemon_of):
     ea, eb = unique("sa"), unique("sb")
     frames = [simple20(i) for i in range(5)]
-    daemon = Daemon(tmp_path, scene(tmp_path, ea, eb, baud=19200, rtscts=True), [ea, eb])
-    try:
-        daemon.wait_for("READY=1")
-        a = serial.Serial(str(tmp_path / "a"), 19200, timeout=10)
-        b = serial.Serial(str(tmp_path / "b"), 19200, timeout=10)
-        a.write(b"".join(f + b"\r\n" for f in frames))
-        assert read_lines(b, 5) == [f + b"\r\n" for f in frames]
-        a.close(), b.close()
-        daemon.stop()
-        assert not [e for e in daemon.trace_events() if e["ev"] == "drop"]
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene(tmp_path, ea, eb, baud=19200, rtscts=True), [ea, eb])
+    a = serial.Serial(str(tmp_path / "a"), 19200, timeout=10)
+    b = serial.Serial(str(tmp_path / "b"), 19200, timeout=10)
+    a.write(b"".join(f + b"\r\n" for f in frames))
+    assert read_lines(b, 5) == [f + b"\r\n" for f in frames]
+    a.close(), b.close()
+    daemon.stop()
+    assert not [e for e in daemon.trace_events() if e["ev"] == "drop"]
 
 
 def test_the_line_options_are_checked_with_file_and_line():
@@ -250,7 +230,7 @@ def driver_scene(tmp_path, a, b, ea, eb, rtscts):
 
 
 @pytest.mark.parametrize("rtscts,on_air", [(False, [45, 45, 12]), (True, [100])])
-def test_hilgates_driver_gets_a_long_frame_across_in_45_byte_pieces_without_flow_control(tmp_path, rtscts, on_air):
+def test_hilgates_driver_gets_a_long_frame_across_in_45_byte_pieces_without_flow_control(tmp_path, rtscts, on_air, daemon_of):
     """hilgate's S100 driver writes a 100-byte SimplePacket and its CR LF as 45 + 45 + 12 bytes paced at the air
     bitrate (the CR LF in the last piece, so no pacing sleep can put the modem's timeout between the tail and
     its terminator, as it did on a loaded CI host): the emulated S100 sends each piece as the real one would
@@ -258,21 +238,17 @@ def test_hilgates_driver_gets_a_long_frame_across_in_45_byte_pieces_without_flow
     from hilgate.client import Link
 
     a, b, ea, eb = unique("da"), unique("db"), unique("ea"), unique("eb")
-    daemon = Daemon(tmp_path, driver_scene(tmp_path, a, b, ea, eb, rtscts), [a, b, ea, eb])
-    try:
-        daemon.wait_for("READY=1")
-        daemon.wait_up(a, b)
-        with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
-            payload = bytes(range(60)) + b"\r\n+++" + bytes(range(200, 230))
-            la.send(payload, dst=2)
-            message = lb.recv(timeout=15)
-            assert message is not None and message.data.rstrip(b"\0") == payload
-        daemon.stop()
-        events = daemon.trace_events()
-        assert [e["size"] for e in events if e.get("link") == ea and e["ev"] == "tx"] == on_air
-        assert not [e for e in events if e["ev"] in ("drop", "err") and e.get("link") in (a, b, ea)]
-    finally:
-        daemon.close()
+    daemon = daemon_of(driver_scene(tmp_path, a, b, ea, eb, rtscts), [a, b, ea, eb])
+    daemon.wait_up(a, b)
+    with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
+        payload = bytes(range(60)) + b"\r\n+++" + bytes(range(200, 230))
+        la.send(payload, dst=2)
+        message = lb.recv(timeout=15)
+        assert message is not None and message.data.rstrip(b"\0") == payload
+    daemon.stop()
+    events = daemon.trace_events()
+    assert [e["size"] for e in events if e.get("link") == ea and e["ev"] == "tx"] == on_air
+    assert not [e for e in events if e["ev"] in ("drop", "err") and e.get("link") in (a, b, ea)]
 
 
 # -- the pipe is transparent, for any bytes and any chunking ---------------------------------------------------
@@ -372,7 +348,7 @@ def test_hilgate_emulate_takes_the_line_options_and_the_scene_checks_them(tmp_pa
 
 
 @pytest.mark.parametrize("packet", ["vl2b", "dlf16", "simple:100"])
-def test_a_simulated_links_applications_get_the_frames_an_s100_sent_in_pieces(tmp_path, packet):
+def test_a_simulated_links_applications_get_the_frames_an_s100_sent_in_pieces(tmp_path, packet, daemon_of):
     """Issue 24 item 5: hilgate's S100 driver (as dccomms' bridge) writes 100-byte frames to an emulated S100
     without flow control, which puts each on air as 45 + 45 + 12 bytes; a *simulated* link receives the
     pieces, and its applications (a dccomms one on the queues, a socket one) get whole frames of their packet
@@ -381,7 +357,7 @@ def test_a_simulated_links_applications_get_the_frames_an_s100_sent_in_pieces(tm
     from hilgate.core.packets import packet_class
 
     d, e, s = unique("drv"), unique("emu"), unique("sim")
-    daemon = Daemon(tmp_path, f"""\
+    daemon = daemon_of(f"""\
 channels: {{rf: {{speed_mps: 1500}}}}
 vehicles:
   va: {{pose: {{static: [0, 0, 0]}}}}
@@ -392,28 +368,24 @@ links:
         baud: 19200}}}}
   {s}: {{vehicle: vb, address: 2, bitrate_bps: 1800, packet: {packet}}}
 """, [d, e, s])
-    try:
-        daemon.wait_for("READY=1")
-        daemon.wait_up(d)
-        wire = packet_class(packet)
-        size = max(n for n in range(wire.max_payload + 1) if wire.real_length(n) == 100)  # 100 bytes on air
-        payloads = [(bytes([i]) + b"\r\n+++AT" + bytes(range(40, 40 + size)))[:size] for i in range(3)]
-        dccomms = daemon.peer(s, "--receive", "3", "--timeout", "60") if packet == "vl2b" else None
-        with Link.open(d, runtime_dir=daemon.runtime) as ld, Link.open(s, runtime_dir=daemon.runtime) as ls:
-            if dccomms is not None:
-                daemon.wait_clients(s, 1)  # (the socket client; the dccomms peer says REQ_STATE as it starts)
-            for payload in payloads:
-                ld.send(payload, dst=2)
-            got = [ls.recv(timeout=60) for _ in payloads]
-            assert [m.data for m in got if m is not None] == payloads
-            assert all(m.src == 1 for m in got)
+    daemon.wait_up(d)
+    wire = packet_class(packet)
+    size = max(n for n in range(wire.max_payload + 1) if wire.real_length(n) == 100)  # 100 bytes on air
+    payloads = [(bytes([i]) + b"\r\n+++AT" + bytes(range(40, 40 + size)))[:size] for i in range(3)]
+    dccomms = daemon.peer(s, "--receive", "3", "--timeout", "60") if packet == "vl2b" else None
+    with Link.open(d, runtime_dir=daemon.runtime) as ld, Link.open(s, runtime_dir=daemon.runtime) as ls:
         if dccomms is not None:
-            frames = [ev for ev in peer_events(dccomms) if ev["ev"] == "frame"]
-            assert [ev["payload"].encode("latin-1") for ev in frames] == payloads and all(ev["crc_ok"] for ev in frames)
-        daemon.stop()
-        events = daemon.trace_events()
-        assert [ev["size"] for ev in events if ev.get("link") == e and ev["ev"] == "tx"] == [45, 45, 12] * 3
-        assert [ev["size"] for ev in events if ev.get("link") == s and ev["ev"] == "rx"] == [45, 45, 12] * 3
-        assert not [ev for ev in events if ev["ev"] in ("drop", "err")]
-    finally:
-        daemon.close()
+            daemon.wait_clients(s, 1)  # (the socket client; the dccomms peer says REQ_STATE as it starts)
+        for payload in payloads:
+            ld.send(payload, dst=2)
+        got = [ls.recv(timeout=60) for _ in payloads]
+        assert [m.data for m in got if m is not None] == payloads
+        assert all(m.src == 1 for m in got)
+    if dccomms is not None:
+        frames = [ev for ev in peer_events(dccomms) if ev["ev"] == "frame"]
+        assert [ev["payload"].encode("latin-1") for ev in frames] == payloads and all(ev["crc_ok"] for ev in frames)
+    daemon.stop()
+    events = daemon.trace_events()
+    assert [ev["size"] for ev in events if ev.get("link") == e and ev["ev"] == "tx"] == [45, 45, 12] * 3
+    assert [ev["size"] for ev in events if ev.get("link") == s and ev["ev"] == "rx"] == [45, 45, 12] * 3
+    assert not [ev for ev in events if ev["ev"] in ("drop", "err")]

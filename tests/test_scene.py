@@ -75,20 +75,21 @@ links: {x: {vehicle: a, model: evologics-s2cr-7-17}}
     assert p.bitrate_bps == 1900 and p.tx_delay_s == 0.001
 
 
+ONE = "channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
+"""The first two lines of most scenes below: a link's errors are on line 3 and after."""
+XY = ONE + "links:\n  x: {vehicle: a}\n  y: {vehicle: a}\nflows:\n"
+"""Two links and the start of a flow: a flow's errors are on line 7 and after."""
+
+
 @pytest.mark.parametrize("text,where,key,words", [
-    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
-     "links: {x: {vehicle: a, bitrate_bsp: 10}}\n", 3, "links.x.bitrate_bsp", "did you mean 'bitrate_bps'"),
-    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
-     "links:\n  x:\n    vehicle: a\n    bitrate_bps: fast\n", 6, "links.x.bitrate_bps", "must be a number"),
-    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
-     "links:\n  x:\n    vehicle: b\n", 5, "links.x.vehicle", "no vehicle 'b'"),
-    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
-     "links:\n  x: {vehicle: a, model: s200}\n", 4, "links.x.model", "unknown modem model 's200'"),
-    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
-     "links:\n  x:\n    vehicle: a\n    error: {unit: bit, expr: \"__import__('os')\"}\n",
+    (ONE + "links: {x: {vehicle: a, bitrate_bsp: 10}}\n", 3, "links.x.bitrate_bsp", "did you mean 'bitrate_bps'"),
+    (ONE + "links:\n  x:\n    vehicle: a\n    bitrate_bps: fast\n", 6, "links.x.bitrate_bps", "must be a number"),
+    (ONE + "links:\n  x:\n    vehicle: b\n", 5, "links.x.vehicle", "no vehicle 'b'"),
+    (ONE + "links:\n  x: {vehicle: a, model: s200}\n", 4, "links.x.model", "unknown modem model 's200'"),
+    (ONE + "links:\n  x:\n    vehicle: a\n    error: {unit: bit, expr: \"__import__('os')\"}\n",
      6, "links.x.error.expr", "bad error-rate expression"),
-    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
-     "links:\n  x:\n    vehicle: a\n    error: {unit: bits, expr: \"0\"}\n", 6, "links.x.error.unit", "bit, byte, packet"),
+    (ONE + "links:\n  x:\n    vehicle: a\n    error: {unit: bits, expr: \"0\"}\n",
+     6, "links.x.error.unit", "bit, byte, packet"),
     ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0]}}}\nlinks: {}\n",
      2, "vehicles.a.pose.static", "list of 3 numbers"),
     ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {statik: [0,0,0]}}}\nlinks: {}\n",
@@ -97,34 +98,23 @@ links: {x: {vehicle: a, model: evologics-s2cr-7-17}}
      "links: {}\n", 4, "vehicles.a", "duplicate key (first given on line 3)"),
     ("channels: {ac: {speed_mps: 1500}, rf: {speed_mps: 2e7}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
      "links:\n  x: {vehicle: a}\n", 4, "links.x", "missing 'channel'"),
-    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
-     "links:\n  x: {vehicle: a, channel: rf}\n", 4, "links.x.channel", "no channel 'rf'"),
-    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
-     "links:\n  x: {vehicle: a, address: 1}\n  y: {vehicle: a, address: 1}\n", 5, "links.y.address", "already used"),
-    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
-     "links:\n  x: {vehicle: a, address: 255}\n", 4, "links.x.address", "broadcast address"),
-    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
-     "links:\n  x: {vehicle: a, address: 65535}\n", 4, "links.x.address", "at most 65534"),
-    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
-     "links:\n  x:\n    vehicle: a\n    packet: dlf16\n    address: 300\n", 7, "links.x.address",
+    (ONE + "links:\n  x: {vehicle: a, channel: rf}\n", 4, "links.x.channel", "no channel 'rf'"),
+    (ONE + "links:\n  x: {vehicle: a, address: 1}\n  y: {vehicle: a, address: 1}\n",
+     5, "links.y.address", "already used"),
+    (ONE + "links:\n  x: {vehicle: a, address: 255}\n", 4, "links.x.address", "broadcast address"),
+    (ONE + "links:\n  x: {vehicle: a, address: 65535}\n", 4, "links.x.address", "at most 65534"),
+    (ONE + "links:\n  x:\n    vehicle: a\n    packet: dlf16\n    address: 300\n", 7, "links.x.address",
      "packet class dlf16 carries a one-byte address on air"),
-    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
-     "links:\n  x: {vehicle: a, range_m: [6, 0.5]}\n", 4, "links.x.range_m", "below min"),
-    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
-     "links:\n  x: {vehicle: a, mac: {protocol: tdma}}\n", 4, "links.x.mac.protocol", "unknown MAC protocol"),
-    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
-     "links:\n  x: {vehicle: a, packet: vl3b}\n", 4, "links.x.packet", "simple:N"),
-    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
-     "links:\n  x: {vehicle: a}\n  y: {vehicle: a}\nflows:\n  - {from: x, to: z, size_bytes: 20, interval_s: 1}\n",
+    (ONE + "links:\n  x: {vehicle: a, range_m: [6, 0.5]}\n", 4, "links.x.range_m", "below min"),
+    (ONE + "links:\n  x: {vehicle: a, mac: {protocol: tdma}}\n", 4, "links.x.mac.protocol", "unknown MAC protocol"),
+    (ONE + "links:\n  x: {vehicle: a, packet: vl3b}\n", 4, "links.x.packet", "simple:N"),
+    (XY + "  - {from: x, to: z, size_bytes: 20, interval_s: 1}\n",
      7, "flows[0].to", "no link 'z'"),
-    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
-     "links:\n  x: {vehicle: a}\n  y: {vehicle: a}\nflows:\n  - {from: x, to: y, size_bytes: 20}\n",
+    (XY + "  - {from: x, to: y, size_bytes: 20}\n",
      7, "flows[0]", "exactly one of interval_s or rate_hz"),
-    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
-     "links:\n  x: {vehicle: a}\n  y: {vehicle: a}\nflows:\n  - {from: x, to: y, size_bytes: 0, interval_s: 1}\n",
+    (XY + "  - {from: x, to: y, size_bytes: 0, interval_s: 1}\n",
      7, "flows[0].size_bytes", "at least 1"),
-    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
-     "links:\n  x: {vehicle: a}\n  y: {vehicle: a}\nflows:\n  - {from: x, to: y, size_bytes: 2, interval_s: 1,\n"
+    (XY + "  - {from: x, to: y, size_bytes: 2, interval_s: 1,\n"
      "     start_s: 5, stop_s: 5}\n", 8, "flows[0].stop_s", "after start_s"),
     ("channels: {a: {speed_mps: 1}, b: {speed_mps: 1}}\nvehicles: {v: {pose: {static: [0,0,0]}}}\n"
      "links:\n  x: {vehicle: v, channel: a}\n  y: {vehicle: v, channel: b}\nflows:\n"
@@ -140,13 +130,10 @@ links: {x: {vehicle: a, model: evologics-s2cr-7-17}}
     ("channels: {ac: {speed_mps: 1500}\nvehicles: {}\n", 2, "", "not valid YAML"),
     ("channels: {ac: {speed_mps: -1}}\nvehicles: {}\nlinks: {}\n", 1, "channels.ac.speed_mps", "greater than 0"),
     ("seed: -1\nchannels: {ac: {speed_mps: 1}}\nvehicles: {}\nlinks: {}\n", 1, "seed", "at least 0"),
-    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
-     "links:\n  bad/id: {vehicle: a}\n", 4, "links.bad/id", "POSIX queues"),
-    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
-     "links:\n  x: {vehicle: a, emulate: {protocol: evologics, tcp: 9200},\n"
+    (ONE + "links:\n  bad/id: {vehicle: a}\n", 4, "links.bad/id", "POSIX queues"),
+    (ONE + "links:\n  x: {vehicle: a, emulate: {protocol: evologics, tcp: 9200},\n"
      "      firmware: {version: 1.10}}\n", 5, "links.x.firmware.version", "in quotes"),
-    ("channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0,0,0]}}}\n"
-     "links:\n  x: {vehicle: a, firmware: {phi: \"0.1\"}}\n", 4, "links.x.firmware.phi", "did you mean 'phy'"),
+    (ONE + "links:\n  x: {vehicle: a, firmware: {phi: \"0.1\"}}\n", 4, "links.x.firmware.phi", "did you mean 'phy'"),
 ])
 def test_errors_name_file_line_and_key(text, where, key, words):
     error = error_of(text)

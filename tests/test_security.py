@@ -37,21 +37,17 @@ def failure(daemon: Daemon) -> tuple[int, str]:
     return code, daemon.output()
 
 
-def test_runtime_directory_and_sockets_are_for_the_daemons_user_and_group(tmp_path):
+def test_runtime_directory_and_sockets_are_for_the_daemons_user_and_group(daemon_of):
     a = unique("a")
-    daemon = Daemon(tmp_path, scene(a), [a])
-    try:
-        daemon.wait_for("READY=1")
-        assert stat.S_IMODE(os.stat(daemon.runtime).st_mode) == 0o750
-        assert stat.S_IMODE(os.stat(os.path.join(daemon.runtime, "gli")).st_mode) == 0o750
-        for path in ("control.sock", f"gli/{a}.sock"):
-            assert stat.S_IMODE(os.stat(os.path.join(daemon.runtime, path)).st_mode) == 0o660, path
-        for name in (f"/{a}_tx_dlnk_phy", f"/{a}_rx_dlnk_phy"):
-            queue = posix_ipc.MessageQueue(name)
-            assert stat.S_IMODE(os.fstat(queue.mqd).st_mode) == 0o660, name
-            queue.close()
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene(a), [a])
+    assert stat.S_IMODE(os.stat(daemon.runtime).st_mode) == 0o750
+    assert stat.S_IMODE(os.stat(os.path.join(daemon.runtime, "gli")).st_mode) == 0o750
+    for path in ("control.sock", f"gli/{a}.sock"):
+        assert stat.S_IMODE(os.stat(os.path.join(daemon.runtime, path)).st_mode) == 0o660, path
+    for name in (f"/{a}_tx_dlnk_phy", f"/{a}_rx_dlnk_phy"):
+        queue = posix_ipc.MessageQueue(name)
+        assert stat.S_IMODE(os.fstat(queue.mqd).st_mode) == 0o660, name
+        queue.close()
 
 
 CLIENT = textwrap.dedent("""\

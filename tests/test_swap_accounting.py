@@ -15,7 +15,7 @@ import sys
 import threading
 import time
 
-from daemon_kit import Daemon, unique, wait_until
+from daemon_kit import unique, wait_until
 from hilgate.client import Link
 from hilgate.fitcmd import run_fit
 from hilgate.report.tracedata import load_trace
@@ -107,13 +107,12 @@ def counted(events, link, start, end):
     return tx, rx
 
 
-def test_a_swap_to_an_emulated_modem_and_back_keeps_one_account_per_link(tmp_path):
+def test_a_swap_to_an_emulated_modem_and_back_keeps_one_account_per_link(tmp_path, daemon_of):
     a, b, ea, eb = unique("sa"), unique("sb"), unique("ea"), unique("eb")
     simulated, real = scenes(tmp_path, a, b, ea, eb)
-    daemon = Daemon(tmp_path, simulated, [a, b, ea, eb])
+    daemon = daemon_of(simulated, [a, b, ea, eb])
     traffic = None
     try:
-        daemon.wait_for("READY=1")
         traffic = Traffic(daemon, a, b)
         wait(lambda: traffic.received >= 10, "10 frames through the simulated links", daemon)
         tx_before = daemon.link_status(a)["tx_packets"]
@@ -135,7 +134,6 @@ def test_a_swap_to_an_emulated_modem_and_back_keeps_one_account_per_link(tmp_pat
     finally:
         if traffic is not None:
             traffic.close()
-        daemon.close()
 
     events = daemon.trace_events()
     summary = json.loads(daemon.summary.read_text())
@@ -188,7 +186,7 @@ def test_a_swap_to_an_emulated_modem_and_back_keeps_one_account_per_link(tmp_pat
     assert "timeline.png" in os.listdir(out)
 
 
-def test_a_link_removed_and_added_again_keeps_its_account(tmp_path):
+def test_a_link_removed_and_added_again_keeps_its_account(daemon_of):
     a, b = unique("ra"), unique("rb")
     scene = f"""\
 channels: {{ac: {{speed_mps: 1500}}}}
@@ -197,26 +195,22 @@ links:
   {a}: {{vehicle: va, address: 1, bitrate_bps: 2000, gli: [socket]}}
   {b}: {{vehicle: vb, address: 2, bitrate_bps: 2000, gli: [socket]}}
 """
-    daemon = Daemon(tmp_path, scene, [a, b])
-    try:
-        daemon.wait_for("READY=1")
-        with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
-            la.send(b"one", dst=2)
-            assert lb.recv(timeout=30).data == b"one"
-        daemon.reload(scene.replace(f"  {b}: {{vehicle: vb, address: 2, bitrate_bps: 2000, gli: [socket]}}\n", ""))
-        assert [link["id"] for link in daemon.status()["links"]] == [a]
-        daemon.reload(scene)
-        with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
-            la.send(b"two", dst=2)
-            assert lb.recv(timeout=30).data == b"two"
-        status = {link["id"]: link for link in daemon.status()["links"]}
-        assert status[b]["rx_packets"] == 2 and status[a]["since_s"] == 0.0 < status[b]["since_s"]
-        table = subprocess.run([sys.executable, "-m", "hilgate", "status", "--runtime-dir", daemon.runtime],
-                               capture_output=True, text=True, timeout=60)
-        assert "since s" in table.stdout.splitlines()[1]
-        daemon.stop()
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene, [a, b])
+    with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
+        la.send(b"one", dst=2)
+        assert lb.recv(timeout=30).data == b"one"
+    daemon.reload(scene.replace(f"  {b}: {{vehicle: vb, address: 2, bitrate_bps: 2000, gli: [socket]}}\n", ""))
+    assert [link["id"] for link in daemon.status()["links"]] == [a]
+    daemon.reload(scene)
+    with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
+        la.send(b"two", dst=2)
+        assert lb.recv(timeout=30).data == b"two"
+    status = {link["id"]: link for link in daemon.status()["links"]}
+    assert status[b]["rx_packets"] == 2 and status[a]["since_s"] == 0.0 < status[b]["since_s"]
+    table = subprocess.run([sys.executable, "-m", "hilgate", "status", "--runtime-dir", daemon.runtime],
+                           capture_output=True, text=True, timeout=60)
+    assert "since s" in table.stdout.splitlines()[1]
+    daemon.stop()
     events = daemon.trace_events()
     first, second = (e for e in events if e["ev"] == "reload")
     assert first["changes"] == {b: {"removed": True}} and second["changes"] == {b: {"added": True}}

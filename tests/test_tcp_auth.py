@@ -151,94 +151,86 @@ class Raw:
         return json.loads(body)["error"]
 
 
-def test_only_applications_that_prove_the_token_reach_a_link(tmp_path):
+def test_only_applications_that_prove_the_token_reach_a_link(tmp_path, daemon_of):
     a, b = unique("a"), unique("b")
     port = free_port()
-    daemon = Daemon(tmp_path, scene(a, b), [a, b], "--tcp", str(port))
-    try:
-        daemon.wait_for("READY=1")
-        token_file = os.path.join(daemon.runtime, "tcp.token")
-        assert stat.S_IMODE(os.stat(token_file).st_mode) == 0o640
-        token = read_token(token_file)
-        with Link.open(b, runtime_dir=daemon.runtime) as receiver:
-            attempts = []
-            # 1. no proof at all (the clients of before this issue)
-            peer = Raw(port)
-            peer.nonce()
-            peer.sock.sendall(hello(a) + wire.encode_send(2, b"forged 1"))
-            attempts.append(peer.refused())
-            # 2. a SEND without HELLO
-            peer = Raw(port)
-            peer.nonce()
-            peer.sock.sendall(wire.encode_send(2, b"forged 2"))
-            attempts.append(peer.refused())
-            # 3. a guessed token
-            peer = Raw(port)
-            peer.sock.sendall(hello(a, proof=proof(b"0" * 64, peer.nonce())) + wire.encode_send(2, b"forged 3"))
-            attempts.append(peer.refused())
-            # 4. a replay: an honest connection's nonce and proof, sniffed, on a new connection
-            honest = Raw(port)
-            nonce = honest.nonce()
-            sniffed = hello(a, proof=proof(token, nonce))
-            honest.sock.sendall(sniffed)
-            assert [honest.next()[0] for _ in range(2)] == [wire.STATE, wire.WELCOME]
-            honest.sock.close()
-            peer = Raw(port)
-            peer.nonce()
-            peer.sock.sendall(sniffed + wire.encode_send(2, b"forged 4"))
-            attempts.append(peer.refused())
-            # 5. not JSON in HELLO
-            peer = Raw(port)
-            peer.nonce()
-            peer.sock.sendall(wire.encode(wire.HELLO, b"{not json"))
-            attempts.append(peer.refused())
-            assert "needs proof of the daemon's token" in attempts[0]
-            assert attempts[1] == "say HELLO first"
-            assert attempts[2] == attempts[3] == "authentication failed: the proof does not match this daemon's token"
-            assert attempts[4].startswith("bad JSON")
-            # the honest application, with the token file (its group may read it)
-            with Link.open(a, tcp=("127.0.0.1", port), token_file=token_file) as sender:
-                sender.send(b"honest", dst=2)
-                message = receiver.recv(timeout=60)
-            assert (message.src, message.data) == (1, b"honest")
-            assert receiver.recv(timeout=0.5) is None  # and nothing of the forged frames
-            assert daemon.status()["tcp"] == {"refused": {"auth": 5, "auth_timeout": 0, "auth_pending": 0},
-                                              "waiting": 0}
-        with pytest.raises(GliError, match="authentication failed"):
-            Link.open(a, tcp=("127.0.0.1", port), token="z" * 64)
-        with pytest.raises(GliError, match="there is none at"):  # no token found: said before connecting
-            Link.open(a, tcp=("127.0.0.1", port), runtime_dir=str(tmp_path / "elsewhere"))
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene(a, b), [a, b], "--tcp", str(port))
+    token_file = os.path.join(daemon.runtime, "tcp.token")
+    assert stat.S_IMODE(os.stat(token_file).st_mode) == 0o640
+    token = read_token(token_file)
+    with Link.open(b, runtime_dir=daemon.runtime) as receiver:
+        attempts = []
+        # 1. no proof at all (the clients of before this issue)
+        peer = Raw(port)
+        peer.nonce()
+        peer.sock.sendall(hello(a) + wire.encode_send(2, b"forged 1"))
+        attempts.append(peer.refused())
+        # 2. a SEND without HELLO
+        peer = Raw(port)
+        peer.nonce()
+        peer.sock.sendall(wire.encode_send(2, b"forged 2"))
+        attempts.append(peer.refused())
+        # 3. a guessed token
+        peer = Raw(port)
+        peer.sock.sendall(hello(a, proof=proof(b"0" * 64, peer.nonce())) + wire.encode_send(2, b"forged 3"))
+        attempts.append(peer.refused())
+        # 4. a replay: an honest connection's nonce and proof, sniffed, on a new connection
+        honest = Raw(port)
+        nonce = honest.nonce()
+        sniffed = hello(a, proof=proof(token, nonce))
+        honest.sock.sendall(sniffed)
+        assert [honest.next()[0] for _ in range(2)] == [wire.STATE, wire.WELCOME]
+        honest.sock.close()
+        peer = Raw(port)
+        peer.nonce()
+        peer.sock.sendall(sniffed + wire.encode_send(2, b"forged 4"))
+        attempts.append(peer.refused())
+        # 5. not JSON in HELLO
+        peer = Raw(port)
+        peer.nonce()
+        peer.sock.sendall(wire.encode(wire.HELLO, b"{not json"))
+        attempts.append(peer.refused())
+        assert "needs proof of the daemon's token" in attempts[0]
+        assert attempts[1] == "say HELLO first"
+        assert attempts[2] == attempts[3] == "authentication failed: the proof does not match this daemon's token"
+        assert attempts[4].startswith("bad JSON")
+        # the honest application, with the token file (its group may read it)
+        with Link.open(a, tcp=("127.0.0.1", port), token_file=token_file) as sender:
+            sender.send(b"honest", dst=2)
+            message = receiver.recv(timeout=60)
+        assert (message.src, message.data) == (1, b"honest")
+        assert receiver.recv(timeout=0.5) is None  # and nothing of the forged frames
+        assert daemon.status()["tcp"] == {"refused": {"auth": 5, "auth_timeout": 0, "auth_pending": 0},
+                                          "waiting": 0}
+    with pytest.raises(GliError, match="authentication failed"):
+        Link.open(a, tcp=("127.0.0.1", port), token="z" * 64)
+    with pytest.raises(GliError, match="there is none at"):  # no token found: said before connecting
+        Link.open(a, tcp=("127.0.0.1", port), runtime_dir=str(tmp_path / "elsewhere"))
     events = daemon.trace_events()
     assert [e for e in events if e["ev"] == "enq"] and not any(
         "forged" in json.dumps(e) for e in events)
 
 
-def test_connections_that_do_not_authenticate_are_bounded_and_time_out(tmp_path):
+def test_connections_that_do_not_authenticate_are_bounded_and_time_out(daemon_of):
     a, b = unique("a"), unique("b")
     port = free_port()
-    daemon = Daemon(tmp_path, scene(a, b), [a, b], "--tcp", str(port))
-    try:
-        daemon.wait_for("READY=1")
-        token_file = os.path.join(daemon.runtime, "tcp.token")
-        idle = [Raw(port) for _ in range(8)]
-        for peer in idle:
-            peer.nonce()  # each was accepted (and counted) before the next connects
-        ninth = Raw(port)
-        assert ninth.refused() == "too many connections waiting to authenticate"
-        with pytest.raises(GliError, match="waiting to authenticate"):  # from this address, for now
-            Link.open(a, tcp=("127.0.0.1", port), token_file=token_file)
-        with Link.open(a, runtime_dir=daemon.runtime) as local:  # the Unix socket is not affected
-            assert local.address == 1
-        for peer in idle:  # after 10 s without HELLO each is told so and closed
-            assert peer.refused() == "no HELLO within 10 s"
-        with Link.open(a, tcp=("127.0.0.1", port), token_file=token_file) as link:
-            assert link.address == 1
-        refused = daemon.status()["tcp"]["refused"]
-        assert refused["auth_timeout"] == 8 and refused["auth_pending"] == 2
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene(a, b), [a, b], "--tcp", str(port))
+    token_file = os.path.join(daemon.runtime, "tcp.token")
+    idle = [Raw(port) for _ in range(8)]
+    for peer in idle:
+        peer.nonce()  # each was accepted (and counted) before the next connects
+    ninth = Raw(port)
+    assert ninth.refused() == "too many connections waiting to authenticate"
+    with pytest.raises(GliError, match="waiting to authenticate"):  # from this address, for now
+        Link.open(a, tcp=("127.0.0.1", port), token_file=token_file)
+    with Link.open(a, runtime_dir=daemon.runtime) as local:  # the Unix socket is not affected
+        assert local.address == 1
+    for peer in idle:  # after 10 s without HELLO each is told so and closed
+        assert peer.refused() == "no HELLO within 10 s"
+    with Link.open(a, tcp=("127.0.0.1", port), token_file=token_file) as link:
+        assert link.address == 1
+    refused = daemon.status()["tcp"]["refused"]
+    assert refused["auth_timeout"] == 8 and refused["auth_pending"] == 2
 
 
 CLIENT = textwrap.dedent("""\
@@ -289,15 +281,14 @@ CLIENT = textwrap.dedent("""\
 
 
 @pytest.mark.skipif(os.geteuid() != 0, reason="needs root to run clients as other users")
-def test_another_user_without_the_token_cannot_send_through_tcp_but_a_member_of_the_group_can(tmp_path):
+def test_another_user_without_the_token_cannot_send_through_tcp_but_a_member_of_the_group_can(daemon_of):
     base = tempfile.mkdtemp(prefix="hilgate-tcp-", dir="/tmp")
     os.chmod(base, 0o711)
     a, b = unique("a"), unique("b")
     port = free_port()
-    daemon = Daemon(tmp_path, scene(a, b), [a, b], "--group", str(GROUP), "--tcp", str(port),
+    daemon = daemon_of(scene(a, b), [a, b], "--group", str(GROUP), "--tcp", str(port),
                     runtime=os.path.join(base, "rt"))
     try:
-        daemon.wait_for("READY=1")
         python = python_for(*OUTSIDER)
         if python is None:
             pytest.skip("no Python interpreter that another user may run")
@@ -322,5 +313,4 @@ def test_another_user_without_the_token_cannot_send_through_tcp_but_a_member_of_
             assert receiver.recv(timeout=0.5) is None  # nothing from the outsider
         assert daemon.status()["tcp"]["refused"]["auth"] == 1
     finally:
-        daemon.close()
         shutil.rmtree(base, ignore_errors=True)

@@ -81,64 +81,60 @@ links:
     return simulated, real
 
 
-def test_the_live_view_draws_the_scene_a_frame_in_flight_and_its_fate_and_a_swapped_badge(tmp_path, browser):  # noqa: F811
+def test_the_live_view_draws_the_scene_a_frame_in_flight_and_its_fate_and_a_swapped_badge(tmp_path, browser, daemon_of):  # noqa: F811
     a, b, c, ea, eb = (unique(p) for p in ("wa", "wb", "wc", "we", "wf"))
     simulated, real = live_scenes(tmp_path, a, b, c, ea, eb)
-    daemon = Daemon(tmp_path, simulated, [a, b, c, ea, eb], "--web", "0")
+    daemon = daemon_of(simulated, [a, b, c, ea, eb], "--web", "0")
     alive = lambda: daemon.process.poll() is None or pytest.fail(daemon.output())  # noqa: E731
-    try:
-        daemon.wait_for("READY=1")
-        url = page_address(daemon)
-        assert "web view on http://127.0.0.1:" in daemon.output() and "#token=" not in daemon.output()
-        browser.open(url)
-        browser.wait("v.authed && v.scene && v.state", "the daemon's scene", alive=alive)
-        assert browser.js("return location.hash") == ""  # the token left the address bar
-        assert sorted(browser.view("v.state.vehicles.map(x => x.name)")) == ["auv", "glider", "topside"]
-        browser.wait("document.querySelectorAll('#top [data-vehicle]').length == 3", "the vehicles drawn")
-        assert browser.view("v.scene.mode") == "live"
-        for link in (a, b, c):
-            assert badge(browser, link) == "sim"
-        assert browser.view(f"Object.keys(v.scene.links).sort()") == sorted([a, b, c])
-        # the range ring of the glider's modem (5 km) is drawn, the unbounded ones are not
-        browser.wait(f"document.querySelectorAll('#top [data-ring]').length == 1", "the glider's range ring")
+    url = page_address(daemon)
+    assert "web view on http://127.0.0.1:" in daemon.output() and "#token=" not in daemon.output()
+    browser.open(url)
+    browser.wait("v.authed && v.scene && v.state", "the daemon's scene", alive=alive)
+    assert browser.js("return location.hash") == ""  # the token left the address bar
+    assert sorted(browser.view("v.state.vehicles.map(x => x.name)")) == ["auv", "glider", "topside"]
+    browser.wait("document.querySelectorAll('#top [data-vehicle]').length == 3", "the vehicles drawn")
+    assert browser.view("v.scene.mode") == "live"
+    for link in (a, b, c):
+        assert badge(browser, link) == "sim"
+    assert browser.view(f"Object.keys(v.scene.links).sort()") == sorted([a, b, c])
+    # the range ring of the glider's modem (5 km) is drawn, the unbounded ones are not
+    browser.wait(f"document.querySelectorAll('#top [data-ring]').length == 1", "the glider's range ring")
 
-        with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
-            la.send(b"hello from the topside", dst=2)
-            states = browser.wait(f"[...v.seen.values()].filter(e => e.src == '{a}').map(e => e.states)"
-                                  f".find(s => s.includes('rx'))", "the frame's fate", alive=alive)
-            # drawn on its way (4.2 s of water to b), then delivered there (vl2b has no address on air: the
-            # glider hears it too, and may lose it to errors)
-            assert states[0] == "flight" and "rx" in states
-            assert lb.recv(timeout=HANG_GUARD_S).data == b"hello from the topside"
-            tx = browser.view(f"v.state.links.find(l => l.id == '{a}').tx")
-            assert tx >= 1
-            # the glider's broadcasts: the topside's modem loses some to errors (its error model: d / 8000)
-            browser.wait("[...v.seen.values()].some(e => e.states.includes('prop'))", "a frame lost to errors",
-                         alive=alive)
+    with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
+        la.send(b"hello from the topside", dst=2)
+        states = browser.wait(f"[...v.seen.values()].filter(e => e.src == '{a}').map(e => e.states)"
+                              f".find(s => s.includes('rx'))", "the frame's fate", alive=alive)
+        # drawn on its way (4.2 s of water to b), then delivered there (vl2b has no address on air: the
+        # glider hears it too, and may lose it to errors)
+        assert states[0] == "flight" and "rx" in states
+        assert lb.recv(timeout=HANG_GUARD_S).data == b"hello from the topside"
+        tx = browser.view(f"v.state.links.find(l => l.id == '{a}').tx")
+        assert tx >= 1
+        # the glider's broadcasts: the topside's modem loses some to errors (its error model: d / 8000)
+        browser.wait("[...v.seen.values()].some(e => e.states.includes('prop'))", "a frame lost to errors",
+                     alive=alive)
 
-        daemon.reload(real)
-        browser.wait(f"(() => {{ const b = document.querySelector('tr[data-link=\"{a}\"] .badge');"
-                     f" return b && b.dataset.kind == 'real'; }})()", "link a's badge after the swap", alive=alive)
-        assert badge(browser, b) == "real" and badge(browser, ea) == "emulated" and badge(browser, c) == "sim"
-        assert "evologics" in browser.js(f"return document.querySelector('tr[data-link=\"{a}\"] .badge').textContent")
-        with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
-            la.send(b"over the real modems", dst=2)
-            assert lb.recv(timeout=HANG_GUARD_S).data == b"over the real modems"
-            browser.wait(f"[...v.seen.values()].some(e => e.src == '{ea}' && e.states.includes('rx'))",
-                         "the emulated modem's frame delivered", alive=alive)
-            la.send(b"one more, for the picture", dst=2)
-            browser.wait(f"[...document.querySelectorAll('#top .wave')].length >= 2 &&"
-                         f" document.querySelectorAll('#top .flight').length >= 1", "frames in flight", alive=alive)
-            shot = tmp_path / "web-live.png"
-            browser.screenshot(str(shot))
-            assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-            if os.environ.get("HILGATE_WRITE_FIGURES"):  # the README's screenshot (docs/live-view.md says how)
-                shutil.copyfile(shot, FIGURE)
-            lb.recv(timeout=HANG_GUARD_S)
-        status = daemon.status()
-        assert status["web"]["pages"] == 1 and status["web"]["url"] in url
-    finally:
-        daemon.close()
+    daemon.reload(real)
+    browser.wait(f"(() => {{ const b = document.querySelector('tr[data-link=\"{a}\"] .badge');"
+                 f" return b && b.dataset.kind == 'real'; }})()", "link a's badge after the swap", alive=alive)
+    assert badge(browser, b) == "real" and badge(browser, ea) == "emulated" and badge(browser, c) == "sim"
+    assert "evologics" in browser.js(f"return document.querySelector('tr[data-link=\"{a}\"] .badge').textContent")
+    with Link.open(a, runtime_dir=daemon.runtime) as la, Link.open(b, runtime_dir=daemon.runtime) as lb:
+        la.send(b"over the real modems", dst=2)
+        assert lb.recv(timeout=HANG_GUARD_S).data == b"over the real modems"
+        browser.wait(f"[...v.seen.values()].some(e => e.src == '{ea}' && e.states.includes('rx'))",
+                     "the emulated modem's frame delivered", alive=alive)
+        la.send(b"one more, for the picture", dst=2)
+        browser.wait(f"[...document.querySelectorAll('#top .wave')].length >= 2 &&"
+                     f" document.querySelectorAll('#top .flight').length >= 1", "frames in flight", alive=alive)
+        shot = tmp_path / "web-live.png"
+        browser.screenshot(str(shot))
+        assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        if os.environ.get("HILGATE_WRITE_FIGURES"):  # the README's screenshot (docs/live-view.md says how)
+            shutil.copyfile(shot, FIGURE)
+        lb.recv(timeout=HANG_GUARD_S)
+    status = daemon.status()
+    assert status["web"]["pages"] == 1 and status["web"]["url"] in url
     # the same run, played from its trace: the link was simulated at first and real at the end
     trace = load_trace(str(daemon.trace))
     replay = Replay(trace, trace.scenes)
@@ -367,7 +363,7 @@ def test_the_page_is_served_with_its_own_scripts_only(player):
     assert "http" not in page.replace("http-equiv", "") or "://" not in page  # nothing from elsewhere
 
 
-def test_the_web_door_refuses_a_port_in_use_and_a_daemon_without_it_says_so(tmp_path):
+def test_the_web_door_refuses_a_port_in_use_and_a_daemon_without_it_says_so(tmp_path, daemon_of):
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
         taken.listen()
@@ -381,13 +377,9 @@ def test_the_web_door_refuses_a_port_in_use_and_a_daemon_without_it_says_so(tmp_
         assert "Traceback" not in result.stderr and len(result.stderr.strip().splitlines()) == 1
     bad = hilgate("run", str(scene), "--web", "70000")
     assert bad.returncode == 2 and "'70000' is not [ADDR:]PORT" in bad.stderr
-    daemon = Daemon(tmp_path, scene.read_text(), [a])
-    try:
-        daemon.wait_for("READY=1")
-        answer = hilgate("view", "--runtime-dir", daemon.runtime)
-        assert answer.returncode == 1 and "serves no web view: start it with --web" in answer.stderr
-    finally:
-        daemon.close()
+    daemon = daemon_of(scene.read_text(), [a])
+    answer = hilgate("view", "--runtime-dir", daemon.runtime)
+    assert answer.returncode == 1 and "serves no web view: start it with --web" in answer.stderr
 
 
 # -- the picture, without a browser -----------------------------------------------------------------

@@ -14,7 +14,7 @@ from collections import defaultdict
 from dataclasses import dataclass, field
 from typing import Any
 
-from .tracefile import MAX_LINE_BYTES, TraceError, count, describe, number, position, printable, read_lines, text
+from .tracefile import TraceError, count, describe, number, position, printable, read_lines, text
 
 __all__ = ["ReportError", "Packet", "Trace", "Run", "trace_runs", "pick_run", "load_trace", "load_summary",
            "MAX_SUMMARY_BYTES"]
@@ -79,45 +79,33 @@ def trace_runs(path: str) -> list[Run]:
     """The runs in a trace file (the daemon appends one per start).  A trace without any header
     (``hilgate sim``, or an older daemon) is one run.  Only lines that may be ``run`` lines are parsed
     here; what is wrong elsewhere is found when the chosen run is read."""
-    from .tracefile import _parse, _Refused
+    from .tracefile import _parse, _Refused, raw_lines
 
     runs: list[Run] = []
-    try:
-        handle = open(path, "rb")
-    except OSError as exc:
-        raise ReportError(f"cannot read trace {path}: {exc.strerror}") from None
     number_ = 0
     before = False  # lines before the first header: a trace that logrotate cut in the middle of a run
-    with handle:
-        while True:
-            try:
-                raw = handle.readline(MAX_LINE_BYTES + 1)
-            except OSError as exc:
-                raise ReportError(f"cannot read trace {path}: {exc.strerror}") from None
-            if not raw:
-                break
-            number_ += 1
-            if b'"ev": "run"' not in raw:
-                before = before or (not runs and bool(raw.strip()))
-                continue
-            try:
-                event = _parse(raw)
-            except _Refused as exc:
-                if raw.endswith(b"\n") or handle.peek(1):  # (not the last line, cut short by a SIGKILL)
-                    raise ReportError(f"{path}:{number_}: {exc}") from None
-                before = before or not runs
-                continue
-            if not isinstance(event, dict) or event.get("ev") != "run":
-                before = before or not runs
-                continue
-            if not runs and before:
-                runs.append(Run(1, "(before the first run line)", "?", "?", 1, number_ - 1))
-            if runs:
-                runs[-1].last_line = number_ - 1
-            scene_path = event.get("path")
-            runs.append(Run(len(runs) + 1, _label(event.get("run")), _label(event.get("start")),
-                            _label(event.get("scene")), number_, path=scene_path if isinstance(scene_path, str) else "",
-                            has_view="scene_view" in event))
+    for number_, raw, cut in raw_lines(path, ReportError):
+        if b'"ev": "run"' not in raw:
+            before = before or (not runs and bool(raw.strip()))
+            continue
+        try:
+            event = _parse(raw)
+        except _Refused as exc:
+            if not cut:  # (the last line, cut short by a SIGKILL, is no run line)
+                raise ReportError(f"{path}:{number_}: {exc}") from None
+            before = before or not runs
+            continue
+        if not isinstance(event, dict) or event.get("ev") != "run":
+            before = before or not runs
+            continue
+        if not runs and before:
+            runs.append(Run(1, "(before the first run line)", "?", "?", 1, number_ - 1))
+        if runs:
+            runs[-1].last_line = number_ - 1
+        scene_path = event.get("path")
+        runs.append(Run(len(runs) + 1, _label(event.get("run")), _label(event.get("start")),
+                        _label(event.get("scene")), number_, path=scene_path if isinstance(scene_path, str) else "",
+                        has_view="scene_view" in event))
     if not runs:
         return [Run(1, "", "", "", 1, number_)]
     runs[-1].last_line = number_

@@ -67,40 +67,47 @@ def describe(value: Any) -> str:
     return text_ if len(text_) <= 40 else text_[:37] + "..."
 
 
-def read_lines(path: str, first: int = 1, last: int | None = None) -> Iterator[tuple[int, dict]]:
-    """(line number, event) of every line from ``first`` to ``last`` (1-based, inclusive)."""
+def raw_lines(path: str, error: type[TraceError] = TraceError) -> Iterator[tuple[int, bytes, bool]]:
+    """(line number, bytes, cut) of every line of a trace file, read at most ``MAX_LINE_BYTES`` + 1 bytes at
+    a time (so a longer line comes without its newline); ``cut`` is true for a last line without its
+    newline (a write a SIGKILL cut short).  A file that cannot be opened or read raises ``error``."""
     try:
         handle = open(path, "rb")
     except OSError as exc:
-        raise TraceError(f"cannot read trace {path}: {exc.strerror}") from None
+        raise error(f"cannot read trace {path}: {exc.strerror}") from None
     with handle:
         number = 0
         while True:
             try:
                 raw = handle.readline(MAX_LINE_BYTES + 1)
             except OSError as exc:
-                raise TraceError(f"cannot read trace {path}: {exc.strerror}") from None
+                raise error(f"cannot read trace {path}: {exc.strerror}") from None
             if not raw:
                 return
             number += 1
-            finished = raw.endswith(b"\n")
-            if not finished and len(raw) > MAX_LINE_BYTES:
-                raise TraceError(f"{path}:{number}: longer than {MAX_LINE_BYTES} bytes (not a trace line)")
-            if number < first:
-                continue
-            if last is not None and number > last:
-                return
-            if not raw.strip():
-                continue
-            try:
-                event = _parse(raw)
-            except _Refused as exc:
-                if not finished and not handle.peek(1):
-                    return  # the last line, cut short by a SIGKILL
-                raise TraceError(f"{path}:{number}: {exc}") from None
-            if not isinstance(event, dict):
-                raise TraceError(f"{path}:{number}: not a JSON object but {describe(event)}")
-            yield number, event
+            yield number, raw, not raw.endswith(b"\n") and not handle.peek(1)
+
+
+def read_lines(path: str, first: int = 1, last: int | None = None) -> Iterator[tuple[int, dict]]:
+    """(line number, event) of every line from ``first`` to ``last`` (1-based, inclusive)."""
+    for number, raw, cut in raw_lines(path):
+        if not raw.endswith(b"\n") and len(raw) > MAX_LINE_BYTES:
+            raise TraceError(f"{path}:{number}: longer than {MAX_LINE_BYTES} bytes (not a trace line)")
+        if number < first:
+            continue
+        if last is not None and number > last:
+            return
+        if not raw.strip():
+            continue
+        try:
+            event = _parse(raw)
+        except _Refused as exc:
+            if cut:
+                return  # the last line, cut short by a SIGKILL
+            raise TraceError(f"{path}:{number}: {exc}") from None
+        if not isinstance(event, dict):
+            raise TraceError(f"{path}:{number}: not a JSON object but {describe(event)}")
+        yield number, event
 
 
 def _parse(raw: bytes) -> Any:

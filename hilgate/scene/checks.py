@@ -10,6 +10,7 @@ from __future__ import annotations
 import difflib
 import math
 import os
+import re
 from typing import Any, Callable, Iterable, Sequence
 
 from ..core.outputs import output_problem, pty_link_problem
@@ -170,6 +171,28 @@ def items(node: Node, path: str) -> list[Node]:
     if not node.is_list:
         raise node.error(path, f"must be a list, not {describe(node)}")
     return node.value
+
+
+def matching(pattern: re.Pattern[str], should_be: str) -> Checker:
+    """A text that ``pattern`` matches whole; anything else is refused as not what it ``should_be``
+    (``"a host name is letters, digits…"``), the error saying what was given instead."""
+    def check(node: Node, path: str) -> str:
+        value = text(node, path)
+        if not pattern.fullmatch(value):
+            raise node.error(path, f"{should_be}, not {describe(node)}")
+        return value
+
+    return check
+
+
+def one_or_more(check: Checker) -> Checker:
+    """One value or a list of them (``connect: tcp/a:7447`` or ``connect: [tcp/a:7447, tcp/b:7447]``), each
+    taken by ``check`` at its own path: a tuple."""
+    def values(node: Node, path: str) -> tuple:
+        nodes = [node] if isinstance(node.value, str) else items(node, path)
+        return tuple(check(item, path if item is node else join_path(path, i)) for i, item in enumerate(nodes))
+
+    return values
 
 
 def mapping(node: Node, path: str) -> dict[str, Node]:

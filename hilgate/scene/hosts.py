@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from ..core.names import zenoh_prefix_problem
-from .checks import Fields, boolean, describe, items, number, path_value, text
+from .checks import Fields, boolean, matching, number, one_or_more, path_value, text
 from .yaml_nodes import Node
 
 __all__ = ["ZenohSpec", "HOST_NAME", "host_name", "zenoh_spec", "resolve_hosts"]
@@ -49,22 +49,8 @@ class ZenohSpec:
     insecure: bool = False  # no credentials, asked for in so many words: plain TCP, anyone may say anything
 
 
-def host_name(node: Node, path: str) -> str:
-    value = text(node, path)
-    if not HOST_NAME.fullmatch(value):
-        raise node.error(path, f"a host name is letters, digits, '_', '.' or '-' (at most 64), not {describe(node)}")
-    return value
-
-
-def _endpoints(node: Node, path: str) -> tuple[str, ...]:
-    values = [node] if isinstance(node.value, str) else items(node, path)
-    result = []
-    for i, item in enumerate(values):
-        value = text(item, path if item is node else f"{path}[{i}]")
-        if not ENDPOINT.fullmatch(value):
-            raise item.error(path, f"{value!r} is not a Zenoh endpoint like tcp/192.168.1.10:7447")
-        result.append(value)
-    return tuple(result)
+host_name = matching(HOST_NAME, "a host name is letters, digits, '_', '.' or '-' (at most 64)")
+_endpoints = one_or_more(matching(ENDPOINT, "a Zenoh endpoint is like tcp/192.168.1.10:7447"))
 
 
 def _prefix(node: Node, path: str) -> str:

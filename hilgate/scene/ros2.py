@@ -19,7 +19,7 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
-from .checks import Fields, choice, describe, integer, items, number, text, vector
+from .checks import Fields, choice, describe, integer, matching, number, one_or_more, text, vector
 from .yaml_nodes import Node
 
 __all__ = ["Ros2Spec", "PublishSpec", "ros2_spec", "ros2_pose", "require_extra", "ros_token", "POSE_TYPES",
@@ -89,23 +89,8 @@ def _topic_name(node: Node, path: str) -> str:
     return value if value.startswith("/") else "/" + value
 
 
-def _frame_id(node: Node, path: str) -> str:
-    value = text(node, path)
-    if not _FRAME_ID.fullmatch(value):
-        raise node.error(path, f"a frame id is letters, digits, '_', '/', '.' or '-', not {describe(node)}")
-    return value
-
-
-def _interfaces(node: Node, path: str) -> tuple[str, ...]:
-    values = [node] if isinstance(node.value, str) else items(node, path)
-    result = []
-    for i, item in enumerate(values):
-        where = path if item is node else f"{path}[{i}]"
-        value = text(item, where)
-        if not _INTERFACE.fullmatch(value):
-            raise item.error(where, f"an interface is a name (eth0) or an address (192.168.2.1), not {describe(item)}")
-        result.append(value)
-    return tuple(result)
+_frame_id = matching(_FRAME_ID, "a frame id is letters, digits, '_', '/', '.' or '-'")
+_interfaces = one_or_more(matching(_INTERFACE, "an interface is a name (eth0) or an address (192.168.2.1)"))
 
 
 def _publish_item(node: Node, path: str) -> PublishSpec:
