@@ -22,7 +22,7 @@ placement, at p50 and at p99, in µs: min/median/max over the repeats.  The thro
 (and say so): they measure how much the daemon carries wherever the kernel puts it.  Every queue handle is
 closed (a daemon's queues count against the per-user budget until the last handle goes).
 
-    python benchmarks/gli_roundtrip.py [--round-trips 3000] [--frames 20000] [--repeats 3] [--placement same|across|both]
+    python benchmarks/gli_roundtrip.py [--round-trips 3000] [--frames 20000 (0: no throughput)] [--repeats 3] [--placement same|across|both]
 """
 
 from __future__ import annotations
@@ -315,6 +315,8 @@ def main() -> None:
               f"{spread([1e6 * h[0] for h in hils])}; added by hilgate p50 {spread(added50)}, p99 {spread(added99)}",
               flush=True)
     print("(target: <= 40 µs added at p50, pinned)")
+    if args.frames <= 0:
+        return  # (--frames 0: the round trips alone)
     print("throughput: unpinned (the kernel places the sender, the daemon and the counter)")
     for offered in (5000, 10000, 20000, None):
         rate, lost, drops = throughput(args.frames, args.size, offered)

@@ -26,7 +26,7 @@ min/median/max over the repeats.  The bare ping-pong is the peer baseline
 of its own so that two runs on one machine do not meet, and its ping in a process of its own so that it
 can be pinned.  3 and 4 are not pinned (they say so) and run with TLS.
 
-    python benchmarks/multihost.py [--round-trips 2000] [--frames 20000] [--repeats 3] [--placement same|across|both]
+    python benchmarks/multihost.py [--round-trips 2000] [--frames 20000 (0: the round trips alone)] [--repeats 3] [--placement same|across|both]
 """
 
 from __future__ import annotations
@@ -342,6 +342,8 @@ def main() -> None:
             f"{SIDES[side]} {spread([1e6 * v for v in got[side]], 0)} µs" for side in sides)
             + f"; ratio TLS/bare {spread(tls)}, insecure/bare {spread(plain)}; TLS costs {spread(cost, 0)} µs", flush=True)
     print("(target: <= 3 x bare Zenoh at p50, with TLS)")
+    if args.frames <= 0:
+        return  # (--frames 0: the round trips alone)
     print("delivery on the wall clock and throughput: unpinned (the kernel places the daemons and applications); "
           "both with TLS", flush=True)
     errors = sorted(on_time(args.on_time))

@@ -98,6 +98,7 @@ class SimModem:
         self.phy_busy = False
         self.closed = False
         self.mac: Mac | None = None
+        self.direct = False  # the MAC is NoMac itself: its steps done here (set_mac)
         self.radio = Radio(self, medium, clock, rng)
         self.acks = Acknowledger(self)
         self.radio.pose = pose
@@ -125,6 +126,11 @@ class SimModem:
         self.mac = mac
         mac.attach(self)
         self.radio.judges_all = self.promiscuous or mac.hears_all
+        # ``mac: none`` exactly (not a subclass, which may change what it does): the modem does the MAC's
+        # three steps itself (the head of the FIFO on air when the PHY is free, after a frame is queued
+        # and after a transmission; a good frame for it delivered), in the same order, so the trace is
+        # the same, without the five calls per frame into a MAC that adds nothing.
+        self.direct = type(mac) is NoMac
 
     # What the radio holds, read through the modem (MACs, the trace, the emulators).
 
@@ -185,7 +191,12 @@ class SimModem:
         if self.queued_bytes > self.stats.fifo_peak_bytes:
             self.stats.fifo_peak_bytes = self.queued_bytes
         self.observer.enq(t, self, frame)
-        self.mac.on_enqueue()
+        if not self.direct:
+            self.mac.on_enqueue()
+        elif not self.phy_busy:  # (NoMac's on_enqueue: the head of the FIFO on air)
+            head = self.fifo.popleft()
+            self.queued_bytes -= head.size
+            self.transmit(head)
         return True
 
     # -- what a MAC may use (MacHost) -----------------------------------------------------------
@@ -273,7 +284,7 @@ class SimModem:
     @property
     def idle(self) -> bool:
         """Nothing to send: FIFO empty, PHY free, and the MAC holds no frame (e.g. awaiting its ACK)."""
-        return not self.phy_busy and not self.fifo and not self.mac.holding and not self.acks.busy
+        return not self.phy_busy and not self.fifo and not self.mac.holding and not self.acks.waiting  # (acks.busy, written out)
 
     def check_idle(self) -> None:
         """Tell the GLI (READY) if the modem just became idle; MACs call it when they let go of a frame."""
@@ -336,7 +347,10 @@ class SimModem:
         owed = self.acks.next_owed() if self.acks.owed else None
         if owed is not None and not self.closed:
             self.transmit_now(owed)  # an ACK that came due while the PHY was busy goes first
-        self.mac.on_tx_done(frame)
+        if not self.direct:
+            self.mac.on_tx_done(frame)
+        elif not self.phy_busy and self.fifo:  # (NoMac's on_tx_done: the next frame on air)
+            self.transmit(self.fifo_pop())
         self.check_idle()
 
     # -- from the radio (RadioHost) -------------------------------------------------------------
@@ -360,7 +374,13 @@ class SimModem:
         if cause is None and frame.ack is not None and frame.dst_addr == address and frame.kind == DATA:
             if self.acks.heard_data(frame) and frame.app_frame is None:
                 return  # a flow's duplicate: traced, not delivered (an application's is, as on a real modem)
-        if addressed or self.mac.hears_all:
+        if self.direct:
+            if cause is None and addressed:  # (NoMac's on_frame; deliver's rx delay only if it has one)
+                if self.rx_delay or self.rx_jitter:
+                    self.deliver(frame)
+                else:
+                    self._deliver_now(frame)
+        elif addressed or self.mac.hears_all:
             self.mac.on_frame(frame, cause, addressed)
 
     def arrival_started(self, frame: "Frame", start: float, end: float) -> None:

@@ -2,6 +2,7 @@
 other threads and signals.  Nothing here asserts speed; order and model times are exact."""
 
 import os
+import select
 import signal
 import socket
 import threading
@@ -118,3 +119,53 @@ def test_systemd_unit_has_what_operations_need():
         assert option in lines
     env = open(os.path.join(os.path.dirname(__file__), "..", "systemd", "hilgate.env")).read()
     assert "HILGATE_SCENE=" in env and "HILGATE_ARGS=" in env
+
+
+def test_a_long_wait_is_one_epoll_wait_that_returns_what_is_ready_and_never_waits_past_its_deadline():
+    from hilgate.core.ioloop import EPOLL_WAIT_MIN_S, IoLoop
+
+    loop = IoLoop()
+    left, right = socket.socketpair()
+    loop.add_reader(left.fileno(), lambda: None)
+    right.send(b"x")
+    for timeout in (0.0005, EPOLL_WAIT_MIN_S, 0.0029, 0.5):  # short (select, then a look) and long (epoll_wait)
+        assert loop.wait(timeout) == [(left.fileno(), select.EPOLLIN)]
+    left.recv(1)
+    assert loop.wait(0.0005) == []
+    # how long a wait may sleep: whole milliseconds from EPOLL_WAIT_MIN_S on (never more than asked)
+    assert loop.waits_until(0.0005) == 0.0005
+    assert loop.waits_until(0.0029) == 0.002 and loop.waits_until(0.5) == 0.5 and loop.waits_until(0.0125) == 0.012
+    loop.close()
+    left.close()
+    right.close()
+
+
+def test_calls_posted_from_threads_all_run_in_order_however_the_wake_ups_fall():
+    """Only the post that finds the queue empty writes a wake-up: none may be lost while the loop sleeps
+    in a long wait (no timer before the end), empties the queue, or is woken by an earlier one."""
+    clock = RealtimeScheduler()
+    got: list[tuple[int, int]] = []
+    count = 2000
+
+    finished = []
+    lock = threading.Lock()
+
+    def poster(name: int) -> None:
+        for i in range(count):
+            clock.post(got.append, (name, i))
+            if i % 97 == 0:
+                threading.Event().wait(0.003)  # now and then the loop goes back to sleep (no timer is set)
+        with lock:
+            finished.append(name)
+            if len(finished) == 2:
+                clock.post(clock.stop)  # after every call of both: the loop stops once it has run them
+
+    threads = [threading.Thread(target=poster, args=(name,)) for name in (1, 2)]
+    clock.at(0.0, lambda: [thread.start() for thread in threads])
+    clock.run(until=90.0)  # (a hang guard: stopped as soon as every call ran)
+    for thread in threads:
+        thread.join()
+    assert len(got) == 2 * count
+    for name in (1, 2):
+        assert [i for n, i in got if n == name] == list(range(count))
+    clock.close()

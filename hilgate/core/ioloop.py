@@ -11,6 +11,12 @@ import signal
 from collections import deque
 from typing import Any, Callable
 
+WAKE_READ = 4096
+"""Bytes of wake-ups read from the pipe at once."""
+EPOLL_WAIT_MIN_S = 0.002
+"""From this wait on (seconds), the loop sleeps in one ``epoll_wait`` of whole milliseconds instead of
+``select()`` then ``epoll_wait(0)``: it may wake up to a millisecond early, which matters no more."""
+
 
 class IoLoop:
     def __init__(self) -> None:
@@ -57,12 +63,19 @@ class IoLoop:
             self._registered.discard(fd)  # already closed: the kernel forgot it
 
     def post(self, fn: Callable[..., Any], *args: Any) -> None:
-        """Run ``fn(*args)`` in the loop as soon as possible; safe from other threads and signal handlers."""
-        self.posted.append((fn, args))
-        try:
-            os.write(self._wake_w, b"\0")
-        except BlockingIOError:
-            pass  # the pipe is full of wake-ups already
+        """Run ``fn(*args)`` in the loop as soon as possible; safe from other threads and signal handlers.
+
+        Only the call that finds the queue of posted calls empty writes a wake-up: until the loop has
+        taken every call (it takes them until none is left), one already written stands for the rest.
+        (Appending and counting are each atomic under the GIL; a call appended while the loop empties
+        the queue is either seen by its ``while`` or finds it empty and wakes it.)"""
+        posted = self.posted
+        posted.append((fn, args))
+        if len(posted) == 1:
+            try:
+                os.write(self._wake_w, b"\0")
+            except BlockingIOError:
+                pass  # the pipe is full of wake-ups already
 
     def on_signal(self, signum: int, handler: Callable[[int], Any]) -> None:
         """Handle ``signum`` in the loop (not in the interrupted frame)."""
@@ -70,20 +83,36 @@ class IoLoop:
         signal.signal(signum, lambda s, _frame: self.post(self._signals[s], s))
 
     def _drain_wakeups(self) -> None:
+        """Empty the wake-up pipe: a read that returns less than it asked for has taken everything
+        (no second read that fails, and its exception, per wake-up)."""
         try:
-            while os.read(self._wake_r, 4096):
+            while len(os.read(self._wake_r, WAKE_READ)) == WAKE_READ:
                 pass
         except BlockingIOError:
             pass
 
-    def wait(self, timeout: float) -> bool:
-        """Sleep until a descriptor is ready or ``timeout`` seconds passed; whether one is.  ``select()``
-        on the epoll descriptor itself: ``epoll_wait`` rounds its timeout to whole milliseconds."""
+    def wait(self, timeout: float) -> list[tuple[int, int]]:
+        """Sleep until a descriptor is ready or ``timeout`` seconds passed; the ready descriptors and
+        their events (empty: none came).
+
+        ``epoll_wait`` counts its timeout in whole milliseconds, so a wait shorter than
+        :data:`EPOLL_WAIT_MIN_S` sleeps in ``select()`` on the epoll descriptor (microseconds) and then
+        asks epoll what is ready: two system calls.  A longer one (an idle daemon, the wait for the next
+        frame of an application) is one ``epoll_wait`` of the whole milliseconds it holds, so it wakes
+        up to a millisecond early, never late; the loop then waits for the rest."""
+        if timeout >= EPOLL_WAIT_MIN_S:
+            return self.epoll.poll((int(timeout * 1000.0) - 0.5) / 1000.0)  # (Python rounds this up to the ms)
         try:
             ready, _, _ = select.select([self.epoll.fileno()], [], [], timeout)
         except InterruptedError:  # pragma: no cover - PEP 475 retries, kept for safety
-            return True
-        return bool(ready)
+            return self.epoll.poll(0)
+        return self.epoll.poll(0) if ready else []
+
+    @staticmethod
+    def waits_until(timeout: float) -> float:
+        """How long :meth:`wait` sleeps at most for ``timeout`` (seconds): whole milliseconds from
+        :data:`EPOLL_WAIT_MIN_S` on, else ``timeout`` itself."""
+        return float(int(timeout * 1000.0)) / 1000.0 if timeout >= EPOLL_WAIT_MIN_S else timeout
 
     def close(self) -> None:
         for fd in list(self.readers):

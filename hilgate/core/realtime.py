@@ -41,7 +41,7 @@ import time
 from typing import Any, Callable
 
 from .ioloop import IoLoop
-from .scheduler import VirtualScheduler
+from .scheduler import INF, VirtualScheduler
 from .waiting import AdaptiveWait
 
 log = logging.getLogger(__name__)
@@ -174,22 +174,30 @@ class RealtimeScheduler(VirtualScheduler):
 
     def _handle_inputs(self, timeout: float) -> None:
         """Wait up to ``timeout`` wall seconds for input (0: only look), then handle what is ready, each
-        input at its own model time."""
+        input at its own model time.  The first input is stamped with the clock read as the wait or the
+        look ended (one reading of the clock, not three: this is every frame's first step)."""
         io = self.io
-        entry = self.model_time()
-        blind = entry - self._watch_end  # not watching inputs since the last wait or poll ended
         if timeout > 0:
-            deadline = entry + timeout * self.speed
-            ready = io.wait(timeout)
-            woke = self.model_time()
-            self._watch_end = woke
-            if not ready:
-                self.wait.overslept((woke - deadline) / self.speed)
+            entry = self.model_time()
+            deadline = entry + io.waits_until(timeout) * self.speed
+            events_ready = io.wait(timeout)  # (the ready descriptors: one system call for a long wait)
+            t = self.model_time()
+            blind = entry - self._watch_end  # not watching inputs since the last wait or poll ended
+            self._watch_end = t
+            if not events_ready and t - deadline > self.late_threshold:
+                # Woke late (preempted, or stopped: after SIGCONT, epoll_wait returns EINTR and Python,
+                # past the deadline, gives up with nothing): look once more at what is ready by now.
+                events_ready = io.epoll.poll(0)
+            if not events_ready:
+                self.wait.overslept((t - deadline) / self.speed)
                 return
-            blind += max(0.0, woke - deadline)  # overslept: stopped or preempted while waiting
-        events_ready = io.epoll.poll(0)
-        if timeout <= 0:
-            self._watch_end = self.model_time()
+            if t > deadline:
+                blind += t - deadline  # overslept: stopped or preempted while waiting
+        else:
+            events_ready = io.epoll.poll(0)
+            t = self.model_time()
+            blind = t - self._watch_end  # (the look itself, a microsecond, counted in)
+            self._watch_end = t
         posted = io.posted
         if events_ready or posted:
             self.wait.input_came(time.perf_counter(), timeout > 0)
@@ -197,11 +205,17 @@ class RealtimeScheduler(VirtualScheduler):
             # timers, or a preemption between two waits), and longer if the loop overslept or timers are
             # overdue (a preemption during the wait).  That bound is kept in input_lateness; overdue
             # timers then fire first, at their own times.
-            t = self.model_time()
-            late = max(blind, t - self.peek())
+            due = self.peek()
+            late = t - due if t - due > blind else blind
             self.input_lateness = late if late > self.late_threshold else 0.0
-            self.fire_due(t)
-            self.advance(t)
+            if due <= t:
+                self.fire_due(t)
+            elif self._deferred and due != INF and due > self._now:
+                self.run_deferred()  # (what fire_due does when nothing is due: the instant is over)
+            if t > self._now:  # (advance, written out)
+                if self._deferred:
+                    self.run_deferred()
+                self._now = t
         fresh = True  # the clock was just brought to the wall clock's time: the first input needs no other
         readers, writers = io.readers, io.writers
         for fd, events in events_ready:
@@ -278,7 +292,8 @@ class RealtimeScheduler(VirtualScheduler):
             next_t = self.peek()
             wait = (min(next_t, until) - now) / self.speed
             spin = policy.spin_s
-            if wait > spin and not policy.keep_polling(time.perf_counter()):
+            if wait > spin and not self.io.posted and not policy.keep_polling(time.perf_counter()):
+                # (a posted call is never slept over: only the first of several writes a wake-up)
                 self._collect_if_idle(wait)
                 wait = (min(next_t, until) - self.model_time()) / self.speed
                 self._handle_inputs(min(max(0.0, wait - spin), 0.5))

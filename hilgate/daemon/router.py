@@ -165,8 +165,12 @@ class RoutedLink:
     @property
     def ready(self) -> bool:
         backend = self.backend
-        return (backend is not None and backend.state == "up" and backend.idle
-                and not any(endpoint.busy for endpoint in self.endpoints))
+        if backend is None or backend.state != "up" or not backend.idle:
+            return False
+        for endpoint in self.endpoints:  # (a loop, not any() over a generator: READY asks it every time)
+            if endpoint.busy:
+                return False
+        return True
 
     def command(self, request: Any) -> dict[str, Any]:
         return self.router.command(self, request)
