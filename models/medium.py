@@ -29,6 +29,7 @@ import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Iterable
 
+from .air import Air, Quiet
 from .frame import BROADCAST
 from .propagation import Propagation, StraightLine
 
@@ -162,6 +163,13 @@ class Medium:
         self._snap_reach = 0.0
         self._dirty = True
         self._pairs: dict[tuple[Radio, Radio], _Neighbour] = {}  # paths asked for their delay alone
+        self.lazy = True
+        """Quiet pairs (``air.py``): a static pair whose receiver does not judge the frame gets no arrival,
+        its interference is gathered when the receiver needs it.  False hands every arrival at once, as
+        before issue 31 (the tests' oracle: the same traces, byte for byte)."""
+        self.air = Air()
+        self._quiet: Quiet | None = None
+        self._quiet_count: dict[Radio, int] = {}  # per sender: its quiet receivers
         self.tap: Any = None
         """Called ``tap(sender, frame, t, duration)`` for every transmission from a radio that listens
         here (one this host serves): how other hosts' media hear it (hilgate.daemon.network)."""
@@ -215,6 +223,18 @@ class Medium:
                 pooled_static[radio.rx_channel] = pooled_static.get(radio.rx_channel, 0) + bool(radio.pose.static)
         grids: dict[float, dict[tuple[int, int, int], list[Radio]]] = {}
         neighbours = {}
+        quiet = self._quiet = Quiet(self.channels) if self.lazy else None
+        quiet_count: dict[Radio, int] = {}
+        if quiet is not None:
+            for radio in radios:
+                position = radio.pose.position(0.0) if radio.pose.static else None
+                if position is None or not isinstance(self.channels[radio.tx_channel].propagation, StraightLine):
+                    continue
+                quiet.add_sender(radio, position)
+                if radio.listens and not radio.judges_all:
+                    quiet.add_receiver(radio, position)
+            for radio in radios:  # every radio: one may still hear an earlier topology's quiet records
+                radio.air = self.air
         roam: dict[Radio, _Roaming] = {}
         for sender in radios:
             channel = self.channels[sender.tx_channel]
@@ -245,18 +265,27 @@ class Medium:
             else:
                 candidates = unbounded if roaming is not None else radios
             listed = []
+            quiet_sender = quiet is not None and sender in quiet.senders
+            count = 0
             for receiver in candidates:
                 if receiver is sender or receiver.rx_channel != sender.tx_channel or not receiver.listens:
                     continue
                 if roaming is not None and roaming.covers(receiver):
                     continue  # found through the moving grid at each transmission
+                if quiet_sender and receiver in quiet.receivers:  # type: ignore[union-attr]
+                    if quiet.delay(sender, receiver) is not None:  # type: ignore[union-attr]
+                        count += 1  # quiet: handed an arrival only when it judges the frame
+                        continue
                 nb = _Neighbour(sender, receiver, channel)
                 if not nb.static or nb.in_range:
                     listed.append(nb)
             neighbours[sender] = listed
+            if count:
+                quiet_count[sender] = count
             if roaming is not None:
                 roam[sender] = roaming
         self._neighbours = neighbours
+        self._quiet_count = quiet_count
         self._unreachable = {}
         by_address: dict[int, list[Radio]] = {}
         for radio in radios:
@@ -275,11 +304,13 @@ class Medium:
         gets its ``range`` error here.  Cached per sender and address until the topology changes."""
         listed = {nb.radio for nb in self._neighbours[sender]}
         roaming = self._roam.get(sender)
+        quiet = self._quiet
         found = tuple(
             radio for radio in self._by_address.get(dst, ())
             if radio is not sender and radio.rx_channel == sender.tx_channel
             and radio.listens and radio not in listed and sender.pose.static and radio.pose.static
             and (roaming is None or not roaming.covers(radio))
+            and (quiet is None or quiet.tau(sender, radio) is None)
         )
         self._unreachable.setdefault(sender, {})[dst] = found
         return found
@@ -387,6 +418,24 @@ class Medium:
                 beyond = self._beyond(sender, dst)
             for radio in beyond:  # addressed to a static radio out of range (never visited below)
                 radio.unreachable(frame)
+        quiet_count = self._quiet_count.get(sender, 0) if self._quiet_count else 0
+        self.air.seq += 1
+        if quiet_count:  # its quiet receivers hear it through the air record; those that judge it get
+            # their arrival below, in attachment order with the others
+            quiet = self._quiet
+            self.air.record(self.clock.now(), sender, t, duration, dst, quiet)  # type: ignore[arg-type]
+            if dst == BROADCAST:
+                judging = [r for r in quiet.receivers if quiet.tau(sender, r) is not None]  # type: ignore[union-attr]
+            else:
+                judging = [r for r in self._by_address.get(dst, ()) if quiet.tau(sender, r) is not None]  # type: ignore[union-attr]
+            if judging:
+                quiet_count -= len(judging)
+                extra = [quiet.pair(sender, r) for r in judging]  # type: ignore[union-attr]
+                if neighbours:
+                    order = self._order
+                    neighbours = sorted(neighbours + extra, key=lambda nb: order[nb.radio])
+                else:
+                    neighbours = extra
         sender_position = None
         missed = 0  # neighbours the frame does not reach (counted this way round: they are the few)
         for nb in neighbours:
@@ -435,7 +484,7 @@ class Medium:
                 radio.arrive_refused(frame, t, start, start + duration, d, loss, nb.refused)
                 continue
             radio.arrive(frame, t, start, start + duration, d, loss)
-        self.arrivals += len(neighbours) - missed
+        self.arrivals += len(neighbours) - missed + quiet_count
 
 
 def _cell_size(rmax: float) -> float:

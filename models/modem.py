@@ -125,6 +125,7 @@ class SimModem:
         self.mac = mac
         mac.attach(self)
         self.radio.judges_all = self.promiscuous or mac.hears_all
+        self.medium.topology_changed()  # a radio that judges every frame is handed every arrival (air.py)
 
     # What the radio holds, read through the modem (MACs, the trace, the emulators).
 

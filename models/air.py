@@ -1,0 +1,190 @@
+"""Interference gathered lazily: what is in the air on each channel, and which radios hear it quietly.
+
+In a dense scene (every modem hears every other) most arrivals are judged by nobody: a frame to one
+modem reaches a thousand others only as interference.  Handing each of them an arrival at once costs
+the medium O(N) per transmission, and keeping each static pair's path costs O(N²) memory.  Instead a
+static pair whose receiver does not judge the frame is **quiet**: the medium records the transmission
+once per channel (:class:`Air`) and the receiver asks for what overlapped only when it needs it, when
+it judges an arrival (at its end) or senses the carrier.  The answer is the one the eager hand-out
+gave, bit for bit: the same arrival interval (``t + τ``, ``+ duration``, τ and the range from the same
+positions), the same overlap test, and under ``collisions: sinr`` the same powers summed in the same
+order (the order of transmissions).
+
+A pair is quiet when both ends are static with a position, the receiver listens on the sender's
+channel (a straight-line one: a ray-traced channel keeps its per-arrival lookups), does not judge every
+frame (promiscuous modems and overhearing MACs are handed everything), is within the sender's range,
+and does not refuse the sender (band, modulation).  Which pairs are quiet is decided on a snapshot of
+the radios taken when the medium rebuilds its lists (:class:`Quiet`); each record keeps the snapshot it
+was sent under, so a later change of topology does not change what an earlier transmission was.
+
+Records are dropped once no arrival still to be judged can overlap them: an arrival is judged at most
+one frame duration after it starts (or at once, for a transmission heard late from another host), so
+a record whose every arrival ended more than the longest duration and the largest lateness seen ago
+is dead.  Each record is appended and dropped once: O(1) amortised per transmission; a judgment costs
+the number of transmissions in the air.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import TYPE_CHECKING, Any, Iterator
+
+from .frame import BROADCAST
+from .path import front_of
+
+if TYPE_CHECKING:
+    from .medium import Channel, _Neighbour
+    from .radio import Radio
+
+_UNKNOWN = object()
+
+
+class Quiet:
+    """The quiet pairs of one topology, decided on a snapshot of the radios taken when it was built.
+
+    Nothing per pair is kept until a receiver asks: τ of a pair is worked out at its first question and
+    remembered per receiver (only receivers that judge or sense ask), the pair's path (its loss model,
+    for a judged arrival or a received power) made on first use."""
+
+    __slots__ = ("senders", "receivers", "refusals", "taus", "pairs", "reach", "channels")
+
+    def __init__(self, channels: dict[str, "Channel"]):
+        self.channels = channels
+        self.senders: dict[Radio, tuple[Any, float, float, str, Any]] = {}  # position, rmin, rmax, channel, front
+        self.receivers: dict[Radio, tuple[Any, int, str, Any]] = {}  # position, address, channel, front
+        self.refusals: dict[tuple[int, int], bool] = {}  # by (id of the sender's front, id of the receiver's)
+        self.taus: dict[Radio, dict[Radio, float | None]] = {}  # receiver → sender → τ (None: not quiet)
+        self.pairs: dict[tuple[Radio, Radio], _Neighbour] = {}
+        self.reach: dict[str, float] = {}  # per channel: the largest τ of a quiet pair
+
+    def add_sender(self, radio: "Radio", position: Any) -> None:
+        self.senders[radio] = (position, radio.range_m[0], radio.range_m[1], radio.tx_channel, front_of(radio))
+
+    def add_receiver(self, radio: "Radio", position: Any) -> None:
+        self.receivers[radio] = (position, radio.address, radio.rx_channel, front_of(radio))
+
+    def delay(self, sender: "Radio", receiver: "Radio") -> float | None:
+        """τ of the pair if it is quiet, else None (worked out here, not remembered: the medium asks
+        every pair once when it counts them)."""
+        s = self.senders.get(sender)
+        r = self.receivers.get(receiver)
+        if s is None or r is None or sender is receiver or s[3] != r[2]:
+            return None
+        a, b = s[0], r[0]
+        d = math.dist(a, b)
+        if not s[1] <= d <= s[2]:
+            return None
+        tx, rx = s[4], r[3]
+        if tx is not None and rx is not None:
+            key = (id(tx), id(rx))
+            refused = self.refusals.get(key)
+            if refused is None:
+                refused = self.refusals[key] = rx.refuses(tx) is not None
+            if refused:
+                return None
+        tau = self.channels[s[3]].propagation.delay(d, a, b)  # as _Neighbour works it out
+        if tau > self.reach.get(s[3], -1.0):
+            self.reach[s[3]] = tau
+        return tau
+
+    def tau(self, sender: "Radio", receiver: "Radio") -> float | None:
+        """τ of a quiet pair, remembered for this receiver; None if the pair is not quiet."""
+        known = self.taus.get(receiver)
+        if known is None:
+            known = self.taus[receiver] = {}
+        tau = known.get(sender, _UNKNOWN)
+        if tau is _UNKNOWN:
+            tau = known[sender] = self.delay(sender, receiver)
+        return tau  # type: ignore[return-value]
+
+    def judges(self, receiver: "Radio", dst: int) -> bool:
+        """The receiver judged a frame to ``dst`` (handed to it as an arrival, not quiet)."""
+        return dst == BROADCAST or dst == self.receivers[receiver][1]
+
+    def pair(self, sender: "Radio", receiver: "Radio") -> "_Neighbour":
+        """The path of a quiet pair, made on first use."""
+        from .medium import _Neighbour
+
+        nb = self.pairs.get((sender, receiver))
+        if nb is None:
+            nb = self.pairs[(sender, receiver)] = _Neighbour(sender, receiver, self.channels[sender.tx_channel])
+        return nb
+
+
+class _Record:
+    __slots__ = ("seq", "t", "duration", "dst", "sender", "quiet", "last")
+
+    def __init__(self, seq: int, t: float, duration: float, dst: int, sender: "Radio", quiet: Quiet, last: float):
+        self.seq = seq
+        self.t = t
+        self.duration = duration
+        self.dst = dst
+        self.sender = sender
+        self.quiet = quiet
+        self.last = last  # no quiet arrival of it ends later
+
+
+class Air:
+    """The transmissions in the air that have quiet receivers, per channel, in the order they were sent.
+
+    ``seq`` numbers every transmission of the medium: the order in which an arrival's interference is
+    summed under ``collisions: sinr``."""
+
+    __slots__ = ("records", "longest", "latest", "seq")
+
+    def __init__(self) -> None:
+        self.records: dict[str, deque[_Record]] = {}
+        self.longest = 0.0  # the longest duration seen
+        self.latest = 0.0  # the largest lateness seen (a transmission from another host, heard late)
+        self.seq = 0
+
+    def record(self, now: float, sender: "Radio", t: float, duration: float, dst: int, quiet: Quiet) -> None:
+        if duration > self.longest:
+            self.longest = duration
+        if now - t > self.latest:
+            self.latest = now - t
+        channel = sender.tx_channel
+        records = self.records.get(channel)
+        if records is None:
+            records = self.records[channel] = deque()
+        horizon = now - self.longest - self.latest  # no arrival still to judge starts before it
+        while records and records[0].last < horizon:
+            records.popleft()
+        records.append(_Record(self.seq, t, duration, dst, sender, quiet,
+                               (t + quiet.reach.get(channel, 0.0)) + duration))
+
+    def _heard(self, radio: "Radio") -> Iterator[tuple[_Record, float]]:
+        """The quiet arrivals at ``radio`` in the air: (record, start)."""
+        for records in self.records.values():
+            for rec in records:
+                quiet = rec.quiet
+                if radio not in quiet.receivers:
+                    continue
+                tau = quiet.tau(rec.sender, radio)
+                if tau is None or quiet.judges(radio, rec.dst):
+                    continue
+                yield rec, rec.t + tau
+
+    def overlaps(self, radio: "Radio", start: float, end: float, eps: float) -> bool:
+        """A quiet arrival at ``radio`` overlaps ``[start, end]`` (by more than ``eps``)."""
+        for rec, other_start in self._heard(radio):
+            if other_start < end - eps and start < other_start + rec.duration - eps:
+                return True
+        return False
+
+    def busy(self, radio: "Radio", now: float) -> bool:
+        """A quiet arrival at ``radio`` is on air at ``now``."""
+        for rec, other_start in self._heard(radio):
+            if other_start <= now < other_start + rec.duration:
+                return True
+        return False
+
+    def powers(self, radio: "Radio", start: float, end: float, eps: float) -> list[tuple[int, float]]:
+        """(seq, received power) of the quiet arrivals at ``radio`` overlapping ``[start, end]``."""
+        found = []
+        for rec, other_start in self._heard(radio):
+            if other_start < end - eps and start < other_start + rec.duration - eps:
+                nb = rec.quiet.pair(rec.sender, radio)
+                found.append((rec.seq, nb.rx_power(nb.d)))
+        return found
