@@ -76,17 +76,51 @@ class Quiet:
         if not s[1] <= d <= s[2]:
             return None
         tx, rx = s[4], r[3]
-        if tx is not None and rx is not None:
-            key = (id(tx), id(rx))
-            refused = self.refusals.get(key)
-            if refused is None:
-                refused = self.refusals[key] = rx.refuses(tx) is not None
-            if refused:
-                return None
+        if tx is not None and rx is not None and self._refuses(tx, rx):
+            return None
         tau = self.channels[s[3]].propagation.delay(d, a, b)  # as _Neighbour works it out
         if tau > self.reach.get(s[3], -1.0):
             self.reach[s[3]] = tau
         return tau
+
+    def split(self, sender: "Radio", candidates: list["Radio"]) -> tuple[int, list["Radio"]]:
+        """When the medium lists a quiet sender's neighbours: how many of ``candidates`` are quiet, and
+        those that are not and must still be looked at (the sender's static pairs out of range are
+        neither: they are never listed).  The same decisions as :meth:`delay`, in one loop: this is
+        the O(n²) of a dense scene's listing."""
+        a, rmin, rmax, channel, tx = self.senders[sender]
+        receivers = self.receivers
+        dist = math.dist
+        rest = []
+        count = 0
+        far = -1.0
+        for receiver in candidates:
+            r = receivers.get(receiver)
+            if r is None or r[2] != channel or receiver is sender:
+                rest.append(receiver)
+                continue
+            d = dist(a, r[0])
+            if not rmin <= d <= rmax:
+                continue
+            rx = r[3]
+            if tx is not None and rx is not None and self._refuses(tx, rx):
+                rest.append(receiver)
+                continue
+            count += 1
+            if d > far:
+                far = d
+        if far >= 0.0:  # a straight line's τ grows with d: the farthest quiet pair has the largest
+            tau = self.channels[channel].propagation.delay(far)
+            if tau > self.reach.get(channel, -1.0):
+                self.reach[channel] = tau
+        return count, rest
+
+    def _refuses(self, tx: Any, rx: Any) -> bool:
+        key = (id(tx), id(rx))
+        refused = self.refusals.get(key)
+        if refused is None:
+            refused = self.refusals[key] = rx.refuses(tx) is not None
+        return refused
 
     def tau(self, sender: "Radio", receiver: "Radio") -> float | None:
         """τ of a quiet pair, remembered for this receiver; None if the pair is not quiet."""

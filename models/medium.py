@@ -265,17 +265,14 @@ class Medium:
             else:
                 candidates = unbounded if roaming is not None else radios
             listed = []
-            quiet_sender = quiet is not None and sender in quiet.senders
             count = 0
+            if quiet is not None and sender in quiet.senders:  # its quiet receivers are counted, not listed:
+                count, candidates = quiet.split(sender, candidates)  # handed an arrival only when they judge
             for receiver in candidates:
                 if receiver is sender or receiver.rx_channel != sender.tx_channel or not receiver.listens:
                     continue
                 if roaming is not None and roaming.covers(receiver):
                     continue  # found through the moving grid at each transmission
-                if quiet_sender and receiver in quiet.receivers:  # type: ignore[union-attr]
-                    if quiet.delay(sender, receiver) is not None:  # type: ignore[union-attr]
-                        count += 1  # quiet: handed an arrival only when it judges the frame
-                        continue
                 nb = _Neighbour(sender, receiver, channel)
                 if not nb.static or nb.in_range:
                     listed.append(nb)
