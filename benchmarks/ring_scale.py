@@ -11,8 +11,10 @@ Two geometries (``--geometry``):
 - ``drifting``: the same ring, each vehicle looping around a 20 m square by its place at 0.5 m/s:
   every pair involves a moving vehicle, so the medium's moving grid does the pruning.
 - ``sink``: ``ring_aloha.py``'s ring (a sink at the centre, N-1 senders on a 500 m ring, unlimited
-  range): every transmission reaches every modem, so the work per judged arrival grows with N by
-  construction (N-1 arrivals per frame, one judged).
+  range), the dense ring: every transmission reaches every modem (N-1 arrivals per frame, one judged).
+  Only the sink judges; the others hear each frame as interference, gathered only when a judged
+  arrival or carrier sense needs it (``models/air.py``), so the cost per offered frame grows with the
+  frames in the air, not with the modems that hear them.
 
 Addresses are 1..N skipping 255 (the broadcast address): above 254 modems the scene needs wide
 addresses (simulated links only).  Each run is a separate ``python -m hilgate sim`` process on a
