@@ -132,10 +132,6 @@ class Quiet:
             tau = known[sender] = self.delay(sender, receiver)
         return tau  # type: ignore[return-value]
 
-    def judges(self, receiver: "Radio", dst: int) -> bool:
-        """The receiver judged a frame to ``dst`` (handed to it as an arrival, not quiet)."""
-        return dst == BROADCAST or dst == self.receivers[receiver][1]
-
     def pair(self, sender: "Radio", receiver: "Radio") -> "_Neighbour":
         """The path of a quiet pair, made on first use."""
         from .medium import _Neighbour
@@ -173,11 +169,18 @@ class Air:
         self.latest = 0.0  # the largest lateness seen (a transmission from another host, heard late)
         self.seq = 0
 
-    def record(self, now: float, sender: "Radio", t: float, duration: float, dst: int, quiet: Quiet) -> None:
+    def sent(self, now: float, t: float, duration: float) -> None:
+        """Every transmission of the medium, whoever hears it: its number, and how long and how late an
+        arrival still to be judged can be."""
+        self.seq += 1
         if duration > self.longest:
             self.longest = duration
         if now - t > self.latest:
             self.latest = now - t
+
+    def record(self, now: float, sender: "Radio", t: float, duration: float, dst: int, quiet: Quiet) -> None:
+        """A transmission of ``sender`` (just :meth:`sent`) that has quiet receivers.  A broadcast has none
+        (every receiver judges it) and is not kept."""
         channel = sender.tx_channel
         records = self.records.get(channel)
         if records is None:
@@ -185,20 +188,21 @@ class Air:
         horizon = now - self.longest - self.latest  # no arrival still to judge starts before it
         while records and records[0].last < horizon:
             records.popleft()
-        records.append(_Record(self.seq, t, duration, dst, sender, quiet,
-                               (t + quiet.reach.get(channel, 0.0)) + duration))
+        if dst != BROADCAST:
+            records.append(_Record(self.seq, t, duration, dst, sender, quiet,
+                                   (t + quiet.reach.get(channel, 0.0)) + duration))
 
     def _heard(self, radio: "Radio") -> Iterator[tuple[_Record, float]]:
         """The quiet arrivals at ``radio`` in the air: (record, start)."""
         for records in self.records.values():
             for rec in records:
                 quiet = rec.quiet
-                if radio not in quiet.receivers:
+                known = quiet.receivers.get(radio)
+                if known is None or rec.dst == known[1]:  # not a quiet receiver then, or it judged the frame
                     continue
                 tau = quiet.tau(rec.sender, radio)
-                if tau is None or quiet.judges(radio, rec.dst):
-                    continue
-                yield rec, rec.t + tau
+                if tau is not None:
+                    yield rec, rec.t + tau
 
     def overlaps(self, radio: "Radio", start: float, end: float, eps: float) -> bool:
         """A quiet arrival at ``radio`` overlaps ``[start, end]`` (by more than ``eps``)."""

@@ -138,3 +138,28 @@ def test_quiet_pairs_keep_no_path_until_asked():
     # dead records dropped: one lives while an arrival of it may still overlap one to be judged, the
     # farthest pair's τ (2.6 s) plus twice the duration (0.2 s): the last 7 of one every 0.5 s
     assert [len(records) for records in medium.air.records.values()] == [7]
+
+
+def _long_frame(lazy):
+    """A 5 s frame from a moving sender (handed at once) to radio 1, whose start a short quiet frame
+    overlaps; then, every second while it lasts, a quiet frame between two radios out of radio 1's
+    range (200 m): records of the same channel, so each one prunes."""
+    positions = [(0.0, 0.0, 0.0), (150.0, 0.0, 0.0), (0.0, 150.0, 0.0), (150.0, 100.0, 0.0),
+                 (1000.0, 0.0, 0.0), (1100.0, 0.0, 0.0)]
+    clock, medium, radios = _medium(positions, lazy=lazy, moving=(2,), range_m=(0.0, 200.0))
+    _send(clock, medium, radios[2], 1, 1, 0.0, duration=5.0)
+    _send(clock, medium, radios[1], 2, 4, 0.05, duration=0.1)
+    for i in range(1, 5):
+        _send(clock, medium, radios[4], 2 + i, 6, float(i), duration=0.1)
+    clock.run(10.0)
+    return radios[0].host.heard_frames, medium
+
+
+def test_records_outlive_the_longest_arrival_still_to_be_judged():
+    """A record is kept while an arrival it overlaps may still be judged, however long that arrival
+    and whoever sent it: frame 1 (not quiet) is judged at its end, 5.1 s, spoilt by a quiet frame that
+    overlapped its start, though four shorter ones were recorded since."""
+    lazy, medium = _long_frame(True)
+    eager, _ = _long_frame(False)
+    assert lazy == eager == [(pytest.approx(5.1), 1, "col")]
+    assert medium.air.longest == 5.0
