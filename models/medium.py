@@ -14,6 +14,12 @@ and a sender with many moving neighbours finds them through a grid of where they
 widened by how far their top speed can have taken them since.  Both keep the list order, so traces
 are the same as with a full scan; the work per transmission no longer grows with the number of modems.
 
+In a dense scene most arrivals are judged by nobody: a static pair whose receiver does not judge the
+frame (not its addressee, not a broadcast, not a promiscuous or overhearing receiver) is **quiet**. It
+is counted, not listed; a transmission is recorded once per channel (``air.py``) and hands an arrival
+only to the quiet receivers that judge it; the others gather its interference when they need it.  The
+outcome is the same as handing every arrival at once (``lazy = False``, kept as the tests' oracle).
+
 Each pair's loss model is bound once, when the pair is listed (``path.py``: the receiver's error model
 with the sender's front end and bit rate).  A receiver that refuses a sender (bands that do not overlap:
 it hears nothing; a modulation it does not decode: interference only) leaves that pair off the fast path,

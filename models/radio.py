@@ -14,6 +14,10 @@ any other is only interference, a ``(start, end)`` pair in ``noise`` that can sp
 Expired entries are dropped as the lists are walked (``noise`` once it has doubled since it was last
 pruned), so each list stays within a small multiple of the number of frames on air at once: that
 keeps an arrival O(1).
+
+A static pair whose receiver does not judge the frame is not handed an arrival at all (``air.py``):
+the radio gathers such quiet arrivals from the medium's record of the air (``air``) when it judges an
+arrival (at its end: :meth:`_judged_over`, :meth:`_sinr_over`) or senses the carrier (:meth:`busy`).
 """
 
 from __future__ import annotations
@@ -143,7 +147,7 @@ class Radio:
         self.noise: list[tuple[float, float]] = []  # (start, end) of arrivals that only interfere
         self._noise_cap = NOISE_MIN  # prune ``noise`` when it grows past this
         self.capture = 0.0  # collisions: sinr: the capture ratio (linear); 0: strict overlap (the default)
-        self.air: "Air | None" = None  # the medium's record of quiet arrivals (``air.py``), set when it lists this radio
+        self.air: "Air | None" = None  # the medium's record of quiet arrivals (``air.py``), set when it lists the radios
 
     # -- the modem's side ----------------------------------------------------------------------
 
