@@ -10,7 +10,9 @@ gave, bit for bit: the same arrival interval (``t + τ``, ``+ duration``, τ and
 positions), the same overlap test, and under ``collisions: sinr`` the same powers summed in the same
 order (the order of transmissions).
 
-A pair is quiet when both ends are static with a position, the receiver listens on the sender's
+A pair is quiet when the sender has many (``medium.QUIET_MIN``: a sparse sender's few arrivals cost
+less handed at once than the records every judgment on the channel scans), both ends are static with a
+position, the receiver listens on the sender's
 channel (a straight-line one: a ray-traced channel keeps its per-arrival lookups), does not judge every
 frame (promiscuous modems and overhearing MACs are handed everything), is within the sender's range,
 and does not refuse the sender (band, modulation).  Which pairs are quiet is decided on a snapshot of
@@ -115,6 +117,10 @@ class Quiet:
                 self.reach[channel] = tau
         return count, rest
 
+    def drop(self, sender: "Radio") -> None:
+        """``sender``'s pairs are not quiet after all (too few: the medium lists them)."""
+        del self.senders[sender]
+
     def _refuses(self, tx: Any, rx: Any) -> bool:
         key = (id(tx), id(rx))
         refused = self.refusals.get(key)
@@ -206,6 +212,8 @@ class Air:
 
     def overlaps(self, radio: "Radio", start: float, end: float, eps: float) -> bool:
         """A quiet arrival at ``radio`` overlaps ``[start, end]`` (by more than ``eps``)."""
+        if not self.records:  # (no quiet sender yet: a sparse scene never has one)
+            return False
         for rec, other_start in self._heard(radio):
             if other_start < end - eps and start < other_start + rec.duration - eps:
                 return True
@@ -213,6 +221,8 @@ class Air:
 
     def busy(self, radio: "Radio", now: float) -> bool:
         """A quiet arrival at ``radio`` is on air at ``now``."""
+        if not self.records:
+            return False
         for rec, other_start in self._heard(radio):
             if other_start <= now < other_start + rec.duration:
                 return True
@@ -220,7 +230,9 @@ class Air:
 
     def powers(self, radio: "Radio", start: float, end: float, eps: float) -> list[tuple[int, float]]:
         """(seq, received power) of the quiet arrivals at ``radio`` overlapping ``[start, end]``."""
-        found = []
+        found: list[tuple[int, float]] = []
+        if not self.records:
+            return found
         for rec, other_start in self._heard(radio):
             if other_start < end - eps and start < other_start + rec.duration - eps:
                 nb = rec.quiet.pair(rec.sender, radio)

@@ -173,6 +173,8 @@ class Medium:
         """Quiet pairs (``air.py``): a static pair whose receiver does not judge the frame gets no arrival,
         its interference is gathered when the receiver needs it.  False hands every arrival at once, as
         before issue 31 (the tests' oracle: the same traces, byte for byte)."""
+        self.quiet_min = QUIET_MIN
+        """A sender's pairs are quiet only when it has at least this many (tests lower it)."""
         self.air = Air()
         self._quiet: Quiet | None = None
         self._quiet_count: dict[Radio, int] = {}  # per sender: its quiet receivers
@@ -273,7 +275,12 @@ class Medium:
             listed = []
             count = 0
             if quiet is not None and sender in quiet.senders:  # its quiet receivers are counted, not listed:
-                count, candidates = quiet.split(sender, candidates)  # handed an arrival only when they judge
+                count, rest = quiet.split(sender, candidates)  # handed an arrival only when they judge
+                if count >= self.quiet_min:
+                    candidates = rest
+                else:  # a sparse sender: its few arrivals are cheaper handed at once
+                    quiet.drop(sender)
+                    count = 0
             for receiver in candidates:
                 if receiver is sender or receiver.rx_channel != sender.tx_channel or not receiver.listens:
                     continue
@@ -526,6 +533,11 @@ def _near(grid: dict[tuple[int, int, int], list["Radio"]], origin: tuple[float, 
                     found.extend(cell)
     return found
 
+
+QUIET_MIN = 32
+"""A sender with fewer quiet pairs than this hands them their arrivals at once: every judgment on the
+channel scans the air's records while they live, which costs more than a few arrivals (a sparse ring of
+a thousand modems, each hearing four, would pay for every frame in the air at each judgment)."""
 
 ROAMING_MIN = 32
 """A sender with more moving-pair neighbours (with a top speed) than this finds them through the

@@ -35,6 +35,7 @@ def trace_of(collisions: str, lazy: bool) -> tuple[str, Simulation]:
     out = io.StringIO()
     simulation = Simulation(scene, trace=out)
     simulation.world.medium.lazy = lazy
+    simulation.world.medium.quiet_min = 1  # every sender's static pairs quiet, however few (the default: 32)
     simulation.run()
     return out.getvalue(), simulation
 
@@ -68,11 +69,12 @@ class Host:
         self.heard_frames.append((self.clock.now(), frame.id, cause))
 
 
-def _medium(positions, lazy=True, moving=(), judges_all=(), range_m=(0.0, float("inf"))):
+def _medium(positions, lazy=True, moving=(), judges_all=(), range_m=(0.0, float("inf")), quiet_min=1):
     """Radios on one 1500 m/s channel at ``positions`` (addresses 1..n); those in ``moving`` on a path."""
     clock = VirtualScheduler()
     medium = Medium(clock, [Channel("ac", 1500.0)])
     medium.lazy = lazy
+    medium.quiet_min = quiet_min
     radios = []
     for i, position in enumerate(positions):
         radio = Radio(Host(f"m{i + 1}", clock), medium, clock, random.Random(i))
@@ -163,3 +165,18 @@ def test_records_outlive_the_longest_arrival_still_to_be_judged():
     eager, _ = _long_frame(False)
     assert lazy == eager == [(pytest.approx(5.1), 1, "col")]
     assert medium.air.longest == 5.0
+
+
+def test_a_sparse_sender_hands_its_arrivals_at_once():
+    """Below ``quiet_min`` quiet pairs a sender's pairs are listed as before: in a ring of 40 modems
+    100 m apart hearing 250 m (four each) nobody is quiet with the default, all are with 4."""
+    positions = [(100.0 * i, 0.0, 0.0) for i in range(40)]
+    _, sparse, _ = _medium(positions, range_m=(0.0, 250.0), quiet_min=32)
+    _, dense, _ = _medium(positions, range_m=(0.0, 250.0), quiet_min=4)
+    for medium in (sparse, dense):
+        medium._rebuild()
+    assert not sparse._quiet_count and not sparse._quiet.senders
+    assert sum(len(nbs) for nbs in sparse._neighbours.values()) == 2 * (1 + 2 + 37 * 2)  # as before
+    assert set(dense._quiet_count.values()) == {4} and len(dense._quiet_count) == 36  # the ends hear 2 or 3
+    assert sparse._quiet.tau(sparse.radios[0], sparse.radios[1]) is None
+    assert dense._quiet.tau(dense.radios[5], dense.radios[6]) == pytest.approx(100.0 / 1500.0)
