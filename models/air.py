@@ -149,6 +149,8 @@ class Quiet:
 
 
 class _Record:
+    """One transmission with quiet receivers, under the topology it was sent in (``quiet``)."""
+
     __slots__ = ("seq", "t", "duration", "dst", "sender", "quiet", "last")
 
     def __init__(self, seq: int, t: float, duration: float, dst: int, sender: "Radio", quiet: Quiet, last: float):
@@ -183,20 +185,23 @@ class Air:
             self.longest = duration
         if now - t > self.latest:
             self.latest = now - t
+        if self.records:  # drop the dead records of every channel (one that fell quiet too)
+            horizon = now - self.longest - self.latest  # no arrival still to judge starts before it
+            for records in self.records.values():
+                while records and records[0].last < horizon:
+                    records.popleft()
 
-    def record(self, now: float, sender: "Radio", t: float, duration: float, dst: int, quiet: Quiet) -> None:
+    def record(self, sender: "Radio", t: float, duration: float, dst: int, quiet: Quiet) -> None:
         """A transmission of ``sender`` (just :meth:`sent`) that has quiet receivers.  A broadcast has none
         (every receiver judges it) and is not kept."""
+        if dst == BROADCAST:
+            return
         channel = sender.tx_channel
         records = self.records.get(channel)
         if records is None:
             records = self.records[channel] = deque()
-        horizon = now - self.longest - self.latest  # no arrival still to judge starts before it
-        while records and records[0].last < horizon:
-            records.popleft()
-        if dst != BROADCAST:
-            records.append(_Record(self.seq, t, duration, dst, sender, quiet,
-                                   (t + quiet.reach.get(channel, 0.0)) + duration))
+        last = (t + quiet.reach.get(channel, 0.0)) + duration  # as late as an arrival of it can end
+        records.append(_Record(self.seq, t, duration, dst, sender, quiet, last))
 
     def _heard(self, radio: "Radio") -> Iterator[tuple[_Record, float]]:
         """The quiet arrivals at ``radio`` in the air: (record, start)."""

@@ -434,7 +434,7 @@ class Medium:
         if quiet_count:  # its quiet receivers hear it through the air record; those that judge it get
             # their arrival below, in attachment order with the others
             quiet = self._quiet
-            self.air.record(now, sender, t, duration, dst, quiet)  # type: ignore[arg-type]
+            self.air.record(sender, t, duration, dst, quiet)  # type: ignore[arg-type]
             if dst == BROADCAST:
                 judging = [r for r in quiet.receivers if quiet.tau(sender, r) is not None]  # type: ignore[union-attr]
             else:
