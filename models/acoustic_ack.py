@@ -138,7 +138,7 @@ class Acknowledger:
     def _tau_to(self, frame: "Frame", t: float) -> float | None:
         modem = self.modem
         other = modem.medium.modem_by_address(modem.tx_channel, frame.dst_addr)
-        return None if other is None else modem.medium.propagation_delay(modem, other, t)
+        return None if other is None else modem.medium.propagation_delay(modem.radio, other.radio, t)
 
     def forget(self) -> None:
         """The modem closes: no report will come for what is still waiting."""

@@ -385,8 +385,8 @@ class Medium:
         listed.sort(key=lambda nb: order[nb.radio])
         return listed
 
-    def propagation_delay(self, sender: Any, receiver: Any, t: float, in_range: bool = True) -> float | None:
-        """τ from modem ``sender`` to modem ``receiver`` at ``t``, exactly what an arrival between them
+    def propagation_delay(self, sender: "Radio", receiver: "Radio", t: float, in_range: bool = True) -> float | None:
+        """τ from radio ``sender`` to radio ``receiver`` at ``t``, exactly what an arrival between them
         at ``t`` takes (the pair's own path: ``_Neighbour.delay_between``); None without a pose, or
         (``in_range``) out of the sender's range."""
         a, b = sender.pose.position(t), receiver.pose.position(t)
@@ -396,7 +396,7 @@ class Medium:
         rmin, rmax = sender.range_m
         if in_range and not rmin <= d <= rmax:
             return None
-        return self._pair(sender.radio, receiver.radio).delay_between(d, a, b)
+        return self._pair(sender, receiver).delay_between(d, a, b)
 
     def _pair(self, sender: "Radio", receiver: "Radio") -> _Neighbour:
         """The path from ``sender`` to ``receiver`` as transmissions see it (made once, kept until the

@@ -65,7 +65,7 @@ def test_an_emulated_modems_delay_and_a_macs_timing_ask_the_same_model():
     net = Net(Channel("rf", SPEED, propagation=OneSecondMore(StraightLine(SPEED))))
     a = net.modem("a", HERE)
     b = net.modem("b", THERE, range_m=(0.0, 100.0))
-    assert net.medium.propagation_delay(a, b, 0.0) == pytest.approx(1.0 + 1.8 / SPEED, abs=1e-15)
+    assert net.medium.propagation_delay(a.radio, b.radio, 0.0) == pytest.approx(1.0 + 1.8 / SPEED, abs=1e-15)
     assert b.tau_at(100.0) == pytest.approx(1.0 + 100.0 / SPEED, abs=1e-15)
 
 
@@ -120,6 +120,6 @@ def test_on_a_positional_channel_an_emulated_modem_is_told_the_delay_its_arrival
     airtime = a.airtime(10)
     heard = {name: net.delivered[name][0][0] - airtime - 1.0 for name in ("static", "moving")}
     assert heard == pytest.approx({"static": 0.01 + 0.25 + 0.5, "moving": 0.01 + 0.25 + 1.0}, abs=1e-12)
-    assert net.medium.propagation_delay(a, static, 1.0) == pytest.approx(heard["static"], abs=1e-12)
-    assert net.medium.propagation_delay(a, moving, 1.0) == pytest.approx(heard["moving"], abs=1e-12)
+    assert net.medium.propagation_delay(a.radio, static.radio, 1.0) == pytest.approx(heard["static"], abs=1e-12)
+    assert net.medium.propagation_delay(a.radio, moving.radio, 1.0) == pytest.approx(heard["moving"], abs=1e-12)
     assert a.tau_at(1500.0) == pytest.approx(0.01 + 1.0, abs=1e-12)  # no positions: the distance alone

@@ -405,7 +405,7 @@ class Network:
             radio = receiver.radio
             if not radio.listens or radio.rx_channel != sender.radio.tx_channel:
                 continue
-            tau = medium.propagation_delay(sender, receiver, t)
+            tau = medium.propagation_delay(sender.radio, radio, t)
             if tau is None:
                 continue
             lateness = now - (t + tau + duration)

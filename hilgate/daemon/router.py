@@ -206,7 +206,7 @@ class RoutedLink:
     def delay_from(self, address: int, t: float) -> float | None:
         mine, theirs = self._sender(address)
         # the time the frame took, whatever the range table says now (it was heard)
-        return None if theirs is None else mine.medium.propagation_delay(theirs, mine, t, in_range=False)
+        return None if theirs is None else mine.medium.propagation_delay(theirs.radio, mine.radio, t, in_range=False)
 
     def reception_from(self, address: int, t: float) -> Reception | None:
         """What this link's modem measures of a frame from ``address`` heard at ``t`` (positions, distance,
