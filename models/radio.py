@@ -111,10 +111,12 @@ class Radio:
     ``address``, ``tx_channel``, ``rx_channel``, ``range_m`` (as a sender), ``pose`` (where its vehicle
     is), ``error`` (the receiving side's error model, as docs/channel-models.md decides), ``acoustic``
     and ``bitrate_bps`` (the modem's front end and bit rate: the transmit side of its paths, and its
-    band as a receiver; ``path.py`` binds them), ``host`` (to find a modem by address) and ``listens``
-    (False for a modem another host serves: it only sends here).  What the medium calls: :meth:`arrive`
+    band as a receiver; ``path.py`` binds them), ``host`` (to find a modem by address), ``listens``
+    (False for a modem another host serves: it only sends here) and ``judges_all`` (such a radio is
+    handed every arrival: none is quiet for it, ``air.py``).  What the medium calls: :meth:`arrive`
     for every arrival, :meth:`arrive_refused` for one it cannot decode, :meth:`unreachable` for a frame
-    addressed to it that cannot arrive.  What the modem calls: :meth:`configure`,
+    addressed to it that cannot arrive; it sets ``air``, its record of the quiet arrivals this radio
+    gathers when it judges or senses.  What the modem calls: :meth:`configure`,
     :meth:`transmit` and :meth:`busy`; it sets ``pose`` and ``judges_all``.
     """
 
