@@ -19,10 +19,9 @@ and does not refuse the sender (band, modulation).  Which pairs are quiet is dec
 the radios taken when the medium rebuilds its lists (:class:`Quiet`); each record keeps the snapshot it
 was sent under, so a later change of topology does not change what an earlier transmission was.
 
-Records are dropped once no arrival still to be judged can overlap them: an arrival is judged at most
-one frame duration after it starts (or at once, for a transmission heard late from another host), so
-a record whose every arrival ended more than the longest duration and the largest lateness seen ago
-is dead.  Each record is appended and dropped once: O(1) amortised per transmission; a judgment costs
+Records are dropped once no arrival still to be judged can overlap them: an arrival is judged at its
+end, at most the longest duration sent after it starts, so a record whose every arrival ended longer
+ago than that is dead.  Each record is appended and dropped once: O(1) amortised per transmission; a judgment costs
 the number of transmissions in the air.
 """
 
@@ -166,34 +165,32 @@ class _Record:
 class Air:
     """The transmissions in the air that have quiet receivers, per channel, in the order they were sent.
 
-    ``seq`` numbers every transmission of the medium: the order in which an arrival's interference is
-    summed under ``collisions: sinr``."""
+    The medium keeps ``seq`` (every transmission's number: the order in which an arrival's interference
+    is summed under ``collisions: sinr``) and ``longest`` (the longest duration sent) itself, without a
+    call: a sparse scene, which never records anything, pays nothing else for the air."""
 
-    __slots__ = ("records", "longest", "latest", "seq")
+    __slots__ = ("records", "longest", "seq")
 
     def __init__(self) -> None:
-        self.records: dict[str, deque[_Record]] = {}
-        self.longest = 0.0  # the longest duration seen
-        self.latest = 0.0  # the largest lateness seen (a transmission from another host, heard late)
+        self.records: dict[str, deque[_Record]] = {}  # only channels with records
+        self.longest = 0.0
         self.seq = 0
 
-    def sent(self, now: float, t: float, duration: float) -> None:
-        """Every transmission of the medium, whoever hears it: its number, and how long and how late an
-        arrival still to be judged can be."""
-        self.seq += 1
-        if duration > self.longest:
-            self.longest = duration
-        if now - t > self.latest:
-            self.latest = now - t
-        if self.records:  # drop the dead records of every channel (one that fell quiet too)
-            horizon = now - self.longest - self.latest  # no arrival still to judge starts before it
-            for records in self.records.values():
-                while records and records[0].last < horizon:
-                    records.popleft()
+    def prune(self, t: float) -> None:
+        """A transmission at ``t``: drop the records no arrival still to be judged can overlap, on every
+        channel (one that fell quiet too).  An arrival is judged at its end, at most ``longest`` after it
+        starts; a transmission heard late from another host (real time only) is judged against what is
+        still recorded, as the eager hand-out judged it against what its lists still held."""
+        horizon = t - self.longest
+        for channel, records in list(self.records.items()):
+            while records and records[0].last < horizon:
+                records.popleft()
+            if not records:
+                del self.records[channel]
 
     def record(self, sender: "Radio", t: float, duration: float, dst: int, quiet: Quiet) -> None:
-        """A transmission of ``sender`` (just :meth:`sent`) that has quiet receivers.  A broadcast has none
-        (every receiver judges it) and is not kept."""
+        """A transmission of ``sender`` that has quiet receivers.  A broadcast has none (every receiver
+        judges it) and is not kept."""
         if dst == BROADCAST:
             return
         channel = sender.tx_channel

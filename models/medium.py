@@ -428,13 +428,17 @@ class Medium:
                 beyond = self._beyond(sender, dst)
             for radio in beyond:  # addressed to a static radio out of range (never visited below)
                 radio.unreachable(frame)
+        air = self.air  # (inline: a sparse scene's frame pays no call for the air)
+        air.seq += 1
+        if duration > air.longest:
+            air.longest = duration
+        if air.records:
+            air.prune(t)
         quiet_count = self._quiet_count.get(sender, 0) if self._quiet_count else 0
-        now = self.clock.now()
-        self.air.sent(now, t, duration)
         if quiet_count:  # its quiet receivers hear it through the air record; those that judge it get
             # their arrival below, in attachment order with the others
             quiet = self._quiet
-            self.air.record(sender, t, duration, dst, quiet)  # type: ignore[arg-type]
+            air.record(sender, t, duration, dst, quiet)  # type: ignore[arg-type]
             if dst == BROADCAST:
                 judging = [r for r in quiet.receivers if quiet.tau(sender, r) is not None]  # type: ignore[union-attr]
             else:

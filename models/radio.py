@@ -17,7 +17,8 @@ keeps an arrival O(1).
 
 A static pair whose receiver does not judge the frame is not handed an arrival at all (``air.py``):
 the radio gathers such quiet arrivals from the medium's record of the air (``air``) when it judges an
-arrival (at its end: :meth:`_judged_over`, :meth:`_sinr_over`) or senses the carrier (:meth:`busy`).
+arrival (at its end: :meth:`_arrival_over`, :meth:`_sinr_over`) or senses the carrier (:meth:`busy`).
+While the air holds no record (a sparse scene) none of this costs a call: a frame's path is as it was.
 """
 
 from __future__ import annotations
@@ -189,7 +190,7 @@ class Radio:
             if span[0] <= now < span[1]:
                 return True
         air = self.air
-        return air is not None and air.busy(self, now)
+        return air is not None and bool(air.records) and air.busy(self, now)
 
     # -- the medium's side ---------------------------------------------------------------------
 
@@ -252,7 +253,7 @@ class Radio:
                 arrival.error = True
         if self.host.on_phy is not None:  # an emulated modem reports RECVSTART
             self.clock.at(start, self.host.arrival_started, frame, start, end)
-        self.clock.at(end, self._arrival_over if self.air is None else self._judged_over, arrival)
+        self.clock.at(end, self._arrival_over, arrival)
         return arrival
 
     # -- collisions: sinr ------------------------------------------------------------------------
@@ -308,8 +309,9 @@ class Radio:
         transmissions (``parts``, with the quiet arrivals the medium's air record holds)."""
         interference = arrival.interference
         parts = arrival.parts or ()
-        if self.air is not None:
-            quiet = self.air.powers(self, arrival.start, arrival.end, OVERLAP_EPS)
+        air = self.air
+        if air is not None and air.records:
+            quiet = air.powers(self, arrival.start, arrival.end, OVERLAP_EPS)
             if quiet:
                 parts = sorted([*parts, *quiet])  # (seq, power): the seqs differ, powers are never compared
         for _, power in parts:
@@ -321,21 +323,20 @@ class Radio:
             per = arrival.loss.per_sinr(arrival.d, arrival.frame.size, interference)  # type: ignore[union-attr]
             if per > 0.0 and (per >= 1.0 or self.rng.random() < per):
                 arrival.error = True
-        self._arrival_over(arrival)
+        self._arrival_over(arrival, True)
 
     def unreachable(self, frame: "Frame", cause: str = "range") -> None:
         """A frame for this radio that cannot reach it (``range``: out of the sender's range;
         ``no_pose``: the sender or this radio has no position; ``band``: outside this radio's band)."""
         self.host.unreachable(frame, cause)
 
-    def _judged_over(self, arrival: Arrival) -> None:
-        """An arrival's end with quiet arrivals possible: those that overlapped it spoil it now."""
-        if not arrival.collided and arrival.refused is None \
-                and self.air.overlaps(self, arrival.start, arrival.end, OVERLAP_EPS):  # type: ignore[union-attr]
+    def _arrival_over(self, arrival: Arrival, sinr: bool = False) -> None:
+        """An arrival's end: its outcome to the host.  Quiet arrivals that overlapped it spoil it now
+        (under ``collisions: sinr`` they were summed into its interference instead)."""
+        air = self.air
+        if air is not None and air.records and not (arrival.collided or sinr or arrival.refused is not None) \
+                and air.overlaps(self, arrival.start, arrival.end, OVERLAP_EPS):
             arrival.collided = True
-        self._arrival_over(arrival)
-
-    def _arrival_over(self, arrival: Arrival) -> None:
         if arrival.refused is not None:
             cause = arrival.refused
         elif arrival.error:
