@@ -29,17 +29,15 @@ too, so both run exactly the same protocol.
 from __future__ import annotations
 
 import argparse
-import cProfile
 import json
 import math
 import os
-import pstats
 import statistics
 import sys
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from peers import PEERS, check_python, run_json, spread  # noqa: E402
+# ``peers`` (subprocess, tempfile) is imported by the parent only: a ``--one`` run's peak memory is hilgate's
 
 from hilgate.scene import load_scene_text  # noqa: E402
 from hilgate.sim.simulate import Simulation  # noqa: E402
@@ -71,8 +69,12 @@ def bench(nodes: int, sim_time: float, seed: int, mac: str, profile: bool = Fals
 
     scene = load_scene_text(ring_scene(nodes, sim_time, seed, mac), f"ring-{nodes}")
     simulation = Simulation(scene)
-    profiler = cProfile.Profile() if profile else None
-    if profiler:
+    profiler = None
+    if profile:  # (imported only here: the profiler's modules would count in every run's peak memory)
+        import cProfile
+        import pstats
+
+        profiler = cProfile.Profile()
         profiler.enable()
     started = time.perf_counter()
     summary = simulation.run()
@@ -93,6 +95,8 @@ def bench(nodes: int, sim_time: float, seed: int, mac: str, profile: bool = Fals
 
 
 def hilgate_run(nodes: int, sim_time: float, seed: int, mac: str) -> dict:
+    from peers import run_json
+
     result, peak = run_json([sys.executable, os.path.abspath(__file__), "--one", str(nodes), "--sim-time",
                              repr(sim_time), "--seed", str(seed), "--mac", mac])
     result["peak_rss_mb"] = peak
@@ -100,6 +104,8 @@ def hilgate_run(nodes: int, sim_time: float, seed: int, mac: str) -> dict:
 
 
 def ns3_run(python: str, script: str, nodes: int, sim_time: float, seed: int) -> dict:
+    from peers import run_json
+
     raw, peak = run_json([python, script, "--nodes", str(nodes), "--sim-time", repr(sim_time), "--seed", str(seed),
                           "--rate", repr(RATE), "--size", str(PAYLOAD), "--bitrate", str(BITRATE),
                           "--radius", repr(RADIUS), "--mac", "aloha", "--prop", "ideal", "--traffic", "poisson"])
@@ -120,7 +126,7 @@ def main() -> None:
     parser.add_argument("--drop-when-busy", action="store_true",
                         help="hilgate's senders use mac: aloha (drop a frame offered while transmitting), as ns-3")
     parser.add_argument("--ns3-python", help="a Python with the ns3 wheel: run ns-3 UAN alongside")
-    parser.add_argument("--ns3-script", default=os.path.join(PEERS, "ns3_uan_aloha.py"))
+    parser.add_argument("--ns3-script", help="the peer script (default: ../shared/peers/ns3_uan_aloha.py)")
     parser.add_argument("--profile", action="store_true", help="one hilgate run per N in this process, profiled")
     parser.add_argument("--one", type=int, help=argparse.SUPPRESS)  # one hilgate run, one JSON line
     parser.add_argument("--mac", default="none", help=argparse.SUPPRESS)
@@ -133,6 +139,9 @@ def main() -> None:
         for n in args.nodes:
             print(json.dumps(bench(n, args.sim_time, args.seed, mac, profile=True)))
         return
+    from peers import PEERS, check_python, spread
+
+    args.ns3_script = args.ns3_script or os.path.join(PEERS, "ns3_uan_aloha.py")
     why_not = check_python(args.ns3_python, "ns") or (None if os.path.exists(args.ns3_script)
                                                       else f"no peer script {args.ns3_script}")
     queueing = ("mac: aloha, a frame offered while transmitting is dropped (as ns-3's UanMacAloha)" if mac == "aloha"

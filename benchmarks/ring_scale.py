@@ -11,8 +11,10 @@ Two geometries (``--geometry``):
 - ``drifting``: the same ring, each vehicle looping around a 20 m square by its place at 0.5 m/s:
   every pair involves a moving vehicle, so the medium's moving grid does the pruning.
 - ``sink``: ``ring_aloha.py``'s ring (a sink at the centre, N-1 senders on a 500 m ring, unlimited
-  range): every transmission reaches every modem, so the work per judged arrival grows with N by
-  construction (N-1 arrivals per frame, one judged).
+  range), the dense ring: every transmission reaches every modem (N-1 arrivals per frame, one judged).
+  Only the sink judges; the others hear each frame as interference, gathered only when a judged
+  arrival or carrier sense needs it (``models/air.py``), so the cost per offered frame grows with the
+  frames in the air, not with the modems that hear them.
 
 Addresses are 1..N skipping 255 (the broadcast address): above 254 modems the scene needs wide
 addresses (simulated links only).  Each run is a separate ``python -m hilgate sim`` process on a
@@ -22,10 +24,13 @@ older commit), and several trees are run alternately, N by N, repeat by repeat. 
 package-dir), so an exported tree needs ``hilgate/models -> ../models`` (and drivers, scenes) links;
 without them ``hilgate.models`` would come from the installed checkout, and the script refuses it.  Printed per run: N,
 simulated seconds, transmissions, judged arrivals (rx + prop/col/mult at the addressed receivers),
-the wall time of the process and of the simulation loop, and judged arrivals per wall second.
+the wall time of the process and of the simulation loop, and judged arrivals per wall second; then
+per offered frame the loop's wall time and the process's peak memory, and for each tree how many times
+its smallest N's wall time per offered frame each N costs (``--pin CPU`` runs every process on that CPU).
 
     python benchmarks/ring_scale.py --nodes 50 200 1000 --sim-time 3600
     python benchmarks/ring_scale.py --tree before=/tmp/old --tree after=. --nodes 50 --repeats 3
+    python benchmarks/ring_scale.py --geometry sink --nodes 100 250 1000 --sim-time 720 --pin 0 --tree ...
 """
 
 from __future__ import annotations
@@ -39,6 +44,9 @@ import subprocess
 import sys
 import tempfile
 import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from placement import pinned_command  # noqa: E402
 
 SPACING_M = 100.0
 RANGE_M = 250.0
@@ -113,19 +121,26 @@ def _env(root: str) -> dict[str, str]:
     return env
 
 
-def run_once(tree: str | None, scene_path: str, summary_path: str) -> dict:
+def run_once(tree: str | None, scene_path: str, summary_path: str, pin: int | None = None) -> dict:
     env = _env(_root(tree))
+    command = [sys.executable, "-m", "hilgate", "sim", scene_path, "--summary", summary_path, "-q"]
+    if pin is not None:
+        command = pinned_command(command, pin)
     started = time.perf_counter()
     # run from the scene's directory: ``python -m`` puts the working directory first on sys.path
-    subprocess.run([sys.executable, "-m", "hilgate", "sim", scene_path, "--summary", summary_path, "-q"],
-                   env=env, check=True, cwd=os.path.dirname(scene_path))
+    child = subprocess.Popen(command, env=env, cwd=os.path.dirname(scene_path))
+    _, status, usage = os.wait4(child.pid, 0)
+    child.returncode = os.waitstatus_to_exitcode(status)
     wall = time.perf_counter() - started
+    if child.returncode:
+        raise subprocess.CalledProcessError(child.returncode, command)
     with open(summary_path, encoding="utf-8") as handle:
         summary = json.load(handle)
     flows = summary["flows"]
     judged = sum(f["rx_packets"] + f["lost"]["prop"] + f["lost"]["col"] + f["lost"]["mult"] for f in flows)
-    return {"tx": sum(f["tx_packets"] for f in flows), "judged": judged,
-            "rx": sum(f["rx_packets"] for f in flows), "wall_s": wall, "sim_wall_s": summary["wall_time_s"]}
+    return {"tx": sum(f["tx_packets"] for f in flows), "judged": judged, "offered": sum(f["offered"] for f in flows),
+            "rx": sum(f["rx_packets"] for f in flows), "wall_s": wall, "sim_wall_s": summary["wall_time_s"],
+            "peak_mb": usage.ru_maxrss / 1024}
 
 
 def main() -> None:
@@ -135,15 +150,18 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--geometry", choices=("neighbour", "drifting", "sink"), default="neighbour")
     parser.add_argument("--repeats", type=int, default=1)
+    parser.add_argument("--pin", type=int, metavar="CPU", help="run every hilgate process on this CPU")
     parser.add_argument("--tree", action="append", default=[], metavar="LABEL=DIR",
                         help="run the hilgate in DIR (repeatable: the trees are run alternately)")
     args = parser.parse_args()
     trees = [tuple(t.split("=", 1)) for t in args.tree] or [("this", None)]
-    print(f"geometry {args.geometry}, {args.sim_time:g} simulated s, seed {args.seed}, repeats {args.repeats}")
+    print(f"geometry {args.geometry}, {args.sim_time:g} simulated s, seed {args.seed}, repeats {args.repeats}, "
+          f"{'pinned to CPU ' + str(args.pin) if args.pin is not None else 'not pinned'}")
     for label, tree in trees:
         print(f"{label}: {tree_of(tree)}")
     print(f"{'tree':>8} {'N':>5} {'tx':>8} {'judged':>8} {'rx':>8} {'wall s':>8} {'sim s':>8} "
-          f"{'judged/s':>9} {'us/judged':>9}")
+          f"{'judged/s':>9} {'us/judged':>9} {'offered':>8} {'us/offered':>10} {'peak MB':>8}")
+    per_frame: dict[str, dict[int, list[float]]] = {label: {} for label, _ in trees}
     with tempfile.TemporaryDirectory(prefix="ring_scale-") as tmp:
         for n in args.nodes:
             scene_path = os.path.join(tmp, f"ring-{n}.yaml")
@@ -153,14 +171,17 @@ def main() -> None:
             for _ in range(args.repeats):
                 for label, tree in trees:  # alternating: each repeat runs every tree once
                     try:
-                        r = run_once(tree, scene_path, os.path.join(tmp, "summary.json"))
+                        r = run_once(tree, scene_path, os.path.join(tmp, "summary.json"), args.pin)
                     except subprocess.CalledProcessError as exc:
                         print(f"{label:>8} {n:>5} not run: hilgate sim exited {exc.returncode} (above)", flush=True)
                         continue
                     results[label].append(r)
+                    us_offered = 1e6 * r["sim_wall_s"] / r["offered"]
+                    per_frame[label].setdefault(n, []).append(us_offered)
                     print(f"{label:>8} {n:>5} {r['tx']:>8} {r['judged']:>8} {r['rx']:>8} {r['wall_s']:>8.2f} "
                           f"{r['sim_wall_s']:>8.2f} {r['judged'] / r['sim_wall_s']:>9.0f} "
-                          f"{1e6 * r['sim_wall_s'] / r['judged']:>9.1f}", flush=True)
+                          f"{1e6 * r['sim_wall_s'] / r['judged']:>9.1f} {r['offered']:>8} {us_offered:>10.1f} "
+                          f"{r['peak_mb']:>8.1f}", flush=True)
             if len(trees) > 1 and args.repeats > 1:
                 for label, runs in results.items():
                     if not runs:
@@ -168,6 +189,13 @@ def main() -> None:
                     walls = sorted(r["sim_wall_s"] for r in runs)
                     print(f"{label:>8} {n:>5} sim wall min/median/max {walls[0]:.2f}/{statistics.median(walls):.2f}"
                           f"/{walls[-1]:.2f} s")
+    for label, by_n in per_frame.items():
+        if len(by_n) < 2:
+            continue
+        smallest = min(by_n)
+        base = statistics.median(by_n[smallest])
+        ratios = ", ".join(f"N = {n}: {statistics.median(v) / base:.1f}x" for n, v in sorted(by_n.items()) if n != smallest)
+        print(f"{label:>8}: wall per offered frame against N = {smallest} ({base:.1f} us): {ratios}")
 
 
 if __name__ == "__main__":

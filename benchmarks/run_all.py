@@ -33,6 +33,10 @@ def benchmarks(ns3_python: str | None) -> list[list[str]]:
         ["benchmarks/multihost.py"],
         ["benchmarks/many_links.py"],
         ["benchmarks/ring_scale.py", "--nodes", "50", "200", "1000"],
+        # the dense ring (every modem hears every other): the cost per offered frame as N grows tenfold
+        ["benchmarks/ring_scale.py", "--geometry", "sink", "--nodes", "100", "250", "1000", "--sim-time", "720",
+         "--pin", str(min(os.sched_getaffinity(0)))],
+        ["benchmarks/ring_aloha.py", "--drop-when-busy", "--nodes", "250", "--sim-time", "3600", *ns3],
         ["benchmarks/ring_aloha.py", "--nodes", "1000", "--sim-time", "3600", "--repeats", "1"],
         ["benchmarks/aruco.py"],
         ["benchmarks/web_cost.py"],

@@ -14,6 +14,12 @@ and a sender with many moving neighbours finds them through a grid of where they
 widened by how far their top speed can have taken them since.  Both keep the list order, so traces
 are the same as with a full scan; the work per transmission no longer grows with the number of modems.
 
+In a dense scene most arrivals are judged by nobody: a static pair whose receiver does not judge the
+frame (not its addressee, not a broadcast, not a promiscuous or overhearing receiver) is **quiet**. It
+is counted, not listed; a transmission is recorded once per channel (``air.py``) and hands an arrival
+only to the quiet receivers that judge it; the others gather its interference when they need it.  The
+outcome is the same as handing every arrival at once (``lazy = False``, kept as the tests' oracle).
+
 Each pair's loss model is bound once, when the pair is listed (``path.py``: the receiver's error model
 with the sender's front end and bit rate).  A receiver that refuses a sender (bands that do not overlap:
 it hears nothing; a modulation it does not decode: interference only) leaves that pair off the fast path,
@@ -29,6 +35,7 @@ import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Iterable
 
+from .air import Air, Quiet
 from .frame import BROADCAST
 from .propagation import Propagation, StraightLine
 
@@ -162,6 +169,15 @@ class Medium:
         self._snap_reach = 0.0
         self._dirty = True
         self._pairs: dict[tuple[Radio, Radio], _Neighbour] = {}  # paths asked for their delay alone
+        self.lazy = True
+        """Quiet pairs (``air.py``): a static pair whose receiver does not judge the frame gets no arrival,
+        its interference is gathered when the receiver needs it.  False hands every arrival at once, as
+        before issue 31 (the tests' oracle: the same traces, byte for byte)."""
+        self.quiet_min = QUIET_MIN
+        """A sender's pairs are quiet only when it has at least this many (tests lower it)."""
+        self.air = Air()
+        self._quiet: Quiet | None = None
+        self._quiet_count: dict[Radio, int] = {}  # per sender: its quiet receivers
         self.tap: Any = None
         """Called ``tap(sender, frame, t, duration)`` for every transmission from a radio that listens
         here (one this host serves): how other hosts' media hear it (hilgate.daemon.network)."""
@@ -215,6 +231,18 @@ class Medium:
                 pooled_static[radio.rx_channel] = pooled_static.get(radio.rx_channel, 0) + bool(radio.pose.static)
         grids: dict[float, dict[tuple[int, int, int], list[Radio]]] = {}
         neighbours = {}
+        quiet = self._quiet = Quiet(self.channels) if self.lazy else None
+        quiet_count: dict[Radio, int] = {}
+        if quiet is not None:
+            for radio in radios:
+                position = radio.pose.position(0.0) if radio.pose.static else None
+                if position is None or not isinstance(self.channels[radio.tx_channel].propagation, StraightLine):
+                    continue
+                quiet.add_sender(radio, position)
+                if radio.listens and not radio.judges_all:
+                    quiet.add_receiver(radio, position)
+            for radio in radios:  # every radio: one may still hear an earlier topology's quiet records
+                radio.air = self.air
         roam: dict[Radio, _Roaming] = {}
         for sender in radios:
             channel = self.channels[sender.tx_channel]
@@ -245,6 +273,14 @@ class Medium:
             else:
                 candidates = unbounded if roaming is not None else radios
             listed = []
+            count = 0
+            if quiet is not None and sender in quiet.senders:  # its quiet receivers are counted, not listed:
+                count, rest = quiet.split(sender, candidates)  # handed an arrival only when they judge
+                if count >= self.quiet_min:
+                    candidates = rest
+                else:  # a sparse sender: its few arrivals are cheaper handed at once
+                    quiet.drop(sender)
+                    count = 0
             for receiver in candidates:
                 if receiver is sender or receiver.rx_channel != sender.tx_channel or not receiver.listens:
                     continue
@@ -254,9 +290,12 @@ class Medium:
                 if not nb.static or nb.in_range:
                     listed.append(nb)
             neighbours[sender] = listed
+            if count:
+                quiet_count[sender] = count
             if roaming is not None:
                 roam[sender] = roaming
         self._neighbours = neighbours
+        self._quiet_count = quiet_count
         self._unreachable = {}
         by_address: dict[int, list[Radio]] = {}
         for radio in radios:
@@ -275,11 +314,13 @@ class Medium:
         gets its ``range`` error here.  Cached per sender and address until the topology changes."""
         listed = {nb.radio for nb in self._neighbours[sender]}
         roaming = self._roam.get(sender)
+        quiet = self._quiet
         found = tuple(
             radio for radio in self._by_address.get(dst, ())
             if radio is not sender and radio.rx_channel == sender.tx_channel
             and radio.listens and radio not in listed and sender.pose.static and radio.pose.static
             and (roaming is None or not roaming.covers(radio))
+            and (quiet is None or quiet.tau(sender, radio) is None)
         )
         self._unreachable.setdefault(sender, {})[dst] = found
         return found
@@ -387,6 +428,29 @@ class Medium:
                 beyond = self._beyond(sender, dst)
             for radio in beyond:  # addressed to a static radio out of range (never visited below)
                 radio.unreachable(frame)
+        air = self.air  # (inline: a sparse scene's frame pays no call for the air)
+        air.seq += 1
+        if duration > air.longest:
+            air.longest = duration
+        if air.records:
+            air.prune(t)
+        quiet_count = self._quiet_count.get(sender, 0) if self._quiet_count else 0
+        if quiet_count:  # its quiet receivers hear it through the air record; those that judge it get
+            # their arrival below, in attachment order with the others
+            quiet = self._quiet
+            air.record(sender, t, duration, dst, quiet)  # type: ignore[arg-type]
+            if dst == BROADCAST:
+                judging = [r for r in quiet.receivers if quiet.tau(sender, r) is not None]  # type: ignore[union-attr]
+            else:
+                judging = [r for r in self._by_address.get(dst, ()) if quiet.tau(sender, r) is not None]  # type: ignore[union-attr]
+            if judging:
+                quiet_count -= len(judging)
+                extra = [quiet.pair(sender, r) for r in judging]  # type: ignore[union-attr]
+                if neighbours:
+                    order = self._order
+                    neighbours = sorted(neighbours + extra, key=lambda nb: order[nb.radio])
+                else:
+                    neighbours = extra
         sender_position = None
         missed = 0  # neighbours the frame does not reach (counted this way round: they are the few)
         for nb in neighbours:
@@ -435,7 +499,7 @@ class Medium:
                 radio.arrive_refused(frame, t, start, start + duration, d, loss, nb.refused)
                 continue
             radio.arrive(frame, t, start, start + duration, d, loss)
-        self.arrivals += len(neighbours) - missed
+        self.arrivals += len(neighbours) - missed + quiet_count
 
 
 def _cell_size(rmax: float) -> float:
@@ -473,6 +537,11 @@ def _near(grid: dict[tuple[int, int, int], list["Radio"]], origin: tuple[float, 
                     found.extend(cell)
     return found
 
+
+QUIET_MIN = 32
+"""A sender with fewer quiet pairs than this hands them their arrivals at once: every judgment on the
+channel scans the air's records while they live, which costs more than a few arrivals (a sparse ring of
+a thousand modems, each hearing four, would pay for every frame in the air at each judgment)."""
 
 ROAMING_MIN = 32
 """A sender with more moving-pair neighbours (with a top speed) than this finds them through the

@@ -131,6 +131,7 @@ class SimModem:
         # and after a transmission; a good frame for it delivered), in the same order, so the trace is
         # the same, without the five calls per frame into a MAC that adds nothing.
         self.direct = type(mac) is NoMac
+        self.medium.topology_changed()  # a radio that judges every frame is handed every arrival (air.py)
 
     # What the radio holds, read through the modem (MACs, the trace, the emulators).
 

@@ -14,6 +14,11 @@ any other is only interference, a ``(start, end)`` pair in ``noise`` that can sp
 Expired entries are dropped as the lists are walked (``noise`` once it has doubled since it was last
 pruned), so each list stays within a small multiple of the number of frames on air at once: that
 keeps an arrival O(1).
+
+A static pair whose receiver does not judge the frame is not handed an arrival at all (``air.py``):
+the radio gathers such quiet arrivals from the medium's record of the air (``air``) when it judges an
+arrival (at its end: :meth:`_arrival_over`, :meth:`_sinr_over`) or senses the carrier (:meth:`busy`).
+While the air holds no record (a sparse scene) none of this costs a call: a frame's path is as it was.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from .frame import BROADCAST
 if TYPE_CHECKING:
     import random
 
+    from .air import Air
     from .clock import Clock
     from .errormodel import ErrorModel
     from .frame import Frame
@@ -79,7 +85,8 @@ class SinrLossModel(LossModel, Protocol):
 class Arrival:
     """One frame reaching one radio over ``[start, end]``; flags set as the radio learns more."""
 
-    __slots__ = ("frame", "start", "end", "d", "error", "collided", "power", "interference", "loss", "refused")
+    __slots__ = ("frame", "start", "end", "d", "error", "collided", "power", "interference", "parts", "loss",
+                 "refused")
 
     def __init__(self, frame: "Frame", start: float, end: float, d: float):
         self.frame = frame
@@ -90,6 +97,7 @@ class Arrival:
         self.collided = False
         self.power = 0.0  # collisions: sinr: received power, and the summed power of what overlaps it
         self.interference = 0.0
+        self.parts: list[tuple[int, float]] | None = None  # collisions: sinr: (transmission seq, power) to add
         self.loss: "SinrLossModel | None" = None
         self.refused: str | None = None  # the receiver cannot decode it (e.g. ``modulation``): lost with this cause
 
@@ -104,10 +112,12 @@ class Radio:
     ``address``, ``tx_channel``, ``rx_channel``, ``range_m`` (as a sender), ``pose`` (where its vehicle
     is), ``error`` (the receiving side's error model, as docs/channel-models.md decides), ``acoustic``
     and ``bitrate_bps`` (the modem's front end and bit rate: the transmit side of its paths, and its
-    band as a receiver; ``path.py`` binds them), ``host`` (to find a modem by address) and ``listens``
-    (False for a modem another host serves: it only sends here).  What the medium calls: :meth:`arrive`
+    band as a receiver; ``path.py`` binds them), ``host`` (to find a modem by address), ``listens``
+    (False for a modem another host serves: it only sends here) and ``judges_all`` (such a radio is
+    handed every arrival: none is quiet for it, ``air.py``).  What the medium calls: :meth:`arrive`
     for every arrival, :meth:`arrive_refused` for one it cannot decode, :meth:`unreachable` for a frame
-    addressed to it that cannot arrive.  What the modem calls: :meth:`configure`,
+    addressed to it that cannot arrive; it sets ``air``, its record of the quiet arrivals this radio
+    gathers when it judges or senses.  What the modem calls: :meth:`configure`,
     :meth:`transmit` and :meth:`busy`; it sets ``pose`` and ``judges_all``.
     """
 
@@ -115,7 +125,7 @@ class Radio:
         "host", "medium", "clock", "rng",
         "address", "tx_channel", "rx_channel", "range_m", "pose", "error", "error_free", "half_duplex", "judges_all",
         "listens", "acoustic", "bitrate_bps",
-        "tx_start", "tx_end", "pending", "noise", "_noise_cap", "capture",
+        "tx_start", "tx_end", "pending", "noise", "_noise_cap", "capture", "air",
     )
 
     def __init__(self, host: RadioHost, medium: "Medium", clock: "Clock", rng: "random.Random"):
@@ -140,6 +150,7 @@ class Radio:
         self.noise: list[tuple[float, float]] = []  # (start, end) of arrivals that only interfere
         self._noise_cap = NOISE_MIN  # prune ``noise`` when it grows past this
         self.capture = 0.0  # collisions: sinr: the capture ratio (linear); 0: strict overlap (the default)
+        self.air: "Air | None" = None  # the medium's record of quiet arrivals (``air.py``), set when it lists the radios
 
     # -- the modem's side ----------------------------------------------------------------------
 
@@ -178,7 +189,8 @@ class Radio:
         for span in self.noise:
             if span[0] <= now < span[1]:
                 return True
-        return False
+        air = self.air
+        return air is not None and bool(air.records) and air.busy(self, now)
 
     # -- the medium's side ---------------------------------------------------------------------
 
@@ -256,12 +268,13 @@ class Radio:
         power = loss.rx_power(d)
         pending = self.pending
         dst = frame.dst_addr
+        seq = self.air.seq if self.air is not None else 0
         if not (self.judges_all or dst == self.address or dst == BROADCAST):
             for other in pending:
                 if other.start < end - OVERLAP_EPS and start < other.end - OVERLAP_EPS:
-                    other.interference += power
+                    _add_part(other, seq, power)
             noise = self.noise
-            noise.append((start, end, power))
+            noise.append((start, end, power, seq))
             if len(noise) > self._noise_cap:
                 noise = self.noise = [span for span in noise if span[1] > t]
                 self._noise_cap = NOISE_MIN + 2 * len(noise)
@@ -269,18 +282,19 @@ class Radio:
         arrival = Arrival(frame, start, end, d)
         arrival.power = power
         arrival.loss = loss
+        parts = arrival.parts = []
         live = []
         for other in pending:
             if other.end > t:
                 live.append(other)
                 if other.start < end - OVERLAP_EPS and start < other.end - OVERLAP_EPS:
-                    other.interference += power
+                    _add_part(other, seq, power)
                     arrival.interference += other.power
         live.append(arrival)
         self.pending = live
         for span in self.noise:
             if span[0] < end - OVERLAP_EPS and start < span[1] - OVERLAP_EPS:
-                arrival.interference += span[2]
+                parts.append((span[3], span[2]))
         if self.half_duplex and self.tx_end - OVERLAP_EPS > start and self.tx_start < end - OVERLAP_EPS:
             arrival.collided = True
         self.clock.at(end, self._sinr_over, arrival)
@@ -288,22 +302,41 @@ class Radio:
 
     def _sinr_over(self, arrival: Arrival) -> None:
         """Capture: the arrival survives the overlap if its power is at least ``capture`` times the
-        interference; its loss is then drawn at the SINR (noise plus interference)."""
+        interference; its loss is then drawn at the SINR (noise plus interference).
+
+        The interference is summed in the order the eager hand-out added it: the judged arrivals already
+        on air when this one came (``interference`` so far), then every other part in the order of the
+        transmissions (``parts``, with the quiet arrivals the medium's air record holds)."""
         interference = arrival.interference
+        parts = arrival.parts or ()
+        air = self.air
+        if air is not None and air.records:
+            quiet = air.powers(self, arrival.start, arrival.end, OVERLAP_EPS)
+            if quiet:
+                parts = sorted([*parts, *quiet])  # (seq, power): the seqs differ, powers are never compared
+        for _, power in parts:
+            interference += power
+        arrival.interference = interference
         if interference > 0.0 and arrival.power < self.capture * interference:
             arrival.collided = True
         if not self.error_free:
             per = arrival.loss.per_sinr(arrival.d, arrival.frame.size, interference)  # type: ignore[union-attr]
             if per > 0.0 and (per >= 1.0 or self.rng.random() < per):
                 arrival.error = True
-        self._arrival_over(arrival)
+        self._arrival_over(arrival, True)
 
     def unreachable(self, frame: "Frame", cause: str = "range") -> None:
         """A frame for this radio that cannot reach it (``range``: out of the sender's range;
         ``no_pose``: the sender or this radio has no position; ``band``: outside this radio's band)."""
         self.host.unreachable(frame, cause)
 
-    def _arrival_over(self, arrival: Arrival) -> None:
+    def _arrival_over(self, arrival: Arrival, sinr: bool = False) -> None:
+        """An arrival's end: its outcome to the host.  Quiet arrivals that overlapped it spoil it now
+        (under ``collisions: sinr`` they were summed into its interference instead)."""
+        air = self.air
+        if air is not None and air.records and not (arrival.collided or sinr or arrival.refused is not None) \
+                and air.overlaps(self, arrival.start, arrival.end, OVERLAP_EPS):
+            arrival.collided = True
         if arrival.refused is not None:
             cause = arrival.refused
         elif arrival.error:
@@ -314,3 +347,11 @@ class Radio:
 
     def __repr__(self) -> str:
         return f"Radio(addr={self.address} {self.tx_channel}->{self.rx_channel})"
+
+
+def _add_part(arrival: Arrival, seq: int, power: float) -> None:
+    """Power from transmission ``seq`` overlapped ``arrival`` (collisions: sinr), to be summed at its end."""
+    if arrival.parts is None:  # (made before its radio took collisions: sinr)
+        arrival.parts = [(seq, power)]
+    else:
+        arrival.parts.append((seq, power))

@@ -108,7 +108,7 @@ def test_frames_are_built_in_one_place():
 
 RADIO_NAMES = {"radio", "sender", "receiver", "target", "end"}
 WHAT_THE_MEDIUM_READS = {"address", "tx_channel", "rx_channel", "range_m", "pose", "host", "listens",
-                         "arrive", "arrive_refused", "unreachable"}
+                         "judges_all", "air", "arrive", "arrive_refused", "unreachable"}
 WHAT_A_PATH_READS = {"acoustic", "bitrate_bps", "error"}  # models/path.py, which the medium asks per pair
 
 

@@ -6,12 +6,16 @@ world does it when it is built (then from the cache, in a moment)."""
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
-from ..models.bellhop_fields import BellhopChannel, path_frequency_hz
 from ..models.medium import Channel
 from ..models.path import front_of
-from .runner import Program, Progress, prepare_fields
+
+if TYPE_CHECKING:
+    from .runner import Program, Progress
+
+# BELLHOP's fields and their runner (numpy: 15 MB of a process) are imported when a channel has water,
+# not by every simulation: a dense ring of 250 modems fits in what numpy alone would take.
 
 __all__ = ["frequencies_of", "ready_channels"]
 
@@ -24,6 +28,7 @@ def frequencies_of(channel: Channel, links: Mapping[str, Any]) -> set[float]:
     senders = {front_of(link.params) for link in links.values() if link.params.tx_channel == channel.name}
     receivers = {front_of(link.params) for link in links.values() if link.params.rx_channel == channel.name}
     default = water.frequency_khz * 1000.0
+    from ..models.bellhop_fields import path_frequency_hz
     return {path_frequency_hz(tx, rx, default) for tx in senders for rx in receivers} or {default}
 
 
@@ -40,6 +45,9 @@ def ready_channels(channels: Mapping[str, Channel], links: Mapping[str, Any], *,
         if channel.propagation.positional:  # (ready already)
             ready[name] = channel
             continue
+        from ..models.bellhop_fields import BellhopChannel
+        from .runner import prepare_fields
+
         fields = prepare_fields(channel.water, sorted(frequencies_of(channel, links)), program=program, cache=cache,
                                 progress=progress)
         ready[name] = dataclasses.replace(channel, propagation=BellhopChannel(channel.water, fields,

@@ -7,7 +7,6 @@ one value with a small checker function that raises :class:`SceneError` naming f
 
 from __future__ import annotations
 
-import difflib
 import math
 import os
 import re
@@ -86,6 +85,8 @@ class Fields:
 
 
 def unknown_key_message(key: str, known: Sequence[str]) -> str:
+    import difflib  # only for a scene with a mistake: not in every simulation's memory
+
     close = difflib.get_close_matches(key, known, n=1, cutoff=0.6)
     if close:
         return f"unknown key (did you mean {close[0]!r}?)"

@@ -16,7 +16,6 @@ class of a listed plugin.  A plugin is referred to by its module name, or by its
 
 from __future__ import annotations
 
-import hashlib
 import importlib
 import importlib.util
 import logging
@@ -78,6 +77,8 @@ def _load_file(path: str) -> Plugin:
     key = (real, info.st_mtime_ns, info.st_size)
     if key in _loaded_files:
         return _loaded_files[key]
+    import hashlib  # here, not at the top: OpenSSL's libcrypto is 3.7 MB of every simulation, few load plugins
+
     name = f"{PRIVATE_PREFIX}{stem}_{hashlib.sha1(real.encode()).hexdigest()[:10]}"
     spec = importlib.util.spec_from_file_location(name, real)
     if spec is None or spec.loader is None:

@@ -8,7 +8,6 @@ its user may not.
 
 from __future__ import annotations
 
-import importlib.resources
 import os
 import stat
 
@@ -27,6 +26,8 @@ MAX_PRESET_BYTES = 64 * 1024
 
 
 def preset_names() -> list[str]:
+    import importlib.resources  # here: with tempfile and shutil it is 2 MB of every process, needed by scenes with presets
+
     folder = importlib.resources.files("hilgate.models")
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".yaml"))
 
@@ -35,6 +36,8 @@ def load_preset(name_node: Node, path: str, scene_dir: str, preset_dirs: tuple[s
     """A packaged preset by name, or a preset file the scene may read (see :func:`_preset_file`)."""
     name = text(name_node, path)
     if name in preset_names():
+        import importlib.resources
+
         resource = importlib.resources.files("hilgate.models") / f"{name}.yaml"
         node = load_text(resource.read_text(encoding="utf-8"), f"models/{name}.yaml")
     elif name.endswith(PRESET_SUFFIXES) or "/" in name or os.sep in name:

@@ -82,6 +82,19 @@ def one_line(text: str, limit: int = MAX_QUOTE) -> str:
     return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
 
 
+class _Mark:
+    """Where a token starts: its line, the only thing an error here quotes.  PyYAML's own ``Mark`` keeps
+    six fields and the buffer for every token, some 4 MB while a 250-modem scene is composed."""
+
+    __slots__ = ("line",)
+
+    def __init__(self, line: int):
+        self.line = line
+
+    def __str__(self) -> str:
+        return f"line {self.line + 1}"
+
+
 class _Loader(yaml.SafeLoader):
     """SafeLoader that also reads YAML 1.2 floats such as ``2.25e7`` and ``1e-3`` (YAML 1.1 insists on
     a dot and a signed exponent, so PyYAML would read them as text and a scene would fail to load),
@@ -89,6 +102,9 @@ class _Loader(yaml.SafeLoader):
     end in a RecursionError somewhere in PyYAML)."""
 
     _depth = 0
+
+    def get_mark(self) -> Any:
+        return _Mark(self.line)
 
     def compose_node(self, parent: Any, index: Any) -> Any:
         self._depth += 1
