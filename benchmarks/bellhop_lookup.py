@@ -109,7 +109,7 @@ def main() -> int:
     cache = os.path.join(shared.name, "bellhop")
     scene = load_scene_text(scene_text(True, 1), "bench.yaml")
     channels = ready_channels(scene.channels, scene.links, program=program, cache=cache)
-    paths: BellhopChannel = channels["ac"].paths
+    paths: BellhopChannel = channels["ac"].propagation
     sender, receiver = scene.links["ls"].params, scene.links["l0"].params
     thorp = receiver.error.path_from(sender.acoustic, sender.bitrate_bps)
     bellhop = paths.bind(sender, receiver).model
