@@ -26,6 +26,7 @@ import logging
 import os
 import socket
 import tty
+from abc import ABC, abstractmethod
 from typing import Any, Callable
 
 from hilgate.core.backend import AppFrame, PhyEvent
@@ -207,7 +208,7 @@ def _open_hosts(spec: dict, scheduler: Any, on_data, on_connect, name: str, on_d
     return TcpHosts(int(spec["tcp"]), scheduler, on_data, on_connect, name, on_disconnect=on_disconnect)
 
 
-class EmulatedModem:
+class EmulatedModem(ABC):
     """What every emulated modem is: an endpoint of kind ``emulator`` on its link's port, and the hosts its
     ``emulate:`` names (a pty, or the clients of a TCP port).  Those that speak a line protocol give each
     host a codec of its own (the modem side of the protocol, sans I/O: ``codec``), made when the host
@@ -230,8 +231,9 @@ class EmulatedModem:
     def _on_connect(self, host: Any) -> None:
         self.codecs[host] = self.codec()
 
+    @abstractmethod
     def _on_data(self, host: Any, data: bytes) -> None:
-        raise NotImplementedError
+        """``host``'s bytes (a pty or a TCP client), to its codec."""
 
     def _codec_of(self, host: Any) -> Any:
         """``host``'s codec (made here too: a TCP client's first bytes may come before its connect is seen)."""

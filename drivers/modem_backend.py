@@ -8,6 +8,7 @@ modem's first bytes may come at once; closing it closes the port before the queu
 
 from __future__ import annotations
 
+from abc import abstractmethod
 from typing import Any, Callable
 
 from hilgate.core.backend import QueuedBackend
@@ -33,11 +34,13 @@ class ModemBackend(QueuedBackend):
                          name=self.link_id, **line)
         self.port.open()
 
+    @abstractmethod
     def _on_data(self, data: bytes) -> None:
-        raise NotImplementedError
+        """The modem's bytes, as the port read them."""
 
+    @abstractmethod
     def _on_port(self, up: bool, reason: str | None) -> None:
-        raise NotImplementedError
+        """The port came up, or went down (``reason``)."""
 
     def close(self) -> None:
         self.port.close()

@@ -5,9 +5,10 @@ It runs ``_run`` until it is stopped; ``_run`` checks ``_stop`` between reads.""
 from __future__ import annotations
 
 import threading
+from abc import ABC, abstractmethod
 
 
-class ReaderThread:
+class ReaderThread(ABC):
     def __init__(self, thread_name: str):
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=thread_name, daemon=True)
@@ -19,5 +20,6 @@ class ReaderThread:
         self._stop.set()
         self._thread.join(timeout=5)
 
+    @abstractmethod
     def _run(self) -> None:
-        raise NotImplementedError
+        """Read the device until ``_stop`` is set."""
