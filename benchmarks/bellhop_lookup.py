@@ -12,11 +12,15 @@ same run.
 - Per arrival in a simulation: ``hilgate sim`` of one sender broadcasting to 20 moving receivers, the
   same scene with and without ``water:``, alternated, 3 repeats: wall time over arrivals.
 
-    python benchmarks/bellhop_lookup.py
+    python benchmarks/bellhop_lookup.py [--quick]
+
+``--quick`` runs every step on a small grid and few arrivals (seconds, not minutes): the tests run it so
+that the benchmark keeps working as the code it measures changes; its figures mean nothing.
 """
 
 from __future__ import annotations
 
+import argparse
 import math
 import os
 import random
@@ -59,7 +63,12 @@ WATER = """    water:
       depth_m: 100
       sound_speed: [[0, 1521], [15, 1520], [25, 1510], [40, 1500], [100, 1498]]
       bottom: sand
-      grid: {range_m: 5000, ranges: 501, depths: 51, source_depths: 11}"""
+      grid: {{range_m: 5000, ranges: {ranges}, depths: {depths}, source_depths: {sources}}}"""
+FULL = {"ranges": 501, "depths": 51, "sources": 11, "arrival_ranges": 101, "arrival_depths": 26, "arrivals": 200_000,
+        "repeats": 5, "sim_repeats": 3, "sim_s": 100.0}
+QUICK = {"ranges": 51, "depths": 11, "sources": 2, "arrival_ranges": 11, "arrival_depths": 6, "arrivals": 2_000,
+         "repeats": 1, "sim_repeats": 1, "sim_s": 5.0}
+SIZE = dict(FULL)
 
 
 def scene_text(water: bool, receivers: int = 20) -> str:
@@ -71,7 +80,8 @@ def scene_text(water: bool, receivers: int = 20) -> str:
         vehicles.append(f"  v{i}: {{pose: {{path: {{start: [{x0:.1f}, 0, {z0:.1f}], "
                         f"legs: [{{to: [{x1:.1f}, 50, {z1:.1f}], duration_s: 100}}]}}}}}}")
         links.append(f"  l{i}: {{vehicle: v{i}, address: {i + 2}, model: evologics-s2cr-18-34, error: {{kind: physical}}}}")
-    return SCENE.format(water=WATER if water else "", vehicles="\n".join(vehicles), links="\n".join(links))
+    water_text = WATER.format(**SIZE) if water else ""
+    return SCENE.format(water=water_text, vehicles="\n".join(vehicles), links="\n".join(links))
 
 
 def ratio_line(name: str, ours: list[float], anchor: list[float]) -> str:
@@ -80,6 +90,10 @@ def ratio_line(name: str, ours: list[float], anchor: list[float]) -> str:
 
 
 def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--quick", action="store_true", help="a small grid and few arrivals (a check, not figures)")
+    if parser.parse_args().quick:
+        SIZE.update(QUICK)
     try:
         program = find_program()
     except BellhopError as exc:
@@ -88,15 +102,18 @@ def main() -> int:
     print(f"BELLHOP program: {program.name.replace(ROOT + os.sep, '')}")
 
     # -- preparation ---------------------------------------------------------------------------------
-    for sources in (1, 11):
-        water = Water(**{**SHALLOW.__dict__, "source_depths": sources})
+    grid = {"ranges": SIZE["ranges"], "depths": SIZE["depths"], "arrival_ranges": SIZE["arrival_ranges"],
+            "arrival_depths": SIZE["arrival_depths"]}
+    shape = f"TL {SIZE['depths']} x {SIZE['ranges']} + arrivals {SIZE['arrival_depths']} x {SIZE['arrival_ranges']}"
+    for sources in (1, SIZE["sources"]):
+        water = Water(**{**SHALLOW.__dict__, **grid, "source_depths": sources})
         times = []
         for _ in range(3 if sources == 1 else 1):
             with tempfile.TemporaryDirectory() as cache:
                 t0 = time.perf_counter()
                 fields = prepare_fields(water, [12000.0], program=program, cache=cache)[0]
                 times.append(time.perf_counter() - t0)
-        print(f"preparation, {sources} source depth(s), TL 51 x 501 + arrivals 26 x 101 at 12 kHz, empty cache: "
+        print(f"preparation, {sources} source depth(s), {shape} at 12 kHz, empty cache: "
               + " / ".join(f"{t:.2f}" for t in times) + " s")
         with tempfile.TemporaryDirectory() as cache:
             prepare_fields(water, [12000.0], program=program, cache=cache)
@@ -115,7 +132,7 @@ def main() -> int:
     bellhop = paths.bind(sender, receiver).model
     rng = random.Random(1)
     geometry = [((0.0, 0.0, rng.uniform(5, 95)), (rng.uniform(100, 4900), rng.uniform(-50, 50), rng.uniform(5, 95)))
-                for _ in range(200_000)]
+                for _ in range(SIZE["arrivals"])]
     n = len(geometry)
 
     def thorp_pass() -> float:
@@ -138,10 +155,10 @@ def main() -> int:
         return (time.perf_counter() - t0) / n
 
     thorp_ns, bellhop_ns = [], []
-    for _ in range(5):
+    for _ in range(SIZE["repeats"]):
         thorp_ns.append(thorp_pass() * 1e9)
         bellhop_ns.append(bellhop_pass() * 1e9)
-    print(f"per arrival, alone ({n} arrivals x 5, alternated): Thorp {statistics.median(thorp_ns):.0f} ns "
+    print(f"per arrival, alone ({n} arrivals x {SIZE['repeats']}, alternated): Thorp {statistics.median(thorp_ns):.0f} ns "
           f"(min {min(thorp_ns):.0f}), BELLHOP lookup {statistics.median(bellhop_ns):.0f} ns (min {min(bellhop_ns):.0f})")
     print("  " + ratio_line("BELLHOP / Thorp", bellhop_ns, thorp_ns))
 
@@ -154,16 +171,17 @@ def main() -> int:
         watery = load_scene_text(scene_text(True), "bench.yaml")
         Simulation(watery, 1.0, None, None).run(False)  # fields into the cache, outside the timing
         per_plain, per_water = [], []
-        for _ in range(3):
+        for _ in range(SIZE["sim_repeats"]):
             for scene_, out in ((plain, per_plain), (watery, per_water)):
-                sim = Simulation(scene_, 100.0, None, None)
+                sim = Simulation(scene_, SIZE["sim_s"], None, None)
                 t0 = time.perf_counter()
                 sim.run(False)
                 wall = time.perf_counter() - t0
                 arrivals = sim.world.medium.arrivals
                 out.append(wall / arrivals * 1e6)
-        print(f"hilgate sim, 1 sender to 20 moving receivers, 100 s ({arrivals} arrivals), wall time per arrival: "
-              f"Thorp {statistics.median(per_plain):.2f} us, BELLHOP {statistics.median(per_water):.2f} us (medians of 3)")
+        print(f"hilgate sim, 1 sender to 20 moving receivers, {SIZE['sim_s']:g} s ({arrivals} arrivals), wall time per "
+              f"arrival: Thorp {statistics.median(per_plain):.2f} us, BELLHOP {statistics.median(per_water):.2f} us "
+              f"(medians of {SIZE['sim_repeats']})")
         print("  " + ratio_line("BELLHOP / Thorp", per_water, per_plain))
     return 0
 
