@@ -12,6 +12,11 @@ Run from the repository root:
 
     python benchmarks/pass_cost.py [PASSES]          # p10 / p50 / p90 of PASSES passes (default 20 000)
     PROF=1 python benchmarks/pass_cost.py 3000       # and a cProfile table of the passes
+    python benchmarks/pass_instructions.py           # instructions per pass, counted by callgrind
+
+Under callgrind (``pass_instructions.py`` sets ``PASS_COST_CALLGRIND``) only the passes themselves are
+counted, after ``CALLGRIND_WARM_UP`` passes: collection is switched on and off around each one, so the
+harness's own ``send`` and drains are left out; the daemon's passes and the relay's are dumped apart.
 
 It runs pinned to the first CPU it may use (``placement.py``) and says so: one process, so one placement.
 Then the same for the bare Python relay of ``gli_roundtrip.py`` (its pass written out here: ``epoll``, the
@@ -30,7 +35,9 @@ import tempfile
 import time
 
 import binascii
+import ctypes
 import select
+import subprocess
 
 import posix_ipc
 
@@ -41,6 +48,39 @@ from placement import pin  # noqa: E402
 from hilgate.core.realtime import RealtimeScheduler  # noqa: E402
 from hilgate.daemon import service  # noqa: E402
 from hilgate.gli.queues import unlink_queues  # noqa: E402
+
+
+CALLGRIND_WARM_UP = 200
+CALLGRIND_C = """#include <valgrind/callgrind.h>
+void hg_toggle(void) { CALLGRIND_TOGGLE_COLLECT; }
+void hg_dump(const char *what) { CALLGRIND_DUMP_STATS_AT(what); }
+"""
+
+
+class Counting:
+    """Callgrind's collection switched on around each pass after the warm-up (a no-op outside callgrind:
+    ``PASS_COST_CALLGRIND`` unset).  The client requests are C macros: a small library is compiled for them."""
+
+    def __init__(self) -> None:
+        self.lib = None
+        if os.environ.get("PASS_COST_CALLGRIND"):
+            directory = tempfile.mkdtemp(prefix="hilgate-callgrind-")
+            source, library = os.path.join(directory, "toggle.c"), os.path.join(directory, "toggle.so")
+            with open(source, "w") as handle:
+                handle.write(CALLGRIND_C)
+            subprocess.run(["cc", "-O1", "-shared", "-fPIC", "-o", library, source], check=True)
+            self.lib = ctypes.CDLL(library)
+
+    def toggle(self, index: int) -> None:
+        if self.lib is not None and index >= CALLGRIND_WARM_UP:
+            self.lib.hg_toggle()
+
+    def dump(self, what: str) -> None:
+        if self.lib is not None:
+            self.lib.hg_dump(what.encode())
+
+
+COUNTING = Counting()
 
 
 def _drain(queue: posix_ipc.MessageQueue) -> int:
@@ -75,23 +115,26 @@ def measuring_scheduler(a: str, b: str, passes: int, profile: bool, pinned_cpu: 
             message = frame(b"ping" * 5, 0, 2)
             profiler = cProfile.Profile(time.thread_time) if profile else None  # CPU time: a loaded host does not skew it
             samples, states, frames, cpu = [], 0, 0, 0.0
-            for _ in range(passes):
+            for index in range(passes):
                 to_a.send(message)
                 cpu_started = time.thread_time()
                 started = time.perf_counter()
                 if profiler:
                     profiler.enable()
+                COUNTING.toggle(index)
                 self._handle_inputs(0.0)
                 while self.peek() <= self.model_time():
                     self.fire_due(self.model_time())
                 if self._deferred:
                     self.run_deferred()
+                COUNTING.toggle(index)
                 if profiler:
                     profiler.disable()
                 samples.append(time.perf_counter() - started)
                 cpu += time.thread_time() - cpu_started
                 states += _drain(from_a)
                 frames += _drain(from_b)
+            COUNTING.dump("daemon")
             samples.sort()
             print(f"one daemon pass (a's queue -> b's queue, in process, pinned to CPU {pinned_cpu}), {passes:,} passes: "
                   f"p10 {samples[passes // 10] * 1e6:.1f} µs, p50 {samples[passes // 2] * 1e6:.1f} µs, "
@@ -120,10 +163,11 @@ def relay_passes(passes: int, pinned_cpu: int) -> None:
     samples, cpu = [], 0.0
     gc.disable()
     try:
-        for _ in range(passes):
+        for index in range(passes):
             a_tx.send(message)
             cpu_started = time.thread_time()
             started = time.perf_counter()
+            COUNTING.toggle(index)
             for fd, _events in epoll.poll(0):
                 source, target, sender = route[fd]
                 got, _ = source.receive(0)
@@ -132,10 +176,12 @@ def relay_passes(passes: int, pinned_cpu: int) -> None:
                     if binascii.crc_hqx(got[4:end], 0) == int.from_bytes(got[end:end + 2], "big"):
                         target.send(got)
                         sender.send(READY_MESSAGE)
+            COUNTING.toggle(index)
             samples.append(time.perf_counter() - started)
             cpu += time.thread_time() - cpu_started
             _drain(a_rx)
             _drain(b_rx)
+        COUNTING.dump("relay")
     finally:
         gc.enable()
         epoll.close()
