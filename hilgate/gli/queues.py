@@ -333,9 +333,10 @@ class MqEndpoint:
     # -- link → application (the endpoint) -----------------------------------------------------
 
     def state(self, ready: bool) -> None:
-        message = self.protocol.state_change(ready)
+        protocol = self.protocol
+        message = protocol.state_change(ready)
         if message is not None and self._put(message):  # (_tell written out: every READY passes here)
-            self.protocol.told(message)
+            protocol.said = message[1]  # (protocol.told, written out)
 
     def _tell(self, message: bytes) -> None:
         if self._put(message):
