@@ -166,7 +166,10 @@ class RoutedLink:
     @property
     def ready(self) -> bool:
         backend = self.backend
-        if backend is None or backend.state != "up" or not backend.idle:
+        if backend is None or backend.state != "up":
+            return False
+        modem = backend.sim_modem  # a simulated link asks its modem itself (SimBackend.idle is its idle)
+        if not (modem.idle if modem is not None else backend.idle):
             return False
         for endpoint in self.endpoints:  # (a loop, not any() over a generator: READY asks it every time)
             if endpoint.busy:
