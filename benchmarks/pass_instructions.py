@@ -22,6 +22,7 @@ import sys
 import tempfile
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+CALLGRIND_H = "/usr/include/valgrind/callgrind.h"
 sys.path.insert(0, HERE)
 from pass_cost import CALLGRIND_WARM_UP  # noqa: E402
 
@@ -40,8 +41,8 @@ def totals(path: str) -> tuple[str, int]:
 
 def main() -> int:
     counted = int(sys.argv[1]) if len(sys.argv) > 1 else 1000
-    if shutil.which("valgrind") is None:
-        print("pass_instructions: not run (no valgrind: apt-get install valgrind)")
+    if shutil.which("valgrind") is None or shutil.which("cc") is None or not os.path.exists(CALLGRIND_H):
+        print(f"pass_instructions: not run (it needs valgrind, {CALLGRIND_H} and a C compiler: apt-get install valgrind gcc)")
         return 0
     directory = tempfile.mkdtemp(prefix="hilgate-callgrind-")
     out = os.path.join(directory, "callgrind.out")
