@@ -427,6 +427,7 @@ class RoutedLink:
             door.close(handle)
         self.doors = []
         self.endpoints = []
+        self._endpoints_changed()
         if self.backend is not None:
             self.backend.close()
         self.account.close(self.router.scheduler.now())
