@@ -111,7 +111,7 @@ class Endpoint(Protocol):
     busy: bool
     """True while this endpoint holds the link BUSY (an emulated modem awaiting an acknowledgement)."""
     assumes_busy: bool
-    """An optional capability (absent: False): this endpoint's applications take the link as BUSY once
+    """An optional capability (False in an endpoint without it): this endpoint's applications take the link as BUSY once
     they send a frame, and the endpoint knows it was told so (dccomms' WritePacket; the queue protocol
     notes it as it reads the frame).  When such an endpoint is the link's only one, the link need not
     announce BUSY after that endpoint's frame while its modem is on air: nobody would be told anything

@@ -201,7 +201,7 @@ class RoutedLink:
         applications assume BUSY once they send (``Endpoint.assumes_busy``)."""
         endpoints = self.endpoints
         sole = endpoints[0] if len(endpoints) == 1 else None
-        self._sole_assumer = sole if getattr(sole, "assumes_busy", False) else None
+        self._sole_assumer = sole if sole is not None and sole.assumes_busy else None
 
     @property
     def clients(self) -> int:
