@@ -136,6 +136,7 @@ class Client:
 class ZenohEndpoint:
     kind = "zenoh"
     busy = False
+    assumes_busy = False  # (hilgate.core.endpoint.Endpoint.assumes_busy: told BUSY by the link after a frame)
     phy = None  # (no PHY reports: hilgate.core.endpoint.Endpoint.phy)
 
     def __init__(self, door: "ZenohDoor", port: LinkPort):

@@ -68,6 +68,7 @@ class Writer:
 class Ros2Endpoint:
     kind = "ros2"
     busy = False
+    assumes_busy = False  # (hilgate.core.endpoint.Endpoint.assumes_busy: told BUSY by the link after a frame)
     phy = None  # (no PHY reports: hilgate.core.endpoint.Endpoint.phy)
 
     def __init__(self, door: "Ros2Door", port: LinkPort):
