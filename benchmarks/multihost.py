@@ -267,9 +267,7 @@ def throughput(count: int, size: int, rate: float | None) -> tuple[float, int, i
         received, first, last = result.get(timeout=120)
         counter.join()
         links = network.status("A")["links"] + network.status("B")["links"]
-        # (a frame B's application could not take is counted app_full in drops and, nobody else having
-        # it, no_reader in unread: the larger of the two, not their sum)
-        drops = max(sum(link["drops"] for link in links), sum(link["unread"] for link in links))
+        drops = sum(link["drops"] + link["unread"] for link in links)
         gaps = sum(view["gaps"] for view in network.status("B")["network"]["hosts"])
         return received / (last - start), count - received, drops, gaps
     finally:

@@ -343,7 +343,7 @@ class RoutedLink:
 
     def _hand(self, frame: AppFrame, endpoints: list[Endpoint], taken: bool = False) -> None:
         t = self.router.scheduler.now()
-        kept = False
+        kept = lost = False
         for endpoint in list(endpoints):
             outcome = endpoint.deliver(frame, t)
             if outcome == TAKEN:
@@ -351,11 +351,12 @@ class RoutedLink:
             elif outcome == KEPT:
                 kept = True
             elif outcome != ABSENT:
+                lost = True
                 self.lost(outcome, len(frame.real))
         if not taken:
             if kept:
                 self.unread_kept += 1  # waits in the queue for an application that starts late
-            else:
+            elif not lost:  # an application's own loss (app_full, client_slow) is counted once, as that
                 self.lost("no_reader", len(frame.real))
         if frame.on_delivered is not None and frame.dst == self.address:
             frame.on_delivered(frame, self)
