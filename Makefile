@@ -104,7 +104,8 @@ install uninstall:
 # lateness benchmark; without it ns-3 is "not run".
 NS3_PYTHON ?= $(wildcard .venv-ns3/bin/python)
 
-bench: $(VENV)/.installed
+# (the test tools' environment: it has the optional extras some benchmarks measure, tornado for web_cost.py)
+bench: $(VENV)/.installed-test
 	NS3_PYTHON='$(NS3_PYTHON)' $(BIN)/python benchmarks/run_all.py --out bench.out
 	$(BIN)/python benchmarks/readme_bench.py bench.out docs/performance.md
 	$(BIN)/python benchmarks/readme_bench.py bench.out docs/compiled-hot-path.md --only pass_cost.py gli_roundtrip.py multihost.py
