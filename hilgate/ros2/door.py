@@ -28,7 +28,6 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import deque
 from typing import Any
 
 from cyclonedds.core import Listener
@@ -36,7 +35,7 @@ from cyclonedds.core import Listener
 from ..core.backend import AppFrame
 from ..core.endpoint import ABSENT, TAKEN, LinkPort
 from ..core.packets import PacketError
-from ..gli.zenoh_door import CLIENT_BURST, CLIENT_QUEUE, CLIENT_RATE_HZ, MAX_CLIENTS, Bucket
+from ..gli.zenoh_door import CLIENT_QUEUE, MAX_CLIENTS, Sender, SenderQueues
 from .idl import message_class
 from .participant import DDSException, Participant, guarded
 from .poses import take_each
@@ -53,20 +52,20 @@ DOOR_BYTES = 16 << 20  # bytes of frames all links' ROS 2 doors hold in all
 READER_SAMPLES = 256   # samples Cyclone keeps for the reader before the listener takes them
 
 
-class Writer:
-    """What the door holds for one DDS writer (a node's publisher) of a link's ``send`` topic."""
+class Writer(Sender):
+    """What the door holds for one DDS writer (a node's publisher) of a link's ``send`` topic: its
+    queue holds ``(data, dst)``."""
 
-    __slots__ = ("name", "queue", "sends", "drops")
+    __slots__ = ()
 
-    def __init__(self, name: str):
-        self.name = name
-        self.queue: deque[tuple[bytes, int]] = deque()
-        self.sends = Bucket(CLIENT_RATE_HZ, CLIENT_BURST)
-        self.drops: dict[str, int] = {}
+    @staticmethod
+    def size(item: tuple[bytes, int]) -> int:
+        return len(item[0])
 
 
-class Ros2Endpoint:
+class Ros2Endpoint(SenderQueues):
     kind = "ros2"
+    source = "ros2"
     busy = False
     phy = None  # (no PHY reports: hilgate.core.endpoint.Endpoint.phy)
 
@@ -74,7 +73,7 @@ class Ros2Endpoint:
         self.door = door
         self.port = port
         self.ready: bool | None = None
-        self.writers: dict[int, Writer] = {}
+        self.senders: dict[int, Writer] = {}
         self.refused: dict[str, int] = {}
         self.lock = door.lock
         self.posted = False
@@ -133,12 +132,12 @@ class Ros2Endpoint:
             data = bytes(sample.data)
             size = len(data)
             with self.lock:
-                writer = self.writers.get(handle)
+                writer = self.senders.get(handle)
                 if writer is None:
-                    if len(self.writers) >= MAX_WRITERS:
+                    if len(self.senders) >= MAX_WRITERS:
                         self.refused["clients"] = self.refused.get("clients", 0) + 1
                         continue
-                    writer = self.writers[handle] = Writer(f"{handle:x}")
+                    writer = self.senders[handle] = Writer(f"{handle:x}")
                 cause = None
                 if size > MAX_PAYLOAD:
                     cause = "bad_frame"
@@ -175,39 +174,8 @@ class Ros2Endpoint:
         if wake:
             self.door.post(self._pump)
 
-    def _pump(self) -> None:
-        """On the loop: report what was dropped, then the writers' frames in turn while the link is READY."""
-        door, port = self.door, self.port
-        with self.lock:
-            self.posted = False
-            drops = [(writer.name, writer.drops) for writer in self.writers.values() if writer.drops]
-            for writer in self.writers.values():
-                writer.drops = {}
-            refused, self.refused = self.refused, {}
-        for name, counts in drops:
-            for cause, n in counts.items():
-                port.lost(cause, 0, src=f"ros2:{name}", n=n)
-        for cause, n in refused.items():
-            port.lost(cause, 0, src="ros2", n=n)
-        while port.ready:
-            sent = False
-            for writer in list(self.writers.values()):
-                with self.lock:
-                    if not writer.queue:
-                        continue
-                    data, dst = writer.queue.popleft()
-                    door.queued -= len(data)
-                self._send(data, dst)
-                sent = True
-                if not port.ready:
-                    break
-            if not sent:
-                break
-        with self.lock:  # writers with nothing queued and nothing sent lately are forgotten
-            for handle in [h for h, w in self.writers.items() if not w.queue and w.sends.full()]:
-                del self.writers[handle]
-
-    def _send(self, data: bytes, dst: int) -> None:
+    def _forward(self, item: tuple[bytes, int], sender: Sender) -> None:
+        data, dst = item
         try:
             self.port.send_payload(data, dst)
         except PacketError as exc:
@@ -219,10 +187,7 @@ class Ros2Endpoint:
         participant = self.door.participant
         for entity in (self.reader, self.recv, self.state_writer):
             participant.delete(entity)
-        with self.lock:
-            for writer in self.writers.values():
-                self.door.queued -= sum(len(data) for data, _ in writer.queue)
-                writer.queue.clear()
+        self._drop_queued()
 
 
 class Ros2Door:
