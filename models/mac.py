@@ -154,5 +154,33 @@ class Duplicates:
         return False
 
 
+class HoldingMac(Mac):
+    """A MAC that takes one frame from the FIFO at a time and holds it until it is acknowledged or given
+    up (CS-ALOHA, S-FAMA): the frame held and its attempts, the one timer it waits on, the frames it
+    delivered (a retransmission is delivered once), and the farthest receiver (``max_range_m``, else
+    the modem's range) that its timings are sized for."""
+
+    def __init__(self, max_range_m: float | None, max_retries: int):
+        super().__init__()
+        self.max_range_m = max_range_m
+        self.max_retries = max_retries
+        self.state = "idle"
+        self.current: Frame | None = None
+        self.attempts = 0
+        self.timer: Any = None
+        self.duplicates = Duplicates()
+
+    @property
+    def holding(self) -> bool:
+        return self.current is not None
+
+    def max_range(self, remedy: str) -> float:
+        """The farthest receiver; a ValueError saying ``remedy`` if it is unlimited (no timing fits)."""
+        max_range = self.max_range_m if self.max_range_m is not None else self.modem.range_m[1]
+        if max_range == float("inf"):
+            raise ValueError(f"{self.name}: {remedy} (the modem's range is unlimited)")
+        return max_range
+
+
 class NoMac(Mac):
     """Transmit the head of the FIFO as soon as the PHY is free: the timing rule of DESIGN.md exactly."""
