@@ -127,14 +127,8 @@ class CsAloha(HoldingMac):
         modem.observer.mac(modem.clock.now(), modem, self.current, "retx", attempt=self.attempts)
         self._backoff("no_ack")
 
-    def _done(self) -> None:
-        self.current = None
-        self.state = IDLE
-        if self.timer is not None:
-            self.modem.clock.cancel(self.timer)
-            self.timer = None
+    def _next(self) -> None:
         self._try_send()
-        self.modem.check_idle()
 
     # -- receiving ------------------------------------------------------------------------------
 

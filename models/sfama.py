@@ -177,14 +177,8 @@ class SFama(HoldingMac):
         self.timer = None
         self._plan()
 
-    def _done(self) -> None:
-        self.current = None
-        self.state = IDLE
-        if self.timer is not None:
-            self.modem.clock.cancel(self.timer)
-            self.timer = None
+    def _next(self) -> None:
         self._plan()
-        self.modem.check_idle()
 
     def on_tx_done(self, frame: "Frame") -> None:
         if frame is self.current and self.state == SEND_DATA:
