@@ -163,12 +163,31 @@ class SenderQueues(ABC):
     under ``lock``, and posts :meth:`_pump` to the loop once (``posted``)."""
 
     source: str  # the ``src`` of what is counted lost ("zenoh", "ros2"; a sender's: "zenoh:<name>")
-    door: Any  # its ``queued``: the bytes every link's door holds, under ``lock``
-    port: LinkPort
-    lock: threading.Lock
-    senders: dict[Any, Sender]
-    refused: dict[str, int]  # frames and queries of no sender the door could keep
-    posted: bool
+
+    def __init__(self, door: Any, port: LinkPort):
+        self.door = door  # its ``queued``: the bytes every link's door holds, under ``lock``
+        self.port = port
+        self.ready: bool | None = None
+        self.senders: dict[Any, Sender] = {}
+        self.refused: dict[str, int] = {}  # frames and queries of no sender the door could keep
+        self.lock: threading.Lock = door.lock  # (one for the door: its byte count is shared)
+        self.posted = False
+
+    def _admit(self, sender: Sender, size: int, max_size: int, door_bytes: int) -> bool:
+        """Under the lock, on the transport's thread: whether ``sender`` may queue a frame of ``size``
+        bytes (then they are counted in the door's), else the drop counted with its cause."""
+        door = self.door
+        if size > max_size:
+            cause = "bad_frame"
+        elif not sender.sends.take():
+            cause = "rate"
+        elif len(sender.queue) >= CLIENT_QUEUE or door.queued + size > door_bytes:
+            cause = "client_queue"
+        else:
+            door.queued += size
+            return True
+        sender.drops[cause] = sender.drops.get(cause, 0) + 1
+        return False
 
     def _pump(self) -> None:
         """On the loop: report what was dropped, then the senders' frames in turn while the link is READY."""
@@ -220,15 +239,11 @@ class ZenohEndpoint(SenderQueues):
     busy = False
     phy = None  # (no PHY reports: hilgate.core.endpoint.Endpoint.phy)
 
+    senders: dict[str, Client]  # (Clients: they ask commands too)
+
     def __init__(self, door: "ZenohDoor", port: LinkPort):
-        self.door = door
-        self.port = port
+        super().__init__(door, port)
         self.info: dict[str, Any] = {}
-        self.ready: bool | None = None
-        self.senders: dict[str, Client] = {}  # (Clients: they ask commands too)
-        self.refused: dict[str, int] = {}  # SENDs and queries of no client the door could keep
-        self.lock = door.lock  # (one for the door: its byte count is shared)
-        self.posted = False
         self.info_bucket = Bucket(QUERY_RATE_HZ * 4, QUERY_BURST * 4)
         session = door.session
         self.base = base = link_key(door.prefix, door.host, port.id, "")
@@ -279,26 +294,13 @@ class ZenohEndpoint(SenderQueues):
         return client
 
     def _on_send(self, sample: Any) -> None:
-        size = len(sample.payload)
-        door = self.door
         with self.lock:
             client = self._client(str(sample.key_expr), "send")
-            if client is not None:
-                cause = None
-                if size > MAX_SEND:
-                    cause = "bad_frame"
-                elif not client.sends.take():
-                    cause = "rate"
-                elif len(client.queue) >= CLIENT_QUEUE or door.queued + size > DOOR_BYTES:
-                    cause = "client_queue"
-                if cause is None:
-                    client.queue.append(sample.payload.to_bytes())
-                    door.queued += size
-                else:
-                    client.drops[cause] = client.drops.get(cause, 0) + 1
+            if client is not None and self._admit(client, len(sample.payload), MAX_SEND, DOOR_BYTES):
+                client.queue.append(sample.payload.to_bytes())
             wake, self.posted = not self.posted, True
         if wake:
-            door.post(self._pump)
+            self.door.post(self._pump)
 
     def _forward(self, data: bytes, sender: Sender) -> None:
         client = sender.name

@@ -35,7 +35,7 @@ from cyclonedds.core import Listener
 from ..core.backend import AppFrame
 from ..core.endpoint import ABSENT, TAKEN, LinkPort
 from ..core.packets import PacketError
-from ..gli.zenoh_door import CLIENT_QUEUE, MAX_CLIENTS, Sender, SenderQueues
+from ..gli.zenoh_door import MAX_CLIENTS, Sender, SenderQueues
 from .idl import message_class
 from .participant import DDSException, Participant, guarded
 from .poses import take_each
@@ -69,14 +69,10 @@ class Ros2Endpoint(SenderQueues):
     busy = False
     phy = None  # (no PHY reports: hilgate.core.endpoint.Endpoint.phy)
 
+    senders: dict[int, Writer]
+
     def __init__(self, door: "Ros2Door", port: LinkPort):
-        self.door = door
-        self.port = port
-        self.ready: bool | None = None
-        self.senders: dict[int, Writer] = {}
-        self.refused: dict[str, int] = {}
-        self.lock = door.lock
-        self.posted = False
+        super().__init__(door, port)
         self.matched = 0  # subscriptions of recv (kept up to date by Cyclone: asking per frame costs more)
         self.Frame = message_class(FRAME)
         self.Bool = message_class(BOOL)
@@ -124,13 +120,11 @@ class Ros2Endpoint(SenderQueues):
     # -- nodes → link (on Cyclone's threads: counted and queued, never waiting) ----------------------
 
     def _on_send(self, reader: Any) -> None:
-        door = self.door
         for sample in take_each(reader, self._refuse_decode):
             if not hasattr(sample, "data"):  # (by name: a DDS sample, or the invalid one of a writer gone)
                 continue  # a writer went away
             handle = sample.sample_info.publication_handle
             data = bytes(sample.data)
-            size = len(data)
             with self.lock:
                 writer = self.senders.get(handle)
                 if writer is None:
@@ -138,18 +132,8 @@ class Ros2Endpoint(SenderQueues):
                         self.refused["clients"] = self.refused.get("clients", 0) + 1
                         continue
                     writer = self.senders[handle] = Writer(f"{handle:x}")
-                cause = None
-                if size > MAX_PAYLOAD:
-                    cause = "bad_frame"
-                elif not writer.sends.take():
-                    cause = "rate"
-                elif len(writer.queue) >= CLIENT_QUEUE or door.queued + size > DOOR_BYTES:
-                    cause = "client_queue"
-                if cause is None:
+                if self._admit(writer, len(data), MAX_PAYLOAD, DOOR_BYTES):
                     writer.queue.append((data, sample.dst))
-                    door.queued += size
-                else:
-                    writer.drops[cause] = writer.drops.get(cause, 0) + 1
         self._wake()
 
     def _refuse_decode(self, cause: str) -> None:
