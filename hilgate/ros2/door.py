@@ -17,7 +17,8 @@ topic       type                       who publishes, what
 **Bounded per writer**, as the Zenoh door is per client (:mod:`hilgate.gli.zenoh_door`): Cyclone DDS
 calls :meth:`Ros2Endpoint._on_send` on its own thread; it takes every sample there, each DDS writer (a
 node's publisher) has its own queue at the door, filled at most at the Zenoh door's rate, and the loop
-takes one frame of each writer in turn while the link is READY.  What a writer sends beyond is
+takes one frame of each writer in turn while the link is READY (the Zenoh door's pump,
+:class:`hilgate.gli.zenoh_door.SenderQueues`).  What a writer sends beyond is
 dropped and counted (``rate``, ``client_queue``); a sample that does not decode is ``bad_frame``;
 what Cyclone itself could not keep (the reader's history full, a best-effort sample lost on the way)
 is counted too (``dds_rejected``, ``dds_lost``).  At most :data:`MAX_WRITERS` writers per link.
