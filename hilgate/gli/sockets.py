@@ -154,11 +154,14 @@ class GliClient:
 
     def deliver(self, frame: Any, t: float) -> str:
         """``client_slow`` if the frame could not be queued for this client: it has stopped reading and
-        its output passed the cap, so it is disconnected (it would only cost the daemon memory)."""
+        its output passed the cap, so it is disconnected (it would only cost the daemon memory).  A
+        client that has closed its end is ABSENT: the frame is not its loss."""
         if self.connection.closed or self.connection.write_failed:
             return ABSENT
         if self.connection.write(wire.encode_recv(frame.src, frame.dst, t, frame.payload)):
             return TAKEN
+        if self.connection.write_failed:  # it has just gone (closed its end): not slow, and not here
+            return ABSENT
         self._too_slow()
         return "client_slow"
 
