@@ -182,6 +182,13 @@ class Network:
     def status(self, host: str) -> dict:
         return self.daemons[host].status()
 
+    def heard(self, host: str, other: str) -> tuple[int, float]:
+        """How many transmissions of ``other`` daemon ``host`` took, and their summed delay (s): from the
+        model time ``other`` put each on air (its loop reading the application's frame) to the model
+        time ``host``'s loop took its message (the daemons' own ``net_delay_mean_ms``, to 1 µs)."""
+        view = next(v for v in self.status(host)["network"]["hosts"] if v["host"] == other)
+        return view["heard"], (view["net_delay_mean_ms"] or 0.0) * 1e-3 * view["heard"]
+
     def _sees(self, host: str, other: str) -> bool:
         views = self.status(host)["network"]["hosts"]
         return any(v["host"] == other and v["state"] == "up" for v in views)
@@ -192,8 +199,11 @@ class Network:
         unlink_queues(self.links)
 
 
-def through_hilgate(count: int, placement: Placement, secure: bool = True) -> list[float]:
-    """The client (this thread) on the placement's step 0, daemon A on 1, daemon B on 2, B's echo on 3."""
+def through_hilgate(count: int, placement: Placement, secure: bool = True) -> tuple[list[float], tuple[float, float]]:
+    """The client (this thread) on the placement's step 0, daemon A on 1, daemon B on 2, B's echo on 3.
+    Returns the round trips and the mean delay A → B and B → A over them (:meth:`Network.heard`: the
+    sending daemon's pass, the encoding, Zenoh and the hand-over to the receiving daemon's loop).
+    Each direction carries the offset between the daemons' epochs (±10 µs); their sum does not."""
     a, b = f"mha{os.getpid()}", f"mhb{os.getpid()}"
     network = Network(a, b, secure=secure, cpus=(placement.cpu(1), placement.cpu(2)))
     try:
@@ -204,8 +214,11 @@ def through_hilgate(count: int, placement: Placement, secure: bool = True) -> li
         message = frame(b"\xa5" * 2048, 0, 2)
         assert len(message) == MESSAGE
         samples = []
+        heard = []  # (the daemons asked after the warm-up and at the end: between round trips)
         with pinned(placement.cpu(0)):
-            for _ in range(count + WARM_UP):
+            for i in range(count + WARM_UP):
+                if i == WARM_UP:
+                    heard.append((network.heard("B", "A"), network.heard("A", "B")))
                 start = time.perf_counter()
                 tx.send(message)
                 while True:
@@ -213,10 +226,13 @@ def through_hilgate(count: int, placement: Placement, secure: bool = True) -> li
                     if reply[0] == 0:
                         break
                 samples.append(time.perf_counter() - start)
+        heard.append((network.heard("B", "A"), network.heard("A", "B")))
         echo.join()
         tx.close()
         rx.close()
-        return samples[WARM_UP:]
+        (ab0, ba0), (ab1, ba1) = heard
+        delays = tuple((end[1] - begin[1]) / max(1, end[0] - begin[0]) for begin, end in ((ab0, ab1), (ba0, ba1)))
+        return samples[WARM_UP:], delays
     finally:
         network.close()
 
@@ -301,22 +317,28 @@ def main() -> None:
               f"(bare: {placement.describe(['ping', 'pong'])})", flush=True)
     if why_not:
         print(why_not, flush=True)
-    runs = {"bare": lambda n, p: bare(n, p), "tls": lambda n, p: through_hilgate(n, p, secure=True),
+    runs = {"bare": lambda n, p: (bare(n, p), None), "tls": lambda n, p: through_hilgate(n, p, secure=True),
             "insecure": lambda n, p: through_hilgate(n, p, secure=False)}
     sides = list(SIDES)
     p50s: dict[tuple[str, str], list[float]] = {}
+    shares: dict[tuple[str, str], list[tuple[float, float]]] = {}  # (mean round trip, A → B + B → A)
     for repeat in range(1, args.repeats + 1):
         for k in range(len(chosen)):
             placement = chosen[(repeat - 1 + k) % len(chosen)]  # each placement goes first in turn
             order = sides[(repeat - 1) % 3:] + sides[:(repeat - 1) % 3]  # and each side, from one repeat to the next
-            got = {}
+            got, delays = {}, {}
             for side in order:
-                got[side] = percentiles(runs[side](args.round_trips, placement))
+                samples, delays[side] = runs[side](args.round_trips, placement)
+                got[side] = percentiles(samples)
                 p50s.setdefault((placement.name, side), []).append(got[side][0])
+                if delays[side] is not None:
+                    shares.setdefault((placement.name, side), []).append((statistics.fmean(samples), sum(delays[side])))
             print(f"repeat {repeat}, {placement.name:>11}: " + "; ".join(
                 f"{SIDES[side]} p50 {got[side][0] * 1e6:.0f} µs (p99 {got[side][1] * 1e6:.0f})" for side in sides)
                 + f"; ratio TLS/bare {got['tls'][0] / got['bare'][0]:.2f}, insecure/bare "
-                f"{got['insecure'][0] / got['bare'][0]:.2f}; order: {', '.join(order)}", flush=True)
+                f"{got['insecure'][0] / got['bare'][0]:.2f}; order: {', '.join(order)}; mean A -> B / B -> A: "
+                + ", ".join(f"{side} {delays[side][0] * 1e6:.0f} / {delays[side][1] * 1e6:.0f} µs" for side in ("tls", "insecure")),
+                flush=True)
     print(f"round trip of a {MESSAGE}-byte frame, p50, {args.round_trips:,} round trips x {args.repeats} per placement, "
           f"min / median / max over the repeats:")
     for placement in chosen:
@@ -328,6 +350,15 @@ def main() -> None:
             f"{SIDES[side]} {spread([1e6 * v for v in got[side]], 0)} µs" for side in sides)
             + f"; ratio TLS/bare {spread(tls)}, insecure/bare {spread(plain)}; TLS costs {spread(cost, 0)} µs", flush=True)
     print("(target: <= 3 x bare Zenoh at p50, with TLS)")
+    print("where hilgate's round trip goes, means, min / median / max over the repeats: from one daemon reading the "
+          "frame to the other's loop taking its message, both ways (the sender's pass, encoding, Zenoh, the hand-over "
+          "to the loop; the daemons' own net_delay), and the rest (the receivers' passes, four queue hops, the echo):")
+    for placement in chosen:
+        for side in ("tls", "insecure"):
+            pairs = shares[(placement.name, side)]
+            print(f"  {placement.name:>11}, {side:>8}: round trip {spread([1e6 * m for m, _ in pairs], 0)} µs = "
+                  f"both ways {spread([1e6 * n for _, n in pairs], 0)} µs + the rest "
+                  f"{spread([1e6 * (m - n) for m, n in pairs], 0)} µs", flush=True)
     if args.frames <= 0:
         return  # (--frames 0: the round trips alone)
     print("delivery on the wall clock and throughput: unpinned (the kernel places the daemons and applications); "

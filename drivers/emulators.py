@@ -216,6 +216,7 @@ class EmulatedModem(ABC):
     state is set, since a pty is a host at once."""
 
     kind = "emulator"
+    assumes_busy = False  # (hilgate.core.endpoint.Endpoint.assumes_busy: an emulated modem is told BUSY by the link)
     codec: Any = None
 
     def __init__(self, port: LinkPort, spec: dict, scheduler: Any):

@@ -41,6 +41,8 @@ SERIAL = {
         "the README's walk: its daemons are the README's commands, which the kit does not start",
     "test_formation.py::test_the_application_classes_keep_formation_through_hilgate_app":
         "examples/formation/run.py: five links' queues in a daemon of its own",
+    "test_benchmarks_run.py::test_a_benchmark_runs_to_its_summary_on_a_small_case":
+        "the benchmarks' daemons and anchors make their own queues (gli_roundtrip.py's relay four of 80 kB)",
     "test_benchmarks_run.py::test_a_benchmark_with_daemons_prints_its_figures_on_a_small_case":
         "the benchmarks' own daemons (several, one after the other), their processes pinned to CPUs",
 }

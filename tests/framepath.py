@@ -160,6 +160,93 @@ def trace_one_frame(directory: str) -> Path:
     return path
 
 
+@dataclass
+class Run:
+    """What :func:`run_frames` saw: per pass, the messages link a's application and link b's found in their
+    queues (as they read them), and the daemon's trace."""
+
+    to_a: list[list[bytes]] = field(default_factory=list)
+    to_b: list[list[bytes]] = field(default_factory=list)
+    trace: str = ""
+
+
+def _take(queue: posix_ipc.MessageQueue) -> list[bytes]:
+    taken = []
+    while True:
+        try:
+            taken.append(queue.receive(0)[0])
+        except posix_ipc.BusyError:
+            return taken
+
+
+def run_frames(directory: str, passes: int, prepare=None, scene_text: str = SCENE, send=None) -> Run:
+    """The real daemon on ``scene_text`` (links ``{a}`` and ``{b}``), on a model clock of its own: both
+    applications say REQ_STATE, then each pass a's application sends a frame to address 2 and every event
+    it causes fires (a pass as in :func:`trace_one_frame`).  ``prepare(router, a, b)`` runs once the links
+    are up, before the applications speak (to attach an endpoint, to take a shortcut away); ``send(router,
+    a)``, if given, sends each pass's frame instead of a's application (a frame from no endpoint)."""
+    token = uuid.uuid4().hex[:8]
+    a, b = f"fra{token}", f"frb{token}"
+    scene = os.path.join(directory, "scene.yaml")
+    with open(scene, "w") as handle:
+        handle.write(scene_text.format(a=a, b=b))
+    trace_path = os.path.join(directory, "trace.jsonl")
+    run = Run()
+    daemon: list[service.Daemon] = []
+
+    class PassScheduler(RealtimeScheduler):
+        clock = 10.0
+
+        def model_time(self) -> float:
+            return self.clock
+
+        def settle(self) -> None:
+            self.fire_due(self.clock + 1e-3)
+            if self._deferred:
+                self.run_deferred()
+
+        def run(self, until: float = float("inf")) -> int:
+            if prepare is not None:
+                prepare(daemon[0].router, a, b)
+            queues = {name: posix_ipc.MessageQueue(f"/{name}") for name in
+                      (f"{a}_tx_dlnk_phy", f"{a}_rx_dlnk_phy", f"{b}_tx_dlnk_phy", f"{b}_rx_dlnk_phy")}
+            to_a, from_a = queues[f"{a}_tx_dlnk_phy"], queues[f"{a}_rx_dlnk_phy"]
+            to_b, from_b = queues[f"{b}_tx_dlnk_phy"], queues[f"{b}_rx_dlnk_phy"]
+            to_b.send(b"\x01")
+            to_a.send(b"\x01")
+            self._handle_inputs(0.0)
+            self.settle()
+            run.to_a.append(_take(from_a))
+            run.to_b.append(_take(from_b))
+            message = _frame(b"ping" * 5, 2)
+            for _ in range(passes):
+                self.clock += 1.0
+                self.settle()
+                if send is None:
+                    to_a.send(message)
+                    self._handle_inputs(0.0)
+                else:
+                    send(daemon[0].router, a)
+                self.settle()
+                run.to_a.append(_take(from_a))
+                run.to_b.append(_take(from_b))
+            for queue in queues.values():
+                queue.close()
+            return 0
+
+    original = service.RealtimeScheduler
+    service.RealtimeScheduler = PassScheduler
+    try:
+        daemon.append(service.Daemon(scene, runtime_dir=os.path.join(directory, "rt"), trace_path=trace_path))
+        daemon[0].run()
+    finally:
+        service.RealtimeScheduler = original
+        unlink_queues((a, b))
+    with open(trace_path) as handle:
+        run.trace = handle.read()
+    return run
+
+
 if __name__ == "__main__":
     import tempfile
 

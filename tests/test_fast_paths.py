@@ -98,3 +98,139 @@ def test_mac_none_writes_the_trace_its_macs_calls_wrote(scene, plain_mac):
     assert not any(modem.direct for modem in slow_run.world.modems.values())
     assert sum(modem.mac.calls for modem in slow_run.world.modems.values()) > 0  # the slow path was taken
     assert fast.count("\n") > 100 and fast == slow
+
+
+# -- no BUSY announcement after a queue application's own frame (issue 31) ---------------------------------
+#
+# After a frame the link's endpoints are told its state at the end of the instant.  When the frame came
+# through the link's only endpoint, a queue endpoint whose application took the link as BUSY as it sent,
+# and the simulated modem is on air (so READY can only come when its transmission ends, which tells the
+# link), that announcement would tell nobody anything: the link skips it.
+
+from framepath import SCENE as TWO_LINKS  # noqa: E402
+from framepath import run_frames  # noqa: E402
+
+from hilgate.core.endpoint import ABSENT  # noqa: E402
+
+BUSY_MESSAGE, READY_MESSAGE = b"\x02\x00", b"\x02\x01"
+
+
+class Listening:
+    """An endpoint of link a beside its queues, that only listens to READY/BUSY (as a socket client does)."""
+
+    kind = "listening"
+    busy = False
+    phy = None
+
+    def __init__(self) -> None:
+        self.states: list[bool] = []
+
+    def deliver(self, frame, t):
+        return ABSENT
+
+    def state(self, ready: bool) -> None:
+        self.states.append(ready)
+
+    def close(self) -> None:
+        pass
+
+
+def announcements(router, link_id: str) -> list[int]:
+    """Count link ``link_id``'s announcements (in a list, so the count is read after the run)."""
+    link = router.links[link_id]
+    counted = [0]
+    announce = link._announce_state
+
+    def counting() -> None:
+        counted[0] += 1
+        announce()
+
+    link._announce_state = counting  # (the bound method the link defers is looked up per call)
+    return counted
+
+
+def slow_path(router, link_id: str) -> None:
+    """The link's queue endpoint no longer says its application assumes BUSY: every frame is announced."""
+    link = router.links[link_id]
+    for endpoint in link.endpoints:
+        endpoint.assumes_busy = False
+    link._endpoints_changed()
+
+
+PASSES = 5
+
+
+def test_no_busy_announcement_after_the_only_endpoints_own_frame_and_the_same_messages_and_trace(tmp_path):
+    counted: dict[str, list[int]] = {}
+
+    def fast(router, a, b):
+        counted["fast"] = announcements(router, a)
+
+    def slow(router, a, b):
+        slow_path(router, a)
+        counted["slow"] = announcements(router, a)
+
+    (tmp_path / "fast").mkdir()
+    (tmp_path / "slow").mkdir()
+    taken = run_frames(str(tmp_path / "fast"), PASSES, fast)
+    anew = run_frames(str(tmp_path / "slow"), PASSES, slow)
+    # taken when its conditions hold: one announcement per frame (READY, when the modem is done), not two
+    assert counted["fast"][0] == PASSES  # (REQ_STATE is answered at once, not announced)
+    assert counted["slow"][0] == 2 * PASSES
+    # and nobody is told anything else: the applications read the same messages, the trace is the same
+    assert taken.to_a == anew.to_a
+    assert taken.to_a[1:] == [[READY_MESSAGE]] * PASSES
+    assert taken.to_b == anew.to_b and all(len(got) == 1 and got[0][0] == 0 for got in taken.to_b[1:])
+    assert taken.trace.count('"ev": "tx"') == PASSES
+    assert strip_names(taken.trace) == strip_names(anew.trace)
+
+
+def strip_names(trace: str) -> str:
+    """The trace's events (not its first line: the run's id, wall-clock start and directory) with the links'
+    random names made alike (``fra…``/``frb…``)."""
+    import re
+
+    first, events = trace.split("\n", 1)
+    assert '"ev": "run"' in first
+    return re.sub(r"fr([ab])[0-9a-f]{8}", r"fr\1", events)
+
+
+def test_busy_is_announced_when_another_endpoint_listens(tmp_path):
+    listening = Listening()
+    counted = {}
+
+    def prepare(router, a, b):
+        router.links[a].attach(listening)
+        counted["n"] = announcements(router, a)
+
+    got = run_frames(str(tmp_path), PASSES, prepare)
+    assert counted["n"][0] == 2 * PASSES  # not taken: the listener must hear BUSY
+    assert listening.states == [True] + [False, True] * PASSES  # (READY as the link came up, then each frame)
+    assert got.to_a[1:] == [[READY_MESSAGE]] * PASSES
+
+
+def test_busy_is_announced_when_the_frame_did_not_come_through_the_queue(tmp_path):
+    counted = {}
+
+    def prepare(router, a, b):
+        counted["n"] = announcements(router, a)
+
+    def send(router, a):
+        router.links[a].send_payload(b"from elsewhere", 2)  # a frame from no endpoint (as a command sends)
+
+    got = run_frames(str(tmp_path), PASSES, prepare, send=send)
+    assert counted["n"][0] == 2 * PASSES  # not taken: a's application, told READY, must hear BUSY
+    assert got.to_a[1:] == [[BUSY_MESSAGE, READY_MESSAGE]] * PASSES
+
+
+def test_busy_is_announced_when_the_modem_is_not_on_air_after_the_send(tmp_path):
+    # under S-FAMA the frame waits for its slot: the PHY is free after the send, so the link announces
+    scene = TWO_LINKS.replace("packet: vl2b}}", "packet: vl2b, mac: {{protocol: s-fama, max_range_m: 100}}}}")
+    assert scene.count("s-fama") == 2
+    counted = {}
+
+    def prepare(router, a, b):
+        counted["n"] = announcements(router, a)
+
+    run_frames(str(tmp_path), 1, prepare, scene_text=scene)
+    assert counted["n"][0] == 2  # BUSY after the frame (told nobody anything), READY once it was sent

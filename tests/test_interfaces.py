@@ -86,6 +86,7 @@ def test_the_checker_sees_what_is_missing():
     class NoState:
         kind = "x"
         busy = False
+        assumes_busy = False
         phy = None
 
         def deliver(self, frame, t):

@@ -481,7 +481,7 @@ links:
             frame = Frame(1, b, a, 1, 9, 0.0, app_frame=AppFrame(vl2b.encode(b"x", 2, 1), b"x", vl2b, 1, 2, 1, 0.0))
             frame.src_addr = 2
             publishers = {h: session.declare_publisher(f"{prefix}/tx/{h}/ac") for h in "ZBA"}
-            wait_until(lambda: all(p.matching_status for p in publishers.values()), what="the daemon's subscriber")
+            wait_until(lambda: all(p.matching_status.matching for p in publishers.values()), what="the daemon's subscriber")
             publishers["Z"].put(encode_transmission("Z", 0, 1, frame, 0.0, 0.1, None))         # a host nobody named
             publishers["B"].put(encode_transmission("B", time.time_ns(), 1, frame, 86400.0, 0.1, None))  # a day ahead
             publishers["B"].put(b"\x00\x00\x00\x05garbage")                                   # not a message

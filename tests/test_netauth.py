@@ -419,7 +419,7 @@ def test_fuzzed_network_messages_leave_every_trace_line_json(lab):
     try:
         wait_until(lambda: peers(thief), what="the thief to connect")
         publisher = thief.declare_publisher(f"{lab.prefix}/tx/B/ac")
-        wait_until(lambda: publisher.matching_status, what="A's subscriber")
+        wait_until(lambda: publisher.matching_status.matching, what="A's subscriber")
         for i in range(3000):
             choice = i % 3
             kind, src = "data", lab.b

@@ -62,8 +62,10 @@ class LinkPort(Protocol):
     def send_payload(self, payload: bytes, dst: int) -> None:
         """Wrap ``payload`` in the link's packet class and send it (a socket client's SEND)."""
 
-    def send_decoded(self, decoded: Decoded) -> None:
-        """Send a frame a dccomms application wrote (real packet and virtual area, decoded)."""
+    def send_decoded(self, decoded: Decoded, sender: Any = None) -> None:
+        """Send a frame a dccomms application wrote (real packet and virtual area, decoded); ``sender``: the
+        endpoint it came through, when its applications take the link as BUSY once they send
+        (:attr:`Endpoint.assumes_busy`)."""
 
     def lost(self, cause: str, size: int, src: str = "medium", n: int = 1) -> None:
         """A frame this endpoint could not take or pass on (``n`` alike): counted by cause and traced."""
@@ -108,6 +110,12 @@ class Endpoint(Protocol):
     kind: str
     busy: bool
     """True while this endpoint holds the link BUSY (an emulated modem awaiting an acknowledgement)."""
+    assumes_busy: bool
+    """An optional capability (False in an endpoint without it): this endpoint's applications take the link as BUSY once
+    they send a frame, and the endpoint knows it was told so (dccomms' WritePacket; the queue protocol
+    notes it as it reads the frame).  When such an endpoint is the link's only one, the link need not
+    announce BUSY after that endpoint's frame while its modem is on air: nobody would be told anything
+    (issue 31, :meth:`hilgate.daemon.router.RoutedLink.send`)."""
     phy: Callable[[PhyEvent], Any] | None
     """An optional capability: where the link reports its simulated modem's transmissions and arrivals
     (an emulated modem's extended notifications); None for an endpoint that does not want them, and

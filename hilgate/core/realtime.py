@@ -172,13 +172,15 @@ class RealtimeScheduler(VirtualScheduler):
         self.fire_due(t)
         self.advance(t)
 
-    def _handle_inputs(self, timeout: float) -> None:
+    def _handle_inputs(self, timeout: float, entry: float | None = None) -> None:
         """Wait up to ``timeout`` wall seconds for input (0: only look), then handle what is ready, each
         input at its own model time.  The first input is stamped with the clock read as the wait or the
-        look ended (one reading of the clock, not three: this is every frame's first step)."""
+        look ended (one reading of the clock, not three: this is every frame's first step).  ``entry``:
+        the model time the caller read just before, from which ``timeout`` was reckoned (None: read now)."""
         io = self.io
         if timeout > 0:
-            entry = self.model_time()
+            if entry is None:
+                entry = self.model_time()
             deadline = entry + io.waits_until(timeout) * self.speed
             events_ready = io.wait(timeout)  # (the ready descriptors: one system call for a long wait)
             t = self.model_time()
@@ -281,22 +283,25 @@ class RealtimeScheduler(VirtualScheduler):
         policy = self.wait
         while self._running:
             now = self.model_time()
-            while self.peek() <= now:  # (again: firing took time, and more became due meanwhile)
+            next_t = self.peek()  # (kept: each peek and clock read is one of every input's few calls)
+            while next_t <= now:  # (again: firing took time, and more became due meanwhile)
                 fired += self.fire_due(now)
                 now = self.model_time()
+                next_t = self.peek()
             if self._deferred:
                 self.run_deferred()  # the instant is over (an input's, with no timer after it yet)
+                next_t = self.peek()  # (a deferred call may have set a timer)
             if now >= until:
                 self.advance(until)
                 break
-            next_t = self.peek()
             wait = (min(next_t, until) - now) / self.speed
             spin = policy.spin_s
             if wait > spin and not self.io.posted and not policy.keep_polling(time.perf_counter()):
                 # (a posted call is never slept over: only the first of several writes a wake-up)
                 self._collect_if_idle(wait)
-                wait = (min(next_t, until) - self.model_time()) / self.speed
-                self._handle_inputs(min(max(0.0, wait - spin), 0.5))
+                entry = self.model_time()  # (read once: the wait is reckoned from it, and the blind time)
+                wait = (min(next_t, until) - entry) / self.speed
+                self._handle_inputs(min(max(0.0, wait - spin), 0.5), entry)
             else:
                 self._handle_inputs(0.0)
         return fired

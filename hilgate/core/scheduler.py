@@ -85,6 +85,7 @@ class VirtualScheduler:
         self._heap: list[list[Any]] = []
         self._sequence = itertools.count()
         self._deferred: list[Callable[[], Any]] = []
+        self.defer = self._deferred.append  # (the list's own append: every READY defers, one Python call fewer)
         self.events = 0
 
     # -- the clock ------------------------------------------------------------------------------
@@ -110,9 +111,10 @@ class VirtualScheduler:
         if handle is not None:
             handle[2] = None
 
-    def defer(self, fn: Callable[[], Any]) -> None:
+    def defer(self, fn: Callable[[], Any]) -> None:  # type: ignore[no-redef]  # (replaced per instance)
         """Call ``fn()`` once the events due now have all fired (used to coalesce notifications, such
-        as READY/BUSY, that would otherwise flip within one instant)."""
+        as READY/BUSY, that would otherwise flip within one instant).  Each scheduler replaces this
+        method with its deferred list's own ``append`` (``__init__``): the same, without a Python call."""
         self._deferred.append(fn)
 
     def advance(self, t: float) -> None:

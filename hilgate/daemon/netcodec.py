@@ -6,14 +6,19 @@ the sender's position at the start) and for the receiving applications to get th
 (the application's packet and what the receiving modem needs to print it).  Binary, big-endian (it is
 on every frame's path across hosts, where JSON cost a third of the round trip)::
 
-    u8 version (3) | u8 flags (1 position, 2 served frame, 4 application frame) | i64 epoch_ns |
+    u8 version (4) | u8 flags (1 position, 2 served frame, 4 application frame) | i64 epoch_ns |
     u64 number | f64 t | f64 duration | f64 x, y, z | name host | name session | frame |
     [frame served] | [application frame] | u32 CRC-32 of all before
     frame:             i64 id | i16 src addr | u16 dst addr | u32 size | f64 t0 | i64 seq |
                        u16 ACK retries (0xFFFF: none) | name src link | name dst link | name kind
     application frame: i64 seq | i16 src | u16 dst | f64 t0 | u32 meta length | u32 real length |
-                       name packet class | meta (JSON object, or nothing) | real packet | payload
+                       u32 payload length | u32 payload offset in the real packet (0xFFFFFFFF: the
+                       payload follows it) | name packet class | meta (JSON object, or nothing) |
+                       real packet | [payload]
     name:              u16 length | UTF-8
+
+The payload is sent once: it is a slice of the real packet for every packet class hilgate knows
+(version 3 sent it twice, 2 kB more of a 2 kB frame's 4.3 kB message to encrypt, copy and check).
 
 ``epoch_ns`` is the sender's epoch (ns of the UNIX clock at its model time 0), ``session`` the sender's
 Zenoh session id (new at every start), ``number`` the session's message counter (gaps are frames Zenoh
@@ -24,7 +29,8 @@ into the loop): a message longer than :data:`MAX_TRANSMISSION` (before anything 
 CRC does not match (``damaged``: bits changed on the way; TLS keeps outsiders from doing it on
 purpose, the CRC catches the rest), one of another version (the hosts of one network run the same
 hilgate), and any field out of range: names are link ids (letters, digits, ``_ . -``), kinds lowercase
-words, numbers finite; so nothing from another host reaches the trace unchecked.
+words, numbers finite; so nothing from another host reaches the trace unchecked.  (The names a host
+sends are the same from frame to frame: each is checked once and remembered, :data:`NAMES_KEPT` of them.)
 
 A **pose** is UTF-8 JSON ``{"h", "e", "v" vehicle, "t" measured (sender's model time), "p" [x, y, z],
 "u" velocity or null}``.  Model times convert between hosts through the epochs:
@@ -90,23 +96,33 @@ def to_local(t_there: float, epoch_there_ns: int, epoch_here_ns: int) -> float:
 
 # -- transmissions: a binary layout (JSON cost 25 + 36 µs a frame, a third of a cross-host round trip) --
 
-VERSION = 3
+VERSION = 4
 _CRC = struct.Struct(">I")
 _FIXED = struct.Struct(">BBqQddddd")       # version, flags, epoch_ns, number, t, duration, x, y, z
 _FRAME = struct.Struct(">qhHIdqH")          # id, src_addr, dst_addr, size, t0, seq, ack retries (0xFFFF: none)
-_APP = struct.Struct(">qhHdII")             # seq, src, dst, t0, meta length, real length
+_APP = struct.Struct(">qhHdIIII")           # seq, src, dst, t0, meta length, real length, payload length, offset
 _NAME = struct.Struct(">H")
 HAS_POSITION, HAS_REF, HAS_APP = 1, 2, 4
 NO_ACK = 0xFFFF
+FOLLOWS = 0xFFFFFFFF  # the payload is not a slice of the real packet: it follows it
 MAX_NAME = 256
+NAMES_KEPT = 1024
+"""Names remembered, encoded (this host's) and checked (the others'): a host's link ids, kinds, packet
+classes and session are a few dozen; past this many (names made up by a peer) the memory starts again."""
+_ENCODED: dict[str, bytes] = {}
+_CHECKED: dict[tuple[bytes, re.Pattern | None], str] = {}
 
 
 def _put_name(parts: list[bytes], text: str) -> None:
-    raw = text.encode()
-    if not 0 < len(raw) <= MAX_NAME * 4:
-        raise ValueError(f"a name of {len(raw)} bytes")
-    parts.append(_NAME.pack(len(raw)))
-    parts.append(raw)
+    field = _ENCODED.get(text)
+    if field is None:
+        raw = text.encode()
+        if not 0 < len(raw) <= MAX_NAME * 4:
+            raise ValueError(f"a name of {len(raw)} bytes")
+        if len(_ENCODED) >= NAMES_KEPT:
+            _ENCODED.clear()
+        field = _ENCODED[text] = _NAME.pack(len(raw)) + raw
+    parts.append(field)
 
 
 def _put_frame(parts: list[bytes], frame: Frame) -> None:
@@ -137,14 +153,26 @@ def encode_transmission(host: str, epoch_ns: int, number: int, frame: Frame, t: 
         _put_frame(parts, frame.ref)
     if flags & HAS_APP:
         meta = b"" if app.meta is None else json.dumps(app.meta, separators=(",", ":"), default=_jsonable).encode()
-        real = bytes(app.real)
-        parts.append(_APP.pack(app.seq, app.src, app.dst, app.t0, len(meta), len(real)))
+        real, payload = bytes(app.real), bytes(app.payload)
+        offset = _slice_at(real, payload)
+        parts.append(_APP.pack(app.seq, app.src, app.dst, app.t0, len(meta), len(real), len(payload),
+                               FOLLOWS if offset < 0 else offset))
         _put_name(parts, app.packet.name)
         parts.append(meta)
         parts.append(real)
-        parts.append(bytes(app.payload))
+        if offset < 0:
+            parts.append(payload)
     body = b"".join(parts)
     return body + _CRC.pack(zlib.crc32(body))
+
+
+def _slice_at(real: bytes, payload: bytes) -> int:
+    """Where ``payload`` is in ``real`` (-1: it is not): after the packet's header, a few bytes in
+    (looked for there first: a search of a 2 kB payload costs more than the rest of the encoding)."""
+    for offset in range(min(16, len(real) - len(payload) + 1)):
+        if real.startswith(payload, offset):
+            return offset
+    return real.find(payload)
 
 
 def _jsonable(value: Any) -> Any:
@@ -177,38 +205,48 @@ def _text(header: dict, key: str) -> str:
 class _Reader:
     """Reads a transmission's fields in order; every shortfall or nonsense is a :class:`NetError`."""
 
-    __slots__ = ("data", "at")
+    __slots__ = ("data", "at", "end")
 
-    def __init__(self, data: bytes):
+    def __init__(self, data: bytes, end: int):
         self.data = data
         self.at = 0
+        self.end = end  # (the CRC after it is not read as fields)
 
     def fixed(self, layout: struct.Struct) -> tuple:
         at = self.at
-        if at + layout.size > len(self.data):
+        if at + layout.size > self.end:
             raise NetError("truncated")
         self.at = at + layout.size
         return layout.unpack_from(self.data, at)
 
     def name(self, what: str, pattern: re.Pattern | None = None) -> str:
-        (length,) = self.fixed(_NAME)
-        at = self.at
-        if not 0 < length <= MAX_NAME * 4 or at + length > len(self.data):
+        data, at = self.data, self.at + 2
+        if at > self.end:
+            raise NetError("truncated")
+        length = (data[at - 2] << 8) | data[at - 1]
+        if not 0 < length <= MAX_NAME * 4 or at + length > self.end:
             raise NetError(f"{what} is not a name")
         self.at = at + length
+        raw = data[at:at + length]
+        text = _CHECKED.get((raw, pattern))
+        if text is not None:
+            return text  # (checked already, against the same pattern)
         try:
-            text = self.data[at:at + length].decode()
+            text = raw.decode()
         except UnicodeDecodeError:
             raise NetError(f"{what} is not UTF-8") from None
         if len(text) > MAX_NAME:
             raise NetError(f"{what} is too long")
         if pattern is not None and not pattern.fullmatch(text):
             raise NetError(f"{what} is not a name of its kind")
+        if len(_CHECKED) >= NAMES_KEPT:
+            _CHECKED.clear()
+        _CHECKED[(raw, pattern)] = text
         return text
 
     def take(self, length: int) -> bytes:
         at = self.at
-        if at + length > len(self.data):
+        if at + length > self.end:
             raise NetError("truncated")
         self.at = at + length
         return self.data[at:at + length]
@@ -260,8 +298,7 @@ def decode_transmission(data: bytes) -> Transmission:
         raise NetError(f"format {data[0]}, not {VERSION}: another hilgate version")
     if zlib.crc32(memoryview(data)[:-_CRC.size]) != _CRC.unpack_from(data, len(data) - _CRC.size)[0]:
         raise NetError("the CRC does not match: damaged on the way", "damaged")
-    data = data[:-_CRC.size]
-    reader = _Reader(data)
+    reader = _Reader(data, len(data) - _CRC.size)
     _, flags, epoch_ns, number, t, duration, x, y, z = reader.fixed(_FIXED)
     if not (math.isfinite(t) and math.isfinite(duration)):
         raise NetError("a time that is not a number")
@@ -280,7 +317,7 @@ def decode_transmission(data: bytes) -> Transmission:
         ref = frame.ref = reader.frame()
         ref_key = (ref.src_link, ref.id)
     if flags & HAS_APP:
-        seq, src, dst, t0, meta_length, real_length = reader.fixed(_APP)
+        seq, src, dst, t0, meta_length, real_length, payload_length, offset = reader.fixed(_APP)
         if not (-1 <= src <= 255 and dst <= 255 and math.isfinite(t0)):
             raise NetError("an application frame's address or time is out of range")
         if meta_length > MAX_HEADER:
@@ -292,9 +329,16 @@ def decode_transmission(data: bytes) -> Transmission:
             if not isinstance(meta, dict):
                 raise NetError("meta is not an object")
         real = reader.take(real_length)
-        payload = data[reader.at:]
+        if offset == FOLLOWS:
+            payload = reader.take(payload_length)
+        elif offset + payload_length <= real_length:
+            payload = real[offset:offset + payload_length]
+        else:
+            raise NetError("a payload beyond its packet")
+        if reader.at != reader.end:
+            raise NetError("trailing bytes")
         frame.app_frame = AppFrame(real, payload, packet, seq, src, dst, t0, meta)
-    elif reader.at != len(data):
+    elif reader.at != reader.end:
         raise NetError("trailing bytes")
     return Transmission(host, epoch_ns, number, frame, t, duration, position, ref_key, session)
 

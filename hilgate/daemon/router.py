@@ -57,6 +57,7 @@ class RoutedLink:
         self.unread_kept = 0  # frames nobody took, kept in the queue for an application that starts late
         self.bridge: ReceivingBridge | None = None  # made for the first bytes an emulated modem sends here
         self._state_pending = False
+        self._sole_assumer: Endpoint | None = None  # the only endpoint, if it assumes_busy (see send)
         self._usbl_rng: random.Random | None = None
         self.readdressed: int | None = None  # the address an emulated modem's AT!AL gave the link
         self.retuned: tuple[float, float] | None = None  # the band an emulated modem's channel gave the link
@@ -165,7 +166,10 @@ class RoutedLink:
     @property
     def ready(self) -> bool:
         backend = self.backend
-        if backend is None or backend.state != "up" or not backend.idle:
+        if backend is None or backend.state != "up":
+            return False
+        modem = backend.sim_modem  # a simulated link asks its modem itself (SimBackend.idle is its idle)
+        if not (modem.idle if modem is not None else backend.idle):
             return False
         for endpoint in self.endpoints:  # (a loop, not any() over a generator: READY asks it every time)
             if endpoint.busy:
@@ -180,6 +184,7 @@ class RoutedLink:
         if endpoint.kind == "socket" and self.clients >= self.router.max_link_clients:
             return False
         self.endpoints.append(endpoint)
+        self._endpoints_changed()
         if endpoint.phy is not None:
             self._watch_phy()
         return True
@@ -187,8 +192,16 @@ class RoutedLink:
     def detach(self, endpoint: Endpoint) -> None:
         if endpoint in self.endpoints:
             self.endpoints.remove(endpoint)
+            self._endpoints_changed()
             if endpoint.phy is not None:
                 self._watch_phy()
+
+    def _endpoints_changed(self) -> None:
+        """Which endpoint, if any, needs no BUSY after its own frame: the only one, if it says its
+        applications assume BUSY once they send (``Endpoint.assumes_busy``)."""
+        endpoints = self.endpoints
+        sole = endpoints[0] if len(endpoints) == 1 else None
+        self._sole_assumer = sole if sole is not None and sole.assumes_busy else None
 
     @property
     def clients(self) -> int:
@@ -237,21 +250,27 @@ class RoutedLink:
 
     # -- application → medium --------------------------------------------------------------------
 
-    def send_decoded(self, decoded: Decoded) -> None:
+    def send_decoded(self, decoded: Decoded, sender: Endpoint | None = None) -> None:
         scheduler = self.router.scheduler
         frame = AppFrame(decoded.real, decoded.payload, self.packet, decoded.seq, self.address, decoded.dst,
                          scheduler.now())
         frame.lateness = scheduler.input_lateness
-        self.send(frame)
+        self.send(frame, sender)
 
     def send_payload(self, payload: bytes, dst: int) -> None:
         real = self.packet.encode(payload, src=self.address, dst=dst)
         self.seq = (self.seq + 1) & 0xFFFFFFFF
         self.send_decoded(Decoded(real, payload, self.seq, self.address, dst))
 
-    def send(self, frame: AppFrame) -> None:
+    def send(self, frame: AppFrame, sender: Endpoint | None = None) -> None:
         """Hand a frame to the backend. A frame it cannot carry (too large for the modem) raises
-        PacketError, which socket clients receive as an ERROR and queues count as a bad frame."""
+        PacketError, which socket clients receive as an ERROR and queues count as a bad frame.
+
+        Then the link's state may have changed (BUSY), and the endpoints are told at the end of the
+        instant, unless nobody would be told anything (issue 31: 10 calls of every frame): the frame
+        came through the link's only endpoint (``sender``), whose applications took the link as BUSY as
+        they sent (``Endpoint.assumes_busy``), and the simulated modem is on air, so the link stays BUSY
+        until the transmission ends, and that end tells the link itself (``on_idle``)."""
         backend = self.backend
         if backend is None:
             self.lost("no_backend", len(frame.real), src="app")
@@ -267,6 +286,10 @@ class RoutedLink:
             if network.host_down(target):  # it still goes on air here, but its host is gone
                 self.lost("host_down", len(frame.real), ev="err", src=self.id, dst=target)
         backend.send(frame)
+        if sender is not None and sender is self._sole_assumer:
+            modem = backend.sim_modem
+            if modem is not None and modem.phy_busy and modem.on_idle is not None:
+                return  # (see above: an announcement would tell its one endpoint BUSY, which it knows)
         self.state_changed()
 
     def lost(self, cause: str, size: int, src: str = "medium", ev: str = "drop", n: int = 1, **fields: Any) -> None:
@@ -320,7 +343,7 @@ class RoutedLink:
 
     def _hand(self, frame: AppFrame, endpoints: list[Endpoint], taken: bool = False) -> None:
         t = self.router.scheduler.now()
-        kept = False
+        kept = lost = False
         for endpoint in list(endpoints):
             outcome = endpoint.deliver(frame, t)
             if outcome == TAKEN:
@@ -328,11 +351,12 @@ class RoutedLink:
             elif outcome == KEPT:
                 kept = True
             elif outcome != ABSENT:
+                lost = True
                 self.lost(outcome, len(frame.real))
         if not taken:
             if kept:
                 self.unread_kept += 1  # waits in the queue for an application that starts late
-            else:
+            elif not lost:  # an application's own loss (app_full, client_slow) is counted once, as that
                 self.lost("no_reader", len(frame.real))
         if frame.on_delivered is not None and frame.dst == self.address:
             frame.on_delivered(frame, self)
@@ -404,6 +428,7 @@ class RoutedLink:
             door.close(handle)
         self.doors = []
         self.endpoints = []
+        self._endpoints_changed()
         if self.backend is not None:
             self.backend.close()
         self.account.close(self.router.scheduler.now())

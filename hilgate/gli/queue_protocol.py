@@ -19,6 +19,7 @@ from ..core.packets import Decoded, PacketClass, PacketError
 FRAME, REQ_STATE, CMD_STATE, NOTBUILT = 0, 1, 2, 3
 BUSY, READY = 0, 1
 FRAME_PREFIX = bytes([FRAME])
+STATE_MESSAGES = (bytes([CMD_STATE, BUSY]), bytes([CMD_STATE, READY]))  # (made once: every READY is one of them)
 
 
 class FrameIn(NamedTuple):
@@ -71,12 +72,12 @@ class QueueProtocol:
 
     @staticmethod
     def state_message(ready: bool) -> bytes:
-        return bytes([CMD_STATE, READY if ready else BUSY])
+        return STATE_MESSAGES[READY if ready else BUSY]
 
     def state_change(self, ready: bool) -> bytes | None:
         """CMD_STATE for ``ready`` if the application has not been told it yet, else None."""
         state = READY if ready else BUSY
-        return None if state == self.said else bytes([CMD_STATE, state])
+        return None if state == self.said else STATE_MESSAGES[state]
 
     def told(self, message: bytes) -> None:
         """``message`` (a CMD_STATE) reached the application's queue."""

@@ -246,6 +246,7 @@ class MqEndpoint:
 
     kind = "mq"
     busy = False
+    assumes_busy = True  # dccomms' WritePacket: QueueProtocol.receive notes BUSY as said with each frame
     phy = None  # (no PHY reports: hilgate.core.endpoint.Endpoint.phy)
 
     def __init__(self, port: LinkPort, scheduler: Any, full_size: bool = True, backlog: int = 1000,
@@ -316,7 +317,7 @@ class MqEndpoint:
         match event:
             case FrameIn(decoded=decoded):
                 try:
-                    self.port.send_decoded(decoded)  # (the link's send says its state changed)
+                    self.port.send_decoded(decoded, self)  # (the link's send says its state changed, if anyone is to be told)
                 except PacketError as exc:
                     log.warning("link %s: %s", self.port.id, exc)
                     self.port.lost(exc.reason, len(decoded.real), src="app")
@@ -332,9 +333,10 @@ class MqEndpoint:
     # -- link → application (the endpoint) -----------------------------------------------------
 
     def state(self, ready: bool) -> None:
-        message = self.protocol.state_change(ready)
+        protocol = self.protocol
+        message = protocol.state_change(ready)
         if message is not None and self._put(message):  # (_tell written out: every READY passes here)
-            self.protocol.told(message)
+            protocol.said = message[1]  # (protocol.told, written out)
 
     def _tell(self, message: bytes) -> None:
         if self._put(message):

@@ -60,6 +60,7 @@ class GliClient:
 
     kind = "socket"
     busy = False
+    assumes_busy = False  # (hilgate.core.endpoint.Endpoint.assumes_busy: told BUSY by the link after a frame)
     phy = None  # (no PHY reports: hilgate.core.endpoint.Endpoint.phy)
 
     def __init__(self, sock: socket.socket, scheduler: Any, limits: ClientLimits,

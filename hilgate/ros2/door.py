@@ -68,6 +68,7 @@ class Ros2Endpoint(SenderQueues):
     kind = "ros2"
     source = "ros2"
     busy = False
+    assumes_busy = False  # (hilgate.core.endpoint.Endpoint.assumes_busy: told BUSY by the link after a frame)
     phy = None  # (no PHY reports: hilgate.core.endpoint.Endpoint.phy)
 
     senders: dict[int, Writer]

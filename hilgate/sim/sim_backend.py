@@ -18,6 +18,7 @@ class SimBackend(Backend):
     def __init__(self, modem: SimModem, link_names: Callable[[str, int], str], everyone_in_range: bool = False,
                  limits: Any = None):
         self.modem = modem
+        self.sim_modem = modem  # (an attribute, not a property: the link's send reads it for every frame)
         super().__init__()
         self._link_names = link_names
         self.everyone_in_range = everyone_in_range  # see LinkSpec.everyone_in_range
@@ -36,6 +37,7 @@ class SimBackend(Backend):
 
     def rebind(self, modem: SimModem) -> None:
         callback, self.modem = self.modem.on_idle, modem
+        self.sim_modem = modem
         modem.on_deliver = self._deliver
         modem.on_idle = callback
         modem.acks.on_outcome = self._acknowledged
@@ -51,10 +53,6 @@ class SimBackend(Backend):
         if self.on_phy is not None:
             app = frame.app_frame if isinstance(frame.app_frame, AppFrame) else None
             self.on_phy(PhyEvent(kind, app, frame.size, frame.src_addr, frame.dst_addr, start, end, cause))
-
-    @property
-    def sim_modem(self) -> SimModem:
-        return self.modem
 
     def set_address(self, address: int) -> bool:
         self.modem.set_address(address)
