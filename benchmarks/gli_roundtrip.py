@@ -38,23 +38,20 @@ from __future__ import annotations
 
 import argparse
 import binascii
-import json
 import multiprocessing as mp
 import os
 import select
-import socket
 import statistics
 import struct
-import subprocess
 import sys
-import tempfile
 import threading
 import time
 
 import posix_ipc
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from placement import Placement, choose, pin, pinned, pinned_command  # noqa: E402
+from daemon_harness import Daemon  # noqa: E402
+from placement import Placement, choose, pin, pinned  # noqa: E402
 
 from hilgate.gli.queues import unlink_queues  # noqa: E402
 
@@ -211,51 +208,6 @@ def _echo(link: str, count: int, mode: str, result, timeout: float = 10.0, cpu: 
     tx.close()
     rx.close()
     result.put((received, first, last))
-
-
-class Daemon:
-    """``hilgate run`` in a subprocess on ``scene_text`` (its links are ``links``), up once it says
-    READY=1; :meth:`close` stops it and removes its queues.  ``cpu``: the one CPU it runs on (None: the
-    kernel's choice).  Shared with realtime_lateness.py."""
-
-    def __init__(self, scene_text: str, links: tuple[str, ...], args: tuple[str, ...] = (), cpu: int | None = None):
-        self.dir = tempfile.mkdtemp(prefix="hilgate-bench-")
-        scene = os.path.join(self.dir, "scene.yaml")
-        with open(scene, "w") as handle:
-            handle.write(scene_text)
-        notify_path = os.path.join(self.dir, "notify")
-        self.notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-        self.notify.bind(notify_path)
-        self.log = open(os.path.join(self.dir, "daemon.log"), "w")  # its log stays out of the benchmark's output
-        self.process = subprocess.Popen(pinned_command(
-            [sys.executable, "-m", "hilgate", "run", scene, "--runtime-dir", os.path.join(self.dir, "rt"),
-             "--no-status-line", *args], cpu), env=dict(os.environ, NOTIFY_SOCKET=notify_path),
-            stderr=self.log)
-        self.notify.settimeout(30)
-        while b"READY=1" not in self.notify.recv(4096):
-            pass
-        self.links = links
-
-    def status(self) -> dict:
-        with socket.socket(socket.AF_UNIX) as sock:
-            sock.connect(os.path.join(self.dir, "rt", "control.sock"))
-            reader = sock.makefile("r")
-            reader.readline()
-            sock.sendall(b'{"class": "STATUS"}\n')
-            return json.loads(reader.readline())
-
-    def close(self) -> "os.struct_rusage | None":
-        """Stop the daemon; its resource usage (CPU), or None if it was already reaped."""
-        self.process.terminate()
-        try:
-            _, status, usage = os.wait4(self.process.pid, 0)
-            self.process.returncode = os.waitstatus_to_exitcode(status)
-        except ChildProcessError:
-            usage = None
-        self.notify.close()
-        self.log.close()
-        unlink_queues(self.links)
-        return usage
 
 
 def through_hilgate(count: int, placement: Placement) -> list[float]:

@@ -33,22 +33,19 @@ import json
 import multiprocessing as mp
 import os
 import selectors
-import signal
 import socket
 import struct
-import subprocess
 import sys
-import tempfile
 import time
 import uuid
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from placement import Placement, choose, pin, pinned_command  # noqa: E402
+from daemon_harness import Daemon, cpu_seconds  # noqa: E402
+from placement import Placement, choose, pin  # noqa: E402
 
 HEADER = struct.Struct(">IB")
 RECV_HEAD = struct.Struct(">BBd")
 SEND, RECV, COMMAND, REPLY = 3, 4, 7, 8
-CLOCK_TICK = os.sysconf("SC_CLK_TCK")
 
 LAUNCH = """\
 import sys
@@ -180,12 +177,6 @@ def reader(runtime: str, links: list[tuple[str, int]], rate: float, start: float
     result.put((lateness, sent, received, rtt, cpu))
 
 
-def proc_cpu(pid: int) -> float:
-    with open(f"/proc/{pid}/stat") as f:
-        fields = f.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / CLOCK_TICK
-
-
 def percentile(values: list[float], q: float) -> float:
     ordered = sorted(values)
     return ordered[min(len(ordered) - 1, int(q * (len(ordered) - 1) + 0.5))]
@@ -194,24 +185,10 @@ def percentile(values: list[float], q: float) -> float:
 def run_once(args: argparse.Namespace, spin: str, placement: Placement) -> dict:
     """The readers on the placement's step 0, the daemon on step 1."""
     prefix = "ml" + uuid.uuid4().hex[:6] + "_"
-    directory = tempfile.mkdtemp(prefix="hilgate-many-links-")
-    scene = os.path.join(directory, "scene.yaml")
-    with open(scene, "w") as handle:
-        handle.write(scene_text(prefix, args.links))
-    runtime = os.path.join(directory, "rt")
-    notify_path = os.path.join(directory, "notify")
-    notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-    notify.bind(notify_path)
-    log = open(os.path.join(directory, "daemon.log"), "w")
-    daemon = subprocess.Popen(pinned_command([sys.executable, "-c", LAUNCH, spin, "run", scene, "--runtime-dir", runtime,
-                                              "--no-status-line", "--max-clients", str(args.links + 16)],
-                                             placement.cpu(1)),
-                              env=dict(os.environ, NOTIFY_SOCKET=notify_path),
-                              stdout=log, stderr=subprocess.STDOUT)
+    daemon = Daemon(scene_text(prefix, args.links), args=("--max-clients", str(args.links + 16)),
+                    cpu=placement.cpu(1), launch=("-c", LAUNCH, spin), ready_timeout=120)
+    runtime = daemon.runtime
     try:
-        notify.settimeout(120)
-        while b"READY=1" not in notify.recv(4096):
-            pass
         pairs = args.links // 2
         all_links = [(f"{prefix}{i}a", 2) for i in range(pairs)] + [(f"{prefix}{i}b", 1) for i in range(pairs)]
         groups = [all_links[r::args.readers] for r in range(args.readers)]
@@ -225,21 +202,14 @@ def run_once(args: argparse.Namespace, spin: str, placement: Placement) -> dict:
         for process in processes:
             process.start()
         time.sleep(max(0.0, start + args.warmup - time.perf_counter()))
-        cpu0, wall0 = proc_cpu(daemon.pid), time.perf_counter()
+        cpu0, wall0 = cpu_seconds(daemon.process.pid), time.perf_counter()
         time.sleep(max(0.0, stop - time.perf_counter()))
-        cpu1, wall1 = proc_cpu(daemon.pid), time.perf_counter()
+        cpu1, wall1 = cpu_seconds(daemon.process.pid), time.perf_counter()
         outcomes = [result.get(timeout=120 + args.seconds) for _ in processes]
         for process in processes:
             process.join()
     finally:
-        daemon.send_signal(signal.SIGTERM)
-        try:
-            daemon.wait(30)
-        except subprocess.TimeoutExpired:
-            daemon.kill()
-            daemon.wait()
-        notify.close()
-        log.close()
+        daemon.close()
     lateness = [value for outcome in outcomes for value in outcome[0]]
     return {
         "spin": spin,

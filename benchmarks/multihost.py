@@ -37,7 +37,6 @@ import multiprocessing as mp
 import os
 import socket
 import statistics
-import subprocess
 import sys
 import tempfile
 import threading
@@ -47,7 +46,8 @@ import uuid
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from gli_roundtrip import MESSAGE, _echo, frame, open_queue, percentiles, send_paced  # noqa: E402
 from peers import spread  # noqa: E402
-from placement import Placement, choose, pin, pinned, pinned_command  # noqa: E402
+from daemon_harness import Daemon  # noqa: E402
+from placement import Placement, choose, pin, pinned  # noqa: E402
 
 from hilgate.gli.queues import unlink_queues  # noqa: E402
 
@@ -157,43 +157,30 @@ class Network:
         from hilgate.netinit import init_network
 
         self.dir = tempfile.mkdtemp(prefix="hilgate-multihost-bench-")
-        scene = os.path.join(self.dir, "scene.yaml")
+        self.links = (a, b)
         if secure:
             init_network(os.path.join(self.dir, "creds"), ["A", "B"], 1)
         security = f"credentials: {os.path.join(self.dir, 'creds')}" if secure else "insecure: true"
-        with open(scene, "w") as handle:
-            handle.write(template.format(a=a, b=b, prefix=f"bench-{uuid.uuid4().hex[:8]}", security=security))
+        text = template.format(a=a, b=b, prefix=f"bench-{uuid.uuid4().hex[:8]}", security=security)
         port = free_port()
         scheme = "tls" if secure else "tcp"
-        self.processes = []
-        for host, cpu, args in (("A", cpus[0], ["--zenoh-listen", f"{scheme}/127.0.0.1:{port}"]),
-                                ("B", cpus[1], ["--zenoh-connect", f"{scheme}/127.0.0.1:{port}"])):
-            notify_path = os.path.join(self.dir, f"notify-{host}")
-            notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-            notify.bind(notify_path)
-            with open(os.path.join(self.dir, f"{host}.log"), "w") as log:  # (the daemons' logs stay there)
-                self.processes.append(subprocess.Popen(pinned_command(
-                    [sys.executable, "-m", "hilgate", "run", scene, "--host", host, "--runtime-dir",
-                     os.path.join(self.dir, host), "--no-status-line", *args], cpu),
-                    env=dict(os.environ, NOTIFY_SOCKET=notify_path), stdout=log, stderr=subprocess.STDOUT))
-            notify.settimeout(30)
-            while b"READY=1" not in notify.recv(4096):
-                pass
-            notify.close()
-        self.links = (a, b)
-        deadline = time.monotonic() + 30
-        while not self._sees("A", "B"):
-            if time.monotonic() > deadline:
-                raise RuntimeError("the daemons did not meet")
-            time.sleep(0.05)
+        self.daemons: dict[str, Daemon] = {}
+        try:
+            for host, cpu, args in (("A", cpus[0], ["--zenoh-listen", f"{scheme}/127.0.0.1:{port}"]),
+                                    ("B", cpus[1], ["--zenoh-connect", f"{scheme}/127.0.0.1:{port}"])):
+                self.daemons[host] = Daemon(text, args=("--host", host, *args), cpu=cpu, directory=self.dir,
+                                            name=host)
+            deadline = time.monotonic() + 30
+            while not self._sees("A", "B"):
+                if time.monotonic() > deadline:
+                    raise RuntimeError("the daemons did not meet")
+                time.sleep(0.05)
+        except BaseException:
+            self.close()
+            raise
 
     def status(self, host: str) -> dict:
-        with socket.socket(socket.AF_UNIX) as sock:
-            sock.connect(os.path.join(self.dir, host, "control.sock"))
-            reader = sock.makefile("r")
-            reader.readline()
-            sock.sendall(b'{"class": "STATUS"}\n')
-            return json.loads(reader.readline())
+        return self.daemons[host].status()
 
     def heard(self, host: str, other: str) -> tuple[int, float]:
         """How many transmissions of ``other`` daemon ``host`` took, and their summed delay (s): from the
@@ -207,9 +194,8 @@ class Network:
         return any(v["host"] == other and v["state"] == "up" for v in views)
 
     def close(self) -> None:
-        for process in self.processes:
-            process.terminate()
-            process.wait()
+        for daemon in self.daemons.values():
+            daemon.close()
         unlink_queues(self.links)
 
 

@@ -55,7 +55,7 @@ import tempfile
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from gli_roundtrip import Daemon  # noqa: E402
+from daemon_harness import Daemon, cpu_seconds  # noqa: E402
 from peers import check_python, spread  # noqa: E402
 from placement import Placement, choose, pin, pinned, pinned_command  # noqa: E402
 
@@ -148,13 +148,13 @@ def through_hilgate(nodes: int, rate: float, seconds: float, apps: int, seed: in
         result = mp.Queue()
         start_at = time.perf_counter() + 2.0  # every application has opened its links by then
         workers = [mp.Process(target=_application, args=(
-            os.path.join(daemon.dir, "rt"), [(i, names[i]) for i in range(k, nodes, apps)], nodes, rate, seconds,
+            daemon.runtime, [(i, names[i]) for i in range(k, nodes, apps)], nodes, rate, seconds,
             seed, start_at, result, placement.cpu(0))) for k in range(apps)]
         for worker in workers:
             worker.start()
-        cpu0, wall0 = _cpu(daemon.process.pid), time.perf_counter()
+        cpu0, wall0 = cpu_seconds(daemon.process.pid), time.perf_counter()
         outcomes = [result.get(timeout=seconds + 60) for _ in workers]
-        cpu, wall = _cpu(daemon.process.pid) - cpu0, time.perf_counter() - wall0
+        cpu, wall = cpu_seconds(daemon.process.pid) - cpu0, time.perf_counter() - wall0
         for worker in workers:
             worker.join()
         links = daemon.status()["links"]
@@ -164,13 +164,6 @@ def through_hilgate(nodes: int, rate: float, seconds: float, apps: int, seed: in
     sent = sum(n for _, n in outcomes)
     counted = {"delivered": sum(link["rx_packets"] for link in links), "drops": sum(link["drops"] for link in links)}
     return late, sent * (nodes - 1), cpu / wall, counted
-
-
-def _cpu(pid: int) -> float:
-    """CPU seconds (user + system) process ``pid`` has used so far (/proc, so it runs on)."""
-    with open(f"/proc/{pid}/stat") as handle:
-        fields = handle.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 # -- bare: a timer loop and one hop -------------------------------------------------------------------

@@ -11,7 +11,7 @@ of wall clock after a warm-up: the daemon's CPU time (every thread, from /proc) 
 percentage of one core, the frames it put on air, and for (3) the pictures and bytes the page got.
 Target: a page costs under 5 % of a core.
 
-    python benchmarks/web_cost.py [--seconds 20] [--repeats 3]
+    python benchmarks/web_cost.py [--seconds 20] [--repeats 3] [--warm-up 3]
 """
 
 from __future__ import annotations
@@ -20,19 +20,18 @@ import argparse
 import asyncio
 import json
 import os
-import signal
-import socket
 import statistics
-import subprocess
 import sys
 import tempfile
 import threading
 import time
 import uuid
 
-from hilgate.gli.token import proof, read_token
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from daemon_harness import Daemon, cpu_seconds  # noqa: E402
 
-WARM_UP_S = 3.0
+from hilgate.gli.token import proof, read_token  # noqa: E402
+
 TICKS = os.sysconf("SC_CLK_TCK")
 
 
@@ -55,22 +54,6 @@ links:
 flows:
 {flows}
 """
-
-
-def cpu_seconds(pid: int) -> float:
-    with open(f"/proc/{pid}/stat") as handle:
-        fields = handle.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / TICKS  # utime + stime, every thread
-
-
-def control(runtime: str, request: dict) -> dict:
-    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as sock:
-        sock.settimeout(10)
-        sock.connect(os.path.join(runtime, "control.sock"))
-        reader = sock.makefile("r")
-        reader.readline()
-        sock.sendall((json.dumps(request) + "\n").encode())
-        return json.loads(reader.readline())
 
 
 class Page(threading.Thread):
@@ -105,47 +88,31 @@ class Page(threading.Thread):
         connection.close()
 
 
-def measure(config: str, seconds: float) -> dict:
+def measure(config: str, seconds: float, warm_up: float) -> dict:
     prefix = f"wc{uuid.uuid4().hex[:6]}"
     with tempfile.TemporaryDirectory() as tmp:
-        path = os.path.join(tmp, "scene.yaml")
-        with open(path, "w") as handle:
-            handle.write(scene(prefix))
-        runtime = os.path.join(tmp, "rt")
-        args = [sys.executable, "-m", "hilgate", "run", path, "--runtime-dir", runtime, "--no-status-line"]
-        if config != "no web door":
-            args += ["--web", "0"]
-        daemon = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        daemon = Daemon(scene(prefix), args=() if config == "no web door" else ("--web", "0"), directory=tmp)
         page = None
         try:
-            deadline = time.monotonic() + 60
-            while True:
-                try:
-                    status = control(runtime, {"class": "STATUS"})
-                    break
-                except OSError:
-                    if time.monotonic() > deadline or daemon.poll() is not None:
-                        raise RuntimeError(f"the daemon did not start ({config})")
-                    time.sleep(0.1)
+            status = daemon.status()
             if config == "a page connected":
                 web = status["web"]
                 page = Page(web["url"], read_token(web["token_file"]))
                 page.start()
                 if not page.welcome.wait(60):
                     raise RuntimeError("the page was not welcomed")
-            time.sleep(WARM_UP_S)
-            tx0 = sum(link["tx_packets"] for link in control(runtime, {"class": "STATUS"})["links"])
-            cpu0, wall0 = cpu_seconds(daemon.pid), time.monotonic()
+            time.sleep(warm_up)
+            tx0 = sum(link["tx_packets"] for link in daemon.status()["links"])
+            cpu0, wall0 = cpu_seconds(daemon.process.pid), time.monotonic()
             pictures0, bytes0 = (page.pictures, page.bytes) if page else (0, 0)
             time.sleep(seconds)
-            cpu1, wall1 = cpu_seconds(daemon.pid), time.monotonic()
+            cpu1, wall1 = cpu_seconds(daemon.process.pid), time.monotonic()
             pictures1, bytes1 = (page.pictures, page.bytes) if page else (0, 0)
-            tx1 = sum(link["tx_packets"] for link in control(runtime, {"class": "STATUS"})["links"])
+            tx1 = sum(link["tx_packets"] for link in daemon.status()["links"])
         finally:
             if page is not None:
                 page.stop = True
-            daemon.send_signal(signal.SIGTERM)
-            daemon.wait(30)
+            daemon.close()
         wall = wall1 - wall0
         return {"cpu": 100 * (cpu1 - cpu0) / wall, "frames_s": (tx1 - tx0) / wall,
                 "pictures_s": (pictures1 - pictures0) / wall, "kb_s": (bytes1 - bytes0) / wall / 1000}
@@ -159,15 +126,16 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seconds", type=float, default=20.0)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--warm-up", type=float, default=3.0, help="seconds of a fresh daemon not measured")
     args = parser.parse_args()
     configs = ["no web door", "--web, no page", "a page connected"]
     results: dict[str, list[dict]] = {config: [] for config in configs}
     for _ in range(args.repeats):
         for config in configs:
-            results[config].append(measure(config, args.seconds))
+            results[config].append(measure(config, args.seconds, args.warm_up))
     load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
     print(f"Web view cost: a daemon at ~100 frames/s (4 links, 32 B), {args.seconds:g} s per measure after "
-          f"{WARM_UP_S:g} s, {args.repeats} repeat(s), configurations alternating; {os.cpu_count()} cores, "
+          f"{args.warm_up:g} s, {args.repeats} repeat(s), configurations alternating; {os.cpu_count()} cores, "
           f"load average {load} at the end.  CPU: % of one core, min / median / max")
     for config in configs:
         rows = results[config]

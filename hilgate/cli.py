@@ -152,58 +152,32 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def _control(args: argparse.Namespace):
-    import json
-    import os
-    import socket
+    from .control_client import Control
 
-    from .core.paths import client_runtime_dir
-
-    path = os.path.join(client_runtime_dir(args.runtime_dir), "control.sock")
-    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    sock.settimeout(5.0)
-    try:
-        sock.connect(path)
-    except OSError as exc:
-        raise OSError(f"no hilgate daemon at {path} ({exc.strerror or exc})") from None
-    reader = sock.makefile("r", encoding="utf-8")
-
-    def request(obj: dict) -> dict:
-        sock.sendall((json.dumps(obj) + "\n").encode())
-        return json.loads(reader.readline())
-
-    version = json.loads(reader.readline())
-    return sock, reader, request, version
+    return Control(args.runtime_dir)
 
 
 def cmd_status(args: argparse.Namespace) -> int:
-    import json
-
-    sock, reader, request, _ = _control(args)
-    try:
+    with _control(args) as control:
         if args.watch:
-            sock.settimeout(None)
-            sock.sendall((json.dumps({"class": "WATCH", "interval_s": args.watch}) + "\n").encode())
-            for line in reader:
-                _print_status(json.loads(line), args.json)
+            control.settimeout(None)
+            control.send({"class": "WATCH", "interval_s": args.watch})
+            for status in control.replies():
+                _print_status(status, args.json)
             return 0
         if args.network:
-            _print_network(request({"class": "NETWORK"}), args.json)
+            _print_network(control.request({"class": "NETWORK"}), args.json)
             return 0
-        _print_status(request({"class": "STATUS"}), args.json)
-    finally:
-        sock.close()
+        _print_status(control.request({"class": "STATUS"}), args.json)
     return 0
 
 
 def cmd_reload(args: argparse.Namespace) -> int:
     """SIGHUP without knowing the daemon's PID: the RELOAD request, answered once the scene file is
     applied or refused (the daemon then keeps the scene it had)."""
-    sock, _, request, _ = _control(args)
-    try:
-        sock.settimeout(args.timeout)
-        answer = request({"class": "RELOAD"})
-    finally:
-        sock.close()
+    with _control(args) as control:
+        control.settimeout(args.timeout)
+        answer = control.request({"class": "RELOAD"})
     if not answer.get("ok"):
         print(f"hilgate: reload refused, the daemon keeps its scene: {answer.get('error')}", file=sys.stderr)
         return EXIT_SCENE
@@ -214,11 +188,8 @@ def cmd_reload(args: argparse.Namespace) -> int:
 
 
 def _control_request(args: argparse.Namespace, request_obj: dict) -> dict:
-    sock, _, request, _ = _control(args)
-    try:
-        return request(request_obj)
-    finally:
-        sock.close()
+    with _control(args) as control:
+        return control.request(request_obj)
 
 
 def _link_note(link: dict) -> str:
@@ -311,19 +282,15 @@ def _print_status(status: dict, as_json: bool) -> None:
 
 def cmd_pose(args: argparse.Namespace) -> int:
     """Follow the vehicles' poses live, one line per vehicle per update."""
-    import json
-
-    sock, reader, request, _ = _control(args)
-    try:
+    with _control(args) as control:
         if args.vehicle:
-            known = [v["name"] for v in request({"class": "STATUS"}).get("vehicles", [])]
+            known = [v["name"] for v in control.request({"class": "STATUS"}).get("vehicles", [])]
             for name in args.vehicle:
                 if name not in known:
                     raise SceneError("pose", 0, "", _unknown_vehicle(name, known))
-        sock.settimeout(None)
-        sock.sendall((json.dumps({"class": "WATCH", "interval_s": args.interval}) + "\n").encode())
-        for line in reader:
-            status = json.loads(line)
+        control.settimeout(None)
+        control.send({"class": "WATCH", "interval_s": args.interval})
+        for status in control.replies():
             for v in status.get("vehicles", []):
                 if args.vehicle and v["name"] not in args.vehicle:
                     continue
@@ -331,8 +298,6 @@ def cmd_pose(args: argparse.Namespace) -> int:
                 where = "no pose" if position is None else "  ".join(f"{c:8.3f}" for c in position)
                 age = "-" if v["age_s"] is None else f"{v['age_s']:.2f} s old"
                 print(f"{status.get('time', 0):10.3f}  {v['name']:<12} {where}  {v['source']} {age}", flush=True)
-    finally:
-        sock.close()
     return 0
 
 

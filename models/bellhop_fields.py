@@ -59,6 +59,17 @@ class _Axis:
             if abs(v - (self.x0 + i * self.step)) > 1e-3 * abs(self.step) + 1e-6:
                 raise ValueError(f"the grid's axis is not uniform at {v:g} (index {i})")
 
+    def cell(self, x: float) -> tuple[int, float]:
+        """The cell ``x`` is in: its first index and the weight of the next, clamped to the first and
+        the last cell (an axis of two values at least)."""
+        f = (x - self.x0) / self.step
+        if f <= 0.0:
+            return 0, 0.0
+        if f >= self.n - 1:
+            return self.n - 2, 1.0
+        i = int(f)
+        return i, f - i
+
 
 class Fields:
     """One frequency's fields on one grid (see the module's doc).  ``tl``, ``first`` and ``spread``
@@ -111,8 +122,9 @@ class Fields:
     def _at(self, grids: tuple[list[float], ...], strides: tuple[int, int], depths: _Axis, ranges: _Axis,
             zs: float, zr: float, r: float) -> list[float]:
         """Trilinear interpolation of each of ``grids`` (all on the axes ``depths`` × ``ranges`` and
-        ``strides``), clamped at the edges: the axes located once and inline (this is the per-arrival
-        cost: a handful of float operations and eight list reads a grid)."""
+        ``strides``), clamped at the edges: each axis located once (this is the per-arrival cost: a
+        handful of float operations and eight list reads a grid; the source's axis inline, as it may
+        have one depth)."""
         sources = self.sources
         si, sj = strides
         # source depth
@@ -125,26 +137,8 @@ class Fields:
         else:
             i = int(f)
             wi = f - i
-        # receiver depth
-        n = depths.n
-        f = (zr - depths.x0) / depths.step
-        if f <= 0.0:
-            j, wj = 0, 0.0
-        elif f >= n - 1:
-            j, wj = n - 2, 1.0
-        else:
-            j = int(f)
-            wj = f - j
-        # range
-        n = ranges.n
-        f = (r - ranges.x0) / ranges.step
-        if f <= 0.0:
-            k, wk = 0, 0.0
-        elif f >= n - 1:
-            k, wk = n - 2, 1.0
-        else:
-            k = int(f)
-            wk = f - k
+        j, wj = depths.cell(zr)
+        k, wk = ranges.cell(r)
         base = i * si + j * sj + k
         values = []
         for g in grids:

@@ -17,7 +17,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from .frame import ACK, BROADCAST, DATA
-from .mac import Duplicates, Mac, MacHost, Param
+from .mac import HoldingMac, MacHost, Param
 
 if TYPE_CHECKING:
     from .frame import Frame
@@ -25,7 +25,7 @@ if TYPE_CHECKING:
 IDLE, BACKOFF, SENDING, WAIT_ACK = "idle", "backoff", "sending", "wait_ack"
 
 
-class CsAloha(Mac):
+class CsAloha(HoldingMac):
     name = "cs-aloha"
     hears_all = False
     PARAMETERS = {
@@ -40,23 +40,12 @@ class CsAloha(Mac):
     def __init__(self, ack_timeout_s: float | None = None, max_retries: int = 3,
                  backoff_s: tuple[float, float] = (0.1, 1.0), ack_bytes: int = 5, max_range_m: float | None = None,
                  acks: bool = True):
-        super().__init__()
+        super().__init__(max_range_m, max_retries)
         self.acks = acks
         self.ack_timeout_param = ack_timeout_s
-        self.max_retries = max_retries
         self.backoff_s = backoff_s
         self.ack_bytes = ack_bytes
-        self.max_range_m = max_range_m
-        self.state = IDLE
-        self.current: Frame | None = None
-        self.attempts = 0
-        self.timer = None
         self.pending_acks: list[Frame] = []
-        self.duplicates = Duplicates()
-
-    @property
-    def holding(self) -> bool:
-        return self.current is not None
 
     def attach(self, modem: MacHost) -> None:
         super().attach(modem)
@@ -76,10 +65,7 @@ class CsAloha(Mac):
 
     def default_timeout(self) -> float:
         modem = self.modem
-        max_range = self.max_range_m if self.max_range_m is not None else modem.range_m[1]
-        if max_range == float("inf"):
-            raise ValueError("cs-aloha: give ack_timeout_s or max_range_m (the modem's range is unlimited)")
-        tau = modem.tau_at(max_range)
+        tau = modem.tau_at(self.max_range("give ack_timeout_s or max_range_m"))
         return 1.1 * (2 * tau + modem.tx_delay + modem.airtime(self.ack_bytes)) + 0.001
 
     # -- sending -------------------------------------------------------------------------------
@@ -141,14 +127,8 @@ class CsAloha(Mac):
         modem.observer.mac(modem.clock.now(), modem, self.current, "retx", attempt=self.attempts)
         self._backoff("no_ack")
 
-    def _done(self) -> None:
-        self.current = None
-        self.state = IDLE
-        if self.timer is not None:
-            self.modem.clock.cancel(self.timer)
-            self.timer = None
+    def _next(self) -> None:
         self._try_send()
-        self.modem.check_idle()
 
     # -- receiving ------------------------------------------------------------------------------
 

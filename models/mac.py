@@ -17,6 +17,7 @@ protocols do exactly that (``tests/test_radio_mac_host.py`` checks it).
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections import OrderedDict, deque
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
@@ -152,6 +153,48 @@ class Duplicates:
         if len(self._recent) > self.size:
             self._recent.popitem(last=False)
         return False
+
+
+class HoldingMac(Mac, ABC):
+    """A MAC that takes one frame from the FIFO at a time and holds it until it is acknowledged or given
+    up (CS-ALOHA, S-FAMA): the frame held and its attempts, the one timer it waits on, the frames it
+    delivered (a retransmission is delivered once), and the farthest receiver (``max_range_m``, else
+    the modem's range) that its timings are sized for."""
+
+    def __init__(self, max_range_m: float | None, max_retries: int):
+        super().__init__()
+        self.max_range_m = max_range_m
+        self.max_retries = max_retries
+        self.state = "idle"
+        self.current: Frame | None = None
+        self.attempts = 0
+        self.timer: Any = None
+        self.duplicates = Duplicates()
+
+    @property
+    def holding(self) -> bool:
+        return self.current is not None
+
+    def _done(self) -> None:
+        """The held frame is acknowledged or given up: let it go, take the next, say so if idle."""
+        self.current = None
+        self.state = "idle"
+        if self.timer is not None:
+            self.modem.clock.cancel(self.timer)
+            self.timer = None
+        self._next()
+        self.modem.check_idle()
+
+    @abstractmethod
+    def _next(self) -> None:
+        """Take the next frame of the FIFO, if any, and start on it as the protocol does."""
+
+    def max_range(self, remedy: str) -> float:
+        """The farthest receiver; a ValueError saying ``remedy`` if it is unlimited (no timing fits)."""
+        max_range = self.max_range_m if self.max_range_m is not None else self.modem.range_m[1]
+        if max_range == float("inf"):
+            raise ValueError(f"{self.name}: {remedy} (the modem's range is unlimited)")
+        return max_range
 
 
 class NoMac(Mac):

@@ -34,7 +34,7 @@ import math
 from typing import TYPE_CHECKING, Any
 
 from .frame import ACK, BROADCAST, CTS, DATA, RTS
-from .mac import Duplicates, Mac, MacHost, Param
+from .mac import HoldingMac, MacHost, Param
 
 if TYPE_CHECKING:
     from .frame import Frame
@@ -44,7 +44,7 @@ DECIDE = 1e-9  # how long after a boundary a missing answer is declared missing
 IDLE, WAIT_CTS, SEND_DATA, WAIT_ACK, BACKOFF = "idle", "wait_cts", "send_data", "wait_ack", "backoff"
 
 
-class SFama(Mac):
+class SFama(HoldingMac):
     name = "s-fama"
     hears_all = True  # overhearing RTS/CTS is the protocol
     PARAMETERS = {
@@ -58,32 +58,18 @@ class SFama(Mac):
 
     def __init__(self, max_range_m: float | None = None, max_backoff_slots: int = 4, rts_bytes: int = 5,
                  cts_bytes: int = 5, ack_bytes: int = 5, max_retries: int = 5):
-        super().__init__()
-        self.max_range_m = max_range_m
+        super().__init__(max_range_m, max_retries)
         self.max_backoff_slots = max_backoff_slots
         self.rts_bytes = rts_bytes
         self.cts_bytes = cts_bytes
         self.ack_bytes = ack_bytes
-        self.max_retries = max_retries
-        self.state = IDLE
-        self.current: Frame | None = None
-        self.attempts = 0
-        self.timer = None
         self.silent_until = 0.0
         self.rts_slot = 0
-        self.duplicates = Duplicates()
         self.answering = 0  # CTS/ACK exchanges this node has promised as a receiver
-
-    @property
-    def holding(self) -> bool:
-        return self.current is not None
 
     def attach(self, modem: MacHost) -> None:
         super().attach(modem)
-        max_range = self.max_range_m if self.max_range_m is not None else modem.range_m[1]
-        if max_range == float("inf"):
-            raise ValueError("s-fama: give max_range_m (the modem's range is unlimited)")
-        self.tau_max = modem.tau_at(max_range)
+        self.tau_max = modem.tau_at(self.max_range("give max_range_m"))
         control = max(self.rts_bytes, self.cts_bytes, self.ack_bytes)  # see the module's docstring
         self.slot = self.tau_max + modem.airtime(control) + modem.tx_delay
 
@@ -191,14 +177,8 @@ class SFama(Mac):
         self.timer = None
         self._plan()
 
-    def _done(self) -> None:
-        self.current = None
-        self.state = IDLE
-        if self.timer is not None:
-            self.modem.clock.cancel(self.timer)
-            self.timer = None
+    def _next(self) -> None:
         self._plan()
-        self.modem.check_idle()
 
     def on_tx_done(self, frame: "Frame") -> None:
         if frame is self.current and self.state == SEND_DATA:

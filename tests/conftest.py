@@ -43,6 +43,8 @@ SERIAL = {
         "examples/formation/run.py: five links' queues in a daemon of its own",
     "test_benchmarks_run.py::test_a_benchmark_runs_to_its_summary_on_a_small_case":
         "the benchmarks' daemons and anchors make their own queues (gli_roundtrip.py's relay four of 80 kB)",
+    "test_benchmarks_run.py::test_a_benchmark_with_daemons_prints_its_figures_on_a_small_case":
+        "the benchmarks' own daemons (several, one after the other), their processes pinned to CPUs",
 }
 
 

@@ -233,16 +233,11 @@ class Daemon:
         return self.log.read()
 
     def control(self, request: dict) -> dict:
-        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        sock.settimeout(10)
-        sock.connect(os.path.join(self.runtime, "control.sock"))
-        reader = sock.makefile("r")
-        version = json.loads(reader.readline())
-        assert version["class"] == "VERSION"
-        sock.sendall((json.dumps(request) + "\n").encode())
-        reply = json.loads(reader.readline())
-        sock.close()
-        return reply
+        from hilgate.control_client import Control
+
+        with Control(self.runtime, timeout=10) as control:
+            assert control.version["class"] == "VERSION"
+            return control.request(request)
 
     def status(self) -> dict:
         return self.control({"class": "STATUS"})

@@ -2,9 +2,15 @@
 that calls the product from outside the tests, and one that broke (bellhop_lookup.py asked for a
 channel attribute the propagation seam had renamed) was only found by a whole `make bench`.  The
 figures of these runs mean nothing and nothing here reads them; only that each ran to the end and
-printed its summary line."""
+printed its summary line.
+
+The benchmarks that start daemons (and pin processes to CPUs) run too, each on the smallest case its
+arguments allow, alone (conftest.SERIAL): only that each exits 0 and prints every one of its figure
+lines, never what the figures say.  Their link ids carry their process id, their queues are unlinked
+when their daemons stop, and their ports are the kernel's free ones."""
 
 import os
+import re
 import subprocess
 import sys
 
@@ -21,9 +27,40 @@ SMALL = {
                    "N = 5: hilgate PDR"),
     "pass_cost": (["benchmarks/pass_cost.py", "200"], "200 passes: p10"),
     "pass_instructions": (["benchmarks/pass_instructions.py", "50"], "instructions per pass"),
-    "gli_roundtrip": (["benchmarks/gli_roundtrip.py", "--round-trips", "200", "--repeats", "1", "--frames", "0"],
-                      "hilgate beyond the relay"),
     "bellhop_lookup": (["benchmarks/bellhop_lookup.py", "--quick"], "BELLHOP / Thorp: ratio"),
+    "aruco": (["benchmarks/aruco.py", "--frames", "5", "--repeats", "1"], "error at 1-2 m: median"),
+}
+
+# name → (argv, lines that must be printed: each a regular expression a line must match from its start)
+WITH_DAEMONS = {
+    "gli_roundtrip": (["benchmarks/gli_roundtrip.py", "--round-trips", "200", "--frames", "200", "--repeats", "1",
+                       "--placement", "same"],
+                      [r"repeat 1, +same CPU: bare POSIX-queue ping-pong .* bare Python relay .* through hilgate "
+                       r"\(4 hops\) p50 ",
+                       r" +same CPU: bare p50 .* added by hilgate p50 .* hilgate beyond the relay p50 ",
+                       *(rf"throughput through one link, 20-byte payloads, +{offered}: .* frames/s received, \d+ lost"
+                         for offered in ("5,000/s offered", "10,000/s offered", "20,000/s offered", "flat out"))]),
+    "multihost": (["benchmarks/multihost.py", "--round-trips", "150", "--frames", "200", "--repeats", "1",
+                   "--placement", "same", "--on-time", "5"],
+                  [r"repeat 1, +same CPU: bare Zenoh p50 .* hilgate, TLS p50 .* hilgate, insecure p50 ",
+                   r" +same CPU: bare Zenoh .* ratio TLS/bare ",
+                   *(rf" +same CPU, +{side}: round trip .* = both ways .* \+ the rest " for side in ("tls", "insecure")),
+                   r"delivery on the wall clock A -> B .* p50 ",
+                   *(rf"throughput A -> B, 20-byte payloads, +{offered}: .* frames/s received, \d+ lost"
+                     for offered in ("5,000/s offered", "10,000/s offered", "flat out"))]),
+    "many_links": (["benchmarks/many_links.py", "--links", "2", "--rate", "10", "--seconds", "1", "--warmup", "0.5",
+                    "--readers", "1", "--placement", "same"],
+                   [r" +same CPU, +adaptive: \d+ frames delivered in the window, \d+ sent in it; lateness .* daemon CPU "]),
+    # ns-3 is a peer this machine need not have: a Python without it is told, and the run goes on
+    "realtime_lateness": (["benchmarks/realtime_lateness.py", "--seconds", "1", "--bare-seconds", "1", "--nodes", "2",
+                           "--rate", "10", "--apps", "1", "--repeats", "1", "--placement", "same",
+                           "--ns3-python", sys.executable],
+                          [r"ns-3: not run \(", r"run 1, +same CPU, +bare: lateness at the application p50 ",
+                           r"run 1, +same CPU, hilgate: lateness at the application p50 .* daemon CPU ",
+                           r" +same CPU: bare .* hilgate .* ns-3 not run; ratio hilgate / bare "]),
+    "web_cost": (["benchmarks/web_cost.py", "--seconds", "1", "--repeats", "1", "--warm-up", "0.5"],
+                 [r" +no web door +CPU ", r" +--web, no page +CPU ", r" +a page connected +CPU .* pictures ",
+                  r" +--web, no page adds ", r" +a page connected adds "]),
 }
 
 
@@ -39,3 +76,15 @@ def test_a_benchmark_runs_to_its_summary_on_a_small_case(name):
         pytest.skip(result.stdout.strip())  # no valgrind here: `make test` does not install it
     assert result.returncode == 0, f"{' '.join(argv)}: exit {result.returncode}\n{result.stdout}\n{result.stderr}"
     assert summary in result.stdout, result.stdout
+
+
+@pytest.mark.parametrize("name", sorted(WITH_DAEMONS))
+def test_a_benchmark_with_daemons_prints_its_figures_on_a_small_case(name):
+    argv, figures = WITH_DAEMONS[name]
+    environment = {k: v for k, v in os.environ.items() if k != "NS3_PYTHON"}
+    result = subprocess.run([sys.executable, *argv], cwd=REPO, env=environment, capture_output=True, text=True,
+                            timeout=600)
+    assert result.returncode == 0, f"{' '.join(argv)}: exit {result.returncode}\n{result.stdout}\n{result.stderr}"
+    lines = result.stdout.splitlines()
+    missing = [figure for figure in figures if not any(re.match(figure, line) for line in lines)]
+    assert not missing, f"no line matches {missing}:\n{result.stdout}"

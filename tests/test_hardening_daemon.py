@@ -379,3 +379,32 @@ def test_an_application_that_only_listens_gets_a_burst_without_losses(daemon_of)
             frames += message[0] == 0
     queue.close()
     assert daemon.link_status(b)["drop_causes"] == {}
+
+
+def test_frames_a_socket_client_sent_as_it_closed_are_all_sent_though_a_write_to_it_failed_first(daemon_of):
+    """A client that sends its last frames and closes at once, while the daemon is busy elsewhere: the
+    daemon's next write to it (here a frame for it, overdue, delivered before its input is read) fails.
+    That only stops output: the frames it sent are read and sent (they were lost, uncounted, when the
+    failed write closed the connection first)."""
+    import signal
+
+    from daemon_kit import wait_until
+    from hilgate.client import Link
+
+    a, b = unique("a"), unique("b")
+    daemon = daemon_of(scene(a, b).replace("[150, 0, 0]", "[3000, 0, 0]"), [a, b])  # 2 s from a to b
+    with Link.open(a, runtime_dir=daemon.runtime) as link_a:
+        link_b = Link.open(b, runtime_dir=daemon.runtime)
+        link_a.send(b"for b", dst=2)
+        wait_until(lambda: daemon.link_status(a)["tx_packets"] == 1, "a's frame on air")
+        daemon.process.send_signal(signal.SIGSTOP)
+        try:
+            for i in range(5):
+                link_b.send(b"last %d" % i, dst=1)
+            link_b.close()
+            time.sleep(3.0)  # (not a bound: a's frame is overdue at b when the daemon goes on)
+        finally:
+            daemon.process.send_signal(signal.SIGCONT)
+        wait_until(lambda: daemon.link_status(b)["tx_packets"] == 5, lambda: daemon.link_status(b))
+    status = daemon.link_status(b)
+    assert status["rx_packets"] == 1 and status["drop_causes"] == {}, status

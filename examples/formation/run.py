@@ -25,6 +25,8 @@ import tempfile
 import time
 import uuid
 
+from hilgate.control_client import request as control_request
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 SCENE = os.path.join(HERE, "..", "..", "scenes", "paper-exp3-formation.yaml")
 VIRTUAL_SCENE = os.path.join(HERE, "..", "..", "scenes", "paper-exp3-formation-virtual.yaml")  # the same applications (apps.py), in virtual time
@@ -64,14 +66,8 @@ def wait_ready(notify: socket.socket, daemon: subprocess.Popen) -> bool:
 
 
 def control(runtime: str, request: dict) -> dict:
-    """One request on the daemon's control socket (line-delimited JSON; the first line is its VERSION)."""
-    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as sock:
-        sock.settimeout(30)
-        sock.connect(os.path.join(runtime, "control.sock"))
-        reader = sock.makefile("r")
-        reader.readline()
-        sock.sendall((json.dumps(request) + "\n").encode())
-        return json.loads(reader.readline())
+    """One request on the daemon's control socket (:mod:`hilgate.control_client`)."""
+    return control_request(request, runtime, timeout=30)
 
 
 def wait_attached(runtime: str, links: list[str], daemon: subprocess.Popen, timeout: float = 120.0) -> None:

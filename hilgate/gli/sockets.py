@@ -155,11 +155,14 @@ class GliClient:
 
     def deliver(self, frame: Any, t: float) -> str:
         """``client_slow`` if the frame could not be queued for this client: it has stopped reading and
-        its output passed the cap, so it is disconnected (it would only cost the daemon memory)."""
-        if self.connection.closed:
+        its output passed the cap, so it is disconnected (it would only cost the daemon memory).  A
+        client that has closed its end is ABSENT: the frame is not its loss."""
+        if self.connection.closed or self.connection.write_failed:
             return ABSENT
         if self.connection.write(wire.encode_recv(frame.src, frame.dst, t, frame.payload)):
             return TAKEN
+        if self.connection.write_failed:  # it has just gone (closed its end): not slow, and not here
+            return ABSENT
         self._too_slow()
         return "client_slow"
 
@@ -170,12 +173,15 @@ class GliClient:
                 self._too_slow()
 
     def _too_slow(self) -> None:
-        if not self.connection.closed:
-            if self.connection.write_failed:  # it closed its end (hilgate send does, once done): not slow
-                log.debug("GLI client on %s has gone", self.port.id if self.port else "?")
-            else:
-                log.info("GLI client on %s stopped reading: disconnected", self.port.id if self.port else "?")
-            self.connection.close()
+        if self.connection.closed:
+            return
+        if self.connection.write_failed:
+            # it closed its end (hilgate send does, once done): not slow, and what it sent before is still
+            # in the socket; the connection closes when reading ends, once that is handled (core.streams)
+            log.debug("GLI client on %s has gone", self.port.id if self.port else "?")
+            return
+        log.info("GLI client on %s stopped reading: disconnected", self.port.id if self.port else "?")
+        self.connection.close()
 
     def _on_close(self) -> None:
         self._stop_waiting()

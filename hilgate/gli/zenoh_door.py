@@ -39,6 +39,7 @@ import re
 import struct
 import threading
 import time
+from abc import ABC, abstractmethod
 from collections import deque
 from typing import Any
 
@@ -121,35 +122,131 @@ class Bucket:
         return True
 
 
-class Client:
-    """What the door holds for one client of a link."""
+class Sender:
+    """What a door holds for one sender of a link (a Zenoh client, a DDS writer): its frames waiting
+    for the link to be READY, its rate, and what it lost since the loop last counted it."""
 
-    __slots__ = ("name", "queue", "sends", "queries", "pending", "drops")
+    __slots__ = ("name", "queue", "sends", "drops")
 
     def __init__(self, name: str):
         self.name = name
-        self.queue: deque[bytes] = deque()
+        self.queue: deque[Any] = deque()
         self.sends = Bucket(CLIENT_RATE_HZ, CLIENT_BURST)
-        self.queries = Bucket(QUERY_RATE_HZ, QUERY_BURST)
-        self.pending = 0
         self.drops: dict[str, int] = {}
 
+    @staticmethod
+    def size(item: Any) -> int:
+        """The bytes of a queued item that count against :data:`DOOR_BYTES`."""
+        return len(item)
 
-class ZenohEndpoint:
+    def idle(self) -> bool:
+        """Nothing queued and nothing sent lately: forgetting it loses nothing."""
+        return not self.queue and self.sends.full()
+
+
+class Client(Sender):
+    """What the door holds for one client of a link: a sender that also asks commands."""
+
+    __slots__ = ("queries", "pending")
+
+    def __init__(self, name: str):
+        super().__init__(name)
+        self.queries = Bucket(QUERY_RATE_HZ, QUERY_BURST)
+        self.pending = 0
+
+    def idle(self) -> bool:
+        return super().idle() and not self.pending and self.queries.full()
+
+
+class SenderQueues(ABC):
+    """The loop's side of a door whose senders each have a queue (this door, and the ROS 2 door's
+    writers): one frame of each sender in turn while the link is READY, so one sender's flood fills
+    only its own queue.  The endpoint fills ``senders`` and ``refused`` on its transport's threads,
+    under ``lock``, and posts :meth:`_pump` to the loop once (``posted``)."""
+
+    source: str  # the ``src`` of what is counted lost ("zenoh", "ros2"; a sender's: "zenoh:<name>")
+
+    def __init__(self, door: Any, port: LinkPort):
+        self.door = door  # its ``queued``: the bytes every link's door holds, under ``lock``
+        self.port = port
+        self.ready: bool | None = None
+        self.senders: dict[Any, Sender] = {}
+        self.refused: dict[str, int] = {}  # frames and queries of no sender the door could keep
+        self.lock: threading.Lock = door.lock  # (one for the door: its byte count is shared)
+        self.posted = False
+
+    def _admit(self, sender: Sender, size: int, max_size: int, door_bytes: int) -> bool:
+        """Under the lock, on the transport's thread: whether ``sender`` may queue a frame of ``size``
+        bytes (then they are counted in the door's), else the drop counted with its cause."""
+        door = self.door
+        if size > max_size:
+            cause = "bad_frame"
+        elif not sender.sends.take():
+            cause = "rate"
+        elif len(sender.queue) >= CLIENT_QUEUE or door.queued + size > door_bytes:
+            cause = "client_queue"
+        else:
+            door.queued += size
+            return True
+        sender.drops[cause] = sender.drops.get(cause, 0) + 1
+        return False
+
+    def _pump(self) -> None:
+        """On the loop: report what was dropped, then the senders' frames in turn while the link is READY."""
+        door, port = self.door, self.port
+        with self.lock:
+            self.posted = False
+            drops = [(sender.name, sender.drops) for sender in self.senders.values() if sender.drops]
+            for sender in self.senders.values():
+                sender.drops = {}
+            refused, self.refused = self.refused, {}
+        for name, counts in drops:
+            for cause, n in counts.items():
+                port.lost(cause, 0, src=f"{self.source}:{name}", n=n)
+        for cause, n in refused.items():
+            port.lost(cause, 0, src=self.source, n=n)
+        while port.ready:
+            sent = False
+            for sender in list(self.senders.values()):
+                with self.lock:
+                    if not sender.queue:
+                        continue
+                    item = sender.queue.popleft()
+                    door.queued -= sender.size(item)
+                self._forward(item, sender)
+                sent = True
+                if not port.ready:
+                    break
+            if not sent:
+                break
+        with self.lock:  # senders with nothing queued, sending and asking nothing lately, are forgotten
+            for key in [key for key, sender in self.senders.items() if sender.idle()]:
+                del self.senders[key]
+
+    @abstractmethod
+    def _forward(self, item: Any, sender: Sender) -> None:
+        """On the loop: hand ``sender``'s queued ``item`` to the link (a refused one is counted)."""
+
+    def _drop_queued(self) -> None:
+        """On close: what the senders still queue is given back to the doors' byte count."""
+        with self.lock:
+            for sender in self.senders.values():
+                self.door.queued -= sum(sender.size(item) for item in sender.queue)
+                sender.queue.clear()
+
+
+class ZenohEndpoint(SenderQueues):
     kind = "zenoh"
+    source = "zenoh"
     busy = False
     assumes_busy = False  # (hilgate.core.endpoint.Endpoint.assumes_busy: told BUSY by the link after a frame)
     phy = None  # (no PHY reports: hilgate.core.endpoint.Endpoint.phy)
 
+    senders: dict[str, Client]  # (Clients: they ask commands too)
+
     def __init__(self, door: "ZenohDoor", port: LinkPort):
-        self.door = door
-        self.port = port
+        super().__init__(door, port)
         self.info: dict[str, Any] = {}
-        self.ready: bool | None = None
-        self.clients: dict[str, Client] = {}
-        self.refused: dict[str, int] = {}  # SENDs and queries of no client the door could keep
-        self.lock = door.lock  # (one for the door: its byte count is shared)
-        self.posted = False
         self.info_bucket = Bucket(QUERY_RATE_HZ * 4, QUERY_BURST * 4)
         session = door.session
         self.base = base = link_key(door.prefix, door.host, port.id, "")
@@ -187,74 +284,29 @@ class ZenohEndpoint:
     def _client(self, key: str, leaf: str) -> Client | None:
         """The client a key names (under the lock); None, counted, when it cannot be kept."""
         name = key[len(self.base) + len(leaf) + 1:]
-        client = self.clients.get(name)
+        client = self.senders.get(name)
         if client is None:
             if not CLIENT_NAME.fullmatch(name):
                 cause = "bad_client"
-            elif len(self.clients) >= MAX_CLIENTS:
+            elif len(self.senders) >= MAX_CLIENTS:
                 cause = "clients"
             else:
-                client = self.clients[name] = Client(name)
+                client = self.senders[name] = Client(name)
                 return client
             self.refused[cause] = self.refused.get(cause, 0) + 1
         return client
 
     def _on_send(self, sample: Any) -> None:
-        size = len(sample.payload)
-        door = self.door
         with self.lock:
             client = self._client(str(sample.key_expr), "send")
-            if client is not None:
-                cause = None
-                if size > MAX_SEND:
-                    cause = "bad_frame"
-                elif not client.sends.take():
-                    cause = "rate"
-                elif len(client.queue) >= CLIENT_QUEUE or door.queued + size > DOOR_BYTES:
-                    cause = "client_queue"
-                if cause is None:
-                    client.queue.append(sample.payload.to_bytes())
-                    door.queued += size
-                else:
-                    client.drops[cause] = client.drops.get(cause, 0) + 1
+            if client is not None and self._admit(client, len(sample.payload), MAX_SEND, DOOR_BYTES):
+                client.queue.append(sample.payload.to_bytes())
             wake, self.posted = not self.posted, True
         if wake:
-            door.post(self._pump)
+            self.door.post(self._pump)
 
-    def _pump(self) -> None:
-        """On the loop: report what was dropped, then the clients' SENDs in turn while the link is READY."""
-        door, port = self.door, self.port
-        with self.lock:
-            self.posted = False
-            drops = [(client.name, client.drops) for client in self.clients.values() if client.drops]
-            for client in self.clients.values():
-                client.drops = {}
-            refused, self.refused = self.refused, {}
-        for name, counts in drops:
-            for cause, n in counts.items():
-                port.lost(cause, 0, src=f"zenoh:{name}", n=n)
-        for cause, n in refused.items():
-            port.lost(cause, 0, src="zenoh", n=n)
-        while port.ready:
-            sent = False
-            for client in list(self.clients.values()):
-                with self.lock:
-                    if not client.queue:
-                        continue
-                    data = client.queue.popleft()
-                    door.queued -= len(data)
-                self._send(data, client.name)
-                sent = True
-                if not port.ready:
-                    break
-            if not sent:
-                break
-        with self.lock:  # clients with nothing queued, sending and asking nothing, are forgotten
-            for name in [n for n, c in self.clients.items() if not c.queue and not c.pending
-                         and c.sends.full() and c.queries.full()]:
-                del self.clients[name]
-
-    def _send(self, data: bytes, client: str) -> None:
+    def _forward(self, data: bytes, sender: Sender) -> None:
+        client = sender.name
         if not data:
             self._error(client, "a SEND needs at least the destination byte")
             self.port.lost("bad_frame", 0, src="app")
@@ -320,10 +372,7 @@ class ZenohEndpoint:
                 entity.undeclare()
             except Exception:  # the session is closing already
                 pass
-        with self.lock:
-            for client in self.clients.values():
-                self.door.queued -= sum(len(data) for data in client.queue)
-                client.queue.clear()
+        self._drop_queued()
 
 
 class ZenohDoor:

@@ -17,7 +17,8 @@ topic       type                       who publishes, what
 **Bounded per writer**, as the Zenoh door is per client (:mod:`hilgate.gli.zenoh_door`): Cyclone DDS
 calls :meth:`Ros2Endpoint._on_send` on its own thread; it takes every sample there, each DDS writer (a
 node's publisher) has its own queue at the door, filled at most at the Zenoh door's rate, and the loop
-takes one frame of each writer in turn while the link is READY.  What a writer sends beyond is
+takes one frame of each writer in turn while the link is READY (the Zenoh door's pump,
+:class:`hilgate.gli.zenoh_door.SenderQueues`).  What a writer sends beyond is
 dropped and counted (``rate``, ``client_queue``); a sample that does not decode is ``bad_frame``;
 what Cyclone itself could not keep (the reader's history full, a best-effort sample lost on the way)
 is counted too (``dds_rejected``, ``dds_lost``).  At most :data:`MAX_WRITERS` writers per link.
@@ -28,7 +29,6 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import deque
 from typing import Any
 
 from cyclonedds.core import Listener
@@ -36,7 +36,7 @@ from cyclonedds.core import Listener
 from ..core.backend import AppFrame
 from ..core.endpoint import ABSENT, TAKEN, LinkPort
 from ..core.packets import PacketError
-from ..gli.zenoh_door import CLIENT_BURST, CLIENT_QUEUE, CLIENT_RATE_HZ, MAX_CLIENTS, Bucket
+from ..gli.zenoh_door import MAX_CLIENTS, Sender, SenderQueues
 from .idl import message_class
 from .participant import DDSException, Participant, guarded
 from .poses import take_each
@@ -53,32 +53,28 @@ DOOR_BYTES = 16 << 20  # bytes of frames all links' ROS 2 doors hold in all
 READER_SAMPLES = 256   # samples Cyclone keeps for the reader before the listener takes them
 
 
-class Writer:
-    """What the door holds for one DDS writer (a node's publisher) of a link's ``send`` topic."""
+class Writer(Sender):
+    """What the door holds for one DDS writer (a node's publisher) of a link's ``send`` topic: its
+    queue holds ``(data, dst)``."""
 
-    __slots__ = ("name", "queue", "sends", "drops")
+    __slots__ = ()
 
-    def __init__(self, name: str):
-        self.name = name
-        self.queue: deque[tuple[bytes, int]] = deque()
-        self.sends = Bucket(CLIENT_RATE_HZ, CLIENT_BURST)
-        self.drops: dict[str, int] = {}
+    @staticmethod
+    def size(item: tuple[bytes, int]) -> int:
+        return len(item[0])
 
 
-class Ros2Endpoint:
+class Ros2Endpoint(SenderQueues):
     kind = "ros2"
+    source = "ros2"
     busy = False
     assumes_busy = False  # (hilgate.core.endpoint.Endpoint.assumes_busy: told BUSY by the link after a frame)
     phy = None  # (no PHY reports: hilgate.core.endpoint.Endpoint.phy)
 
+    senders: dict[int, Writer]
+
     def __init__(self, door: "Ros2Door", port: LinkPort):
-        self.door = door
-        self.port = port
-        self.ready: bool | None = None
-        self.writers: dict[int, Writer] = {}
-        self.refused: dict[str, int] = {}
-        self.lock = door.lock
-        self.posted = False
+        super().__init__(door, port)
         self.matched = 0  # subscriptions of recv (kept up to date by Cyclone: asking per frame costs more)
         self.Frame = message_class(FRAME)
         self.Bool = message_class(BOOL)
@@ -126,32 +122,20 @@ class Ros2Endpoint:
     # -- nodes → link (on Cyclone's threads: counted and queued, never waiting) ----------------------
 
     def _on_send(self, reader: Any) -> None:
-        door = self.door
         for sample in take_each(reader, self._refuse_decode):
             if not hasattr(sample, "data"):  # (by name: a DDS sample, or the invalid one of a writer gone)
                 continue  # a writer went away
             handle = sample.sample_info.publication_handle
             data = bytes(sample.data)
-            size = len(data)
             with self.lock:
-                writer = self.writers.get(handle)
+                writer = self.senders.get(handle)
                 if writer is None:
-                    if len(self.writers) >= MAX_WRITERS:
+                    if len(self.senders) >= MAX_WRITERS:
                         self.refused["clients"] = self.refused.get("clients", 0) + 1
                         continue
-                    writer = self.writers[handle] = Writer(f"{handle:x}")
-                cause = None
-                if size > MAX_PAYLOAD:
-                    cause = "bad_frame"
-                elif not writer.sends.take():
-                    cause = "rate"
-                elif len(writer.queue) >= CLIENT_QUEUE or door.queued + size > DOOR_BYTES:
-                    cause = "client_queue"
-                if cause is None:
+                    writer = self.senders[handle] = Writer(f"{handle:x}")
+                if self._admit(writer, len(data), MAX_PAYLOAD, DOOR_BYTES):
                     writer.queue.append((data, sample.dst))
-                    door.queued += size
-                else:
-                    writer.drops[cause] = writer.drops.get(cause, 0) + 1
         self._wake()
 
     def _refuse_decode(self, cause: str) -> None:
@@ -176,39 +160,8 @@ class Ros2Endpoint:
         if wake:
             self.door.post(self._pump)
 
-    def _pump(self) -> None:
-        """On the loop: report what was dropped, then the writers' frames in turn while the link is READY."""
-        door, port = self.door, self.port
-        with self.lock:
-            self.posted = False
-            drops = [(writer.name, writer.drops) for writer in self.writers.values() if writer.drops]
-            for writer in self.writers.values():
-                writer.drops = {}
-            refused, self.refused = self.refused, {}
-        for name, counts in drops:
-            for cause, n in counts.items():
-                port.lost(cause, 0, src=f"ros2:{name}", n=n)
-        for cause, n in refused.items():
-            port.lost(cause, 0, src="ros2", n=n)
-        while port.ready:
-            sent = False
-            for writer in list(self.writers.values()):
-                with self.lock:
-                    if not writer.queue:
-                        continue
-                    data, dst = writer.queue.popleft()
-                    door.queued -= len(data)
-                self._send(data, dst)
-                sent = True
-                if not port.ready:
-                    break
-            if not sent:
-                break
-        with self.lock:  # writers with nothing queued and nothing sent lately are forgotten
-            for handle in [h for h, w in self.writers.items() if not w.queue and w.sends.full()]:
-                del self.writers[handle]
-
-    def _send(self, data: bytes, dst: int) -> None:
+    def _forward(self, item: tuple[bytes, int], sender: Sender) -> None:
+        data, dst = item
         try:
             self.port.send_payload(data, dst)
         except PacketError as exc:
@@ -220,10 +173,7 @@ class Ros2Endpoint:
         participant = self.door.participant
         for entity in (self.reader, self.recv, self.state_writer):
             participant.delete(entity)
-        with self.lock:
-            for writer in self.writers.values():
-                self.door.queued -= sum(len(data) for data, _ in writer.queue)
-                writer.queue.clear()
+        self._drop_queued()
 
 
 class Ros2Door:

@@ -1,0 +1,73 @@
+"""A client of a daemon's control socket (``RUNTIME/control.sock``, docs/daemon.md): ``hilgate status``,
+``reload`` and ``pose``, the benchmarks and the examples speak to a running daemon through this one piece
+rather than each writing the socket, the VERSION line and the JSON lines again.
+
+    from hilgate.control_client import request
+    links = request({"class": "STATUS"}, runtime_dir)["links"]
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+from typing import Any, Iterator
+
+from .core.paths import client_runtime_dir
+
+__all__ = ["Control", "request"]
+
+
+class Control:
+    """One connection to the control socket of the daemon serving ``runtime_dir`` (None: the first
+    directory where a daemon listens).  The daemon's first line, its VERSION, is read on connecting
+    (``version``); an OSError says there is no daemon there."""
+
+    def __init__(self, runtime_dir: str | None = None, timeout: float | None = 5.0):
+        self.path = os.path.join(client_runtime_dir(runtime_dir), "control.sock")
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        self.sock.settimeout(timeout)
+        try:
+            self.sock.connect(self.path)
+        except OSError as exc:
+            self.sock.close()
+            raise OSError(f"no hilgate daemon at {self.path} ({exc.strerror or exc})") from None
+        self.reader = self.sock.makefile("r", encoding="utf-8")
+        try:
+            self.version: dict[str, Any] = json.loads(self.reader.readline())
+        except BaseException:
+            self.close()
+            raise
+
+    def send(self, message: dict) -> None:
+        """A request whose answers are read with :meth:`replies` (WATCH)."""
+        self.sock.sendall((json.dumps(message) + "\n").encode())
+
+    def request(self, message: dict) -> dict:
+        """A request and its one answer."""
+        self.send(message)
+        return json.loads(self.reader.readline())
+
+    def replies(self) -> Iterator[dict]:
+        """Each line the daemon sends from now on, until it closes the connection."""
+        for line in self.reader:
+            yield json.loads(line)
+
+    def settimeout(self, timeout: float | None) -> None:
+        self.sock.settimeout(timeout)
+
+    def close(self) -> None:
+        self.reader.close()
+        self.sock.close()
+
+    def __enter__(self) -> "Control":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def request(message: dict, runtime_dir: str | None = None, timeout: float | None = 10.0) -> dict:
+    """One request on a connection of its own, and its answer."""
+    with Control(runtime_dir, timeout) as control:
+        return control.request(message)
