@@ -44,7 +44,7 @@ import time
 import uuid
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from gli_roundtrip import MESSAGE, _echo, frame, open_queue, percentiles, send_paced  # noqa: E402
+from gli_roundtrip import MESSAGE, _echo, frame, open_queue, percentiles, round_trip, send_paced  # noqa: E402
 from peers import spread  # noqa: E402
 from daemon_harness import Daemon  # noqa: E402
 from placement import Placement, choose, pin, pinned  # noqa: E402
@@ -219,13 +219,7 @@ def through_hilgate(count: int, placement: Placement, secure: bool = True) -> tu
             for i in range(count + WARM_UP):
                 if i == WARM_UP:
                     heard.append((network.heard("B", "A"), network.heard("A", "B")))
-                start = time.perf_counter()
-                tx.send(message)
-                while True:
-                    reply, _ = rx.receive(10.0)
-                    if reply[0] == 0:
-                        break
-                samples.append(time.perf_counter() - start)
+                samples.append(round_trip(tx, rx, message, 10.0))
         heard.append((network.heard("B", "A"), network.heard("A", "B")))
         echo.join()
         tx.close()
