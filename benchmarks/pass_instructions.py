@@ -47,11 +47,13 @@ def main() -> int:
     directory = tempfile.mkdtemp(prefix="hilgate-callgrind-")
     out = os.path.join(directory, "callgrind.out")
     environment = dict(os.environ, PASS_COST_CALLGRIND="1", PYTHONHASHSEED="0")
-    subprocess.run(["valgrind", "--tool=callgrind", "--collect-atstart=no", f"--callgrind-out-file={out}",
-                    sys.executable, os.path.join(HERE, "pass_cost.py"), str(counted + CALLGRIND_WARM_UP)],
-                   env=environment, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    found = dict(totals(path) for path in glob.glob(out + "*"))
-    shutil.rmtree(directory, ignore_errors=True)
+    try:
+        subprocess.run(["valgrind", "--tool=callgrind", "--collect-atstart=no", f"--callgrind-out-file={out}",
+                        sys.executable, os.path.join(HERE, "pass_cost.py"), str(counted + CALLGRIND_WARM_UP)],
+                       env=environment, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        found = dict(totals(path) for path in glob.glob(out + "*"))
+    finally:
+        shutil.rmtree(directory, ignore_errors=True)
     daemon = next((n for trigger, n in found.items() if "daemon" in trigger), None)
     relay = next((n for trigger, n in found.items() if "relay" in trigger), None)
     if daemon is None or relay is None:

@@ -13,9 +13,23 @@ import os
 import socket
 from typing import Any, Iterator
 
+from .core import safejson
 from .core.paths import client_runtime_dir
 
-__all__ = ["Control", "request"]
+__all__ = ["Control", "ControlError", "ControlClosed", "request"]
+
+MAX_ANSWER = 16 << 20
+"""Characters of the longest answer line read (a STATUS of thousands of links is a few MB): a socket
+that sends more without a line's end is not a daemon, and is not given the memory."""
+
+
+class ControlError(ConnectionError):
+    """The daemon's socket closed, or said something that is no answer (an OSError: ``hilgate status``
+    prints it as one line)."""
+
+
+class ControlClosed(ControlError):
+    """The daemon closed the connection (the end of :meth:`Control.replies`; elsewhere an error)."""
 
 
 class Control:
@@ -34,7 +48,7 @@ class Control:
             raise OSError(f"no hilgate daemon at {self.path} ({exc.strerror or exc})") from None
         self.reader = self.sock.makefile("r", encoding="utf-8")
         try:
-            self.version: dict[str, Any] = json.loads(self.reader.readline())
+            self.version: dict[str, Any] = self._answer()
         except BaseException:
             self.close()
             raise
@@ -46,12 +60,37 @@ class Control:
     def request(self, message: dict) -> dict:
         """A request and its one answer."""
         self.send(message)
-        return json.loads(self.reader.readline())
+        return self._answer()
 
     def replies(self) -> Iterator[dict]:
         """Each line the daemon sends from now on, until it closes the connection."""
-        for line in self.reader:
-            yield json.loads(line)
+        while True:
+            try:
+                yield self._answer()
+            except ControlClosed:
+                return
+
+    def _answer(self) -> dict:
+        """The next line as a JSON object, read with bounds: a dead or hostile socket is a ControlError,
+        never a traceback (a line nested past the parser's recursion, not UTF-8), a hang on a line
+        without end, or memory without bound."""
+        try:
+            line = self.reader.readline(MAX_ANSWER + 1)
+        except UnicodeDecodeError:
+            raise ControlError(f"{self.path} sent something that is not an answer (not UTF-8)") from None
+        if not line:
+            raise ControlClosed(f"the daemon at {self.path} closed the connection")
+        if not line.endswith("\n"):
+            if len(line) > MAX_ANSWER:
+                raise ControlError(f"{self.path} sent a line longer than {MAX_ANSWER} characters")
+            raise ControlClosed(f"the daemon at {self.path} closed the connection mid-answer")
+        try:
+            answer = safejson.loads(line, max_bytes=4 * MAX_ANSWER)
+        except ValueError as exc:
+            raise ControlError(f"{self.path} sent something that is not an answer ({exc})") from None
+        if not isinstance(answer, dict):
+            raise ControlError(f"{self.path} sent something that is not an answer (not a JSON object)")
+        return answer
 
     def settimeout(self, timeout: float | None) -> None:
         self.sock.settimeout(timeout)

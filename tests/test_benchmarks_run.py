@@ -11,8 +11,10 @@ when their daemons stop, and their ports are the kernel's free ones."""
 
 import os
 import re
+import shutil
 import subprocess
 import sys
+import tempfile
 
 import pytest
 
@@ -66,16 +68,25 @@ WITH_DAEMONS = {
 
 @pytest.mark.parametrize("name", sorted(SMALL))
 def test_a_benchmark_runs_to_its_summary_on_a_small_case(name):
+    """...and leaves nothing in the temporary directory (every `make test` runs them: pass_cost.py left a
+    scene and a runtime directory in /tmp at each run, 182 of them on this machine by the afternoon)."""
     argv, summary = SMALL[name]
     environment = {k: v for k, v in os.environ.items() if k != "NS3_PYTHON"}  # ns-3 is make bench's, not ours
-    result = subprocess.run([sys.executable, *argv], cwd=REPO, env=environment, capture_output=True, text=True,
-                            timeout=600)
+    scratch = tempfile.mkdtemp(prefix="hb-")  # (short: a daemon's socket paths go under it)
+    environment["TMPDIR"] = scratch
+    try:
+        result = subprocess.run([sys.executable, *argv], cwd=REPO, env=environment, capture_output=True, text=True,
+                                timeout=600)
+        left = sorted(os.listdir(scratch))
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
     if name == "bellhop_lookup" and "BELLHOP: not run" in result.stdout:
         pytest.skip(result.stdout.strip())  # no BELLHOP program: `make test` makes .venv-bellhop
     if name == "pass_instructions" and "not run" in result.stdout:
         pytest.skip(result.stdout.strip())  # no valgrind here: `make test` does not install it
     assert result.returncode == 0, f"{' '.join(argv)}: exit {result.returncode}\n{result.stdout}\n{result.stderr}"
     assert summary in result.stdout, result.stdout
+    assert left == [], f"{' '.join(argv)} left these in its temporary directory"
 
 
 @pytest.mark.parametrize("name", sorted(WITH_DAEMONS))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.resources
 import os
+import stat
 
 SYSTEM_SCENE = "/etc/hilgate/scene.yaml"
 SYSTEM_RUNTIME = "/run/hilgate"
@@ -35,13 +36,37 @@ def daemon_runtime_dir(explicit: str | None = None) -> str:
 
 
 def client_runtime_dir(explicit: str | None = None) -> str:
-    """The first candidate where a daemon is listening (falls back to the daemon's choice)."""
+    """The first candidate where a daemon is listening (falls back to the daemon's choice).  A candidate
+    anyone could have created first is skipped (:func:`_not_trusted`); an OSError if the fallback is one."""
     if explicit:
         return explicit
     for candidate in runtime_candidates():
-        if os.path.exists(os.path.join(candidate, "control.sock")):
+        if os.path.exists(os.path.join(candidate, "control.sock")) and _not_trusted(candidate) is None:
             return candidate
-    return daemon_runtime_dir()
+    chosen = daemon_runtime_dir()
+    problem = _not_trusted(chosen)
+    if problem is not None:
+        raise OSError(f"{problem}: anyone may create that name first, so it is no daemon of yours; "
+                      f"remove it or give --runtime-dir")
+    return chosen
+
+
+def _not_trusted(candidate: str) -> str | None:
+    """Why a daemon in ``candidate`` could be anyone's (None: it cannot): a symlink, or a directory of
+    another user in a directory anyone may write to (``/tmp/hilgate-UID`` is a name anyone can take;
+    the daemon refuses such a directory too, docs/security.md).  Root's is trusted."""
+    try:
+        info = os.lstat(candidate)
+        parent = os.stat(os.path.dirname(os.path.abspath(candidate)))
+    except OSError:
+        return None  # nothing there yet: nothing to trust or refuse
+    if not parent.st_mode & stat.S_IWOTH:
+        return None  # only its owner (root for /run) could have put it there
+    if stat.S_ISLNK(info.st_mode) or not stat.S_ISDIR(info.st_mode):
+        return f"the runtime directory {candidate} is not a directory (a symlink or a file)"
+    if info.st_uid not in (os.getuid(), 0):
+        return f"the runtime directory {candidate} belongs to uid {info.st_uid}, not to this user"
+    return None
 
 
 def default_scene() -> str:
