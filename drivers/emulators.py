@@ -49,6 +49,9 @@ MAX_TIME_S = 2 ** 32 - 1  # AT!UT: the modem's system time is a 32-bit count of 
 MAX_TCP_CLIENTS = 8  # an emulated modem's TCP port: hosts at once (a real S2C serves a few on its port)
 TCP_OUTPUT_CAP = 256 * 1024  # answers kept for a TCP host that does not read (beyond: not sent)
 LINE_AHEAD_S = 2.0  # the emulated S100 reads at most this far ahead of its serial line (then the writer waits)
+WATCH_S = 0.01  # without flow control, the loop looks at its inputs at least this often (wall seconds)
+HANDOVER_CAP_S = 0.25  # the kernel's hand-over delay an emulated S100 allows for at most (wall seconds)
+HANDOVER_FIXED_S = 0.05  # …and allows for when the host cannot say how long its tasks waited (no PSI)
 SEND_MODES = {"*SENDIM": "im", "*SENDIMS": "ims", "*SENDPBM": "pbm", "*SEND": "burst"}
 
 
@@ -721,6 +724,9 @@ class _S100Host:
         self.buffer: InputBuffer | None = None  # made with the first bytes (the link's modem may come later)
         self.other = bytearray()  # bytes that are no frame of the link's class: passed on as they are
         self.waiting: tuple[Decoded, bytes] | None = None  # a frame and the part of its CR LF still to come
+        self.judged_until = float("-inf")  # the latest arrival the input buffer was judged with (its own line)
+        self.read_at = float("-inf")  # when bytes were last read from this host, and the host's stall then
+        self.stall_then: float | None = None
         self.idle_timer = None
         self.resume_timer = None  # while reading is paused: when the line has room again
 
@@ -744,6 +750,19 @@ class S100Emulator(EmulatedModem):
       ends them, after :data:`IDLE_S` without bytes, or (without flow control) 45 bytes at a time; the
       far emulated S100 writes them unchanged.  So a frame longer than 45 bytes without flow control
       crosses as 45-byte pieces, as on the real modem, and the far host's framing joins them again.
+    - **A busy host loses nothing a real modem would keep.**  The emulator sees a byte when the kernel hands
+      it over, not when the host wrote it: a machine that froze for a moment (a preemption, a virtual
+      machine's host busy with its disk) hands over two paced pieces at once, which on a real line came
+      200 ms apart.  So the 45 bytes are judged against the most favourable arrival the loop cannot rule
+      out: the bytes of one read may have come at any time since the loop last looked
+      (:meth:`~hilgate.core.realtime.RealtimeScheduler.input_window`; the loop is asked to look at
+      least every :data:`WATCH_S`), or the kernel held them (its pty worker waits for a CPU like any
+      task: at most as long as the host's tasks waited since the last read, :mod:`hilgate.core.stall`,
+      capped at :data:`HANDOVER_CAP_S`), spread at most as the line allows.  On a quiet host that is
+      the line's own timing; a host that writes more than the modem holds at once loses the bytes the
+      modem could not hold, and each overflow's trace line says the window it was judged with
+      (``window``).  Frames go to the channel at the times the line carries them from when they were
+      read, as before.
     """
 
     busy = False
@@ -756,6 +775,8 @@ class S100Emulator(EmulatedModem):
         self.speed = scheduler.speed  # line times are wall-clock seconds
         self.piece = limits_for("s100", port.limits).piece_bytes or PIECE  # held without flow control (limits:)
         self.states: dict[Any, _S100Host] = {}
+        # (with flow control nothing is judged: the loop need not look more often than it does)
+        self.watch = None if self.rtscts else scheduler.watch_inputs(WATCH_S)
         self.hosts = _open_hosts(spec, scheduler, self._on_data, self._on_connect, port.id)
 
     def _on_connect(self, host: Any) -> None:
@@ -778,10 +799,11 @@ class S100Emulator(EmulatedModem):
             if airtime:
                 state.buffer = InputBuffer(1.0 / airtime, self.piece)  # drained at the air bitrate
         if state.buffer is not None:
-            fits = state.buffer.accept(start, len(data), bt)
+            window = self._window(state, now)
+            fits = state.buffer.accept(*self._judged_arrival(state, now, window, len(data), bt))
             lost = fits.count(False)
             if lost:
-                self.port.lost("overflow", lost, src="app")
+                self.port.lost("overflow", lost, src="app", window=window)
                 data = bytes(b for b, kept in zip(data, fits) if kept)
                 arrivals = [t for t, kept in zip(arrivals, fits) if kept]
         if state.waiting is not None:
@@ -814,6 +836,32 @@ class S100Emulator(EmulatedModem):
         self.scheduler.cancel(state.idle_timer)
         state.idle_timer = self.scheduler.at(line.free_at + IDLE_S * self.speed, self._idle, state)
         self._pace(host, state, now)
+
+    def _window(self, state: _S100Host, now: float) -> float:
+        """How long before ``now`` (model seconds) the bytes read now may have been written: what the loop
+        cannot rule out, and what the kernel may have held them meanwhile (0 in virtual time)."""
+        scheduler = self.scheduler
+        stall = scheduler.host_stall()
+        if stall is None:
+            held = HANDOVER_FIXED_S * self.speed
+        elif state.stall_then is None:
+            held = 0.0
+        else:
+            held = min((stall - state.stall_then) * self.speed, now - state.read_at, HANDOVER_CAP_S * self.speed)
+        state.stall_then, state.read_at = stall, now
+        return scheduler.input_window() + held
+
+    @staticmethod
+    def _judged_arrival(state: _S100Host, now: float, window: float, size: int,
+                        bt: float) -> tuple[float, int, float]:
+        """When ``size`` bytes read at ``now`` are taken to have come, for the 45-byte buffer only: from as
+        early as ``window`` allows (not before the bytes judged before them had crossed the line), spread
+        evenly until they were read, and never faster than the line carries them.  On time (a virtual
+        clock), that is when the line brings them.  ``(start, size, byte spacing)``."""
+        start = max(state.judged_until, now - window)
+        span = max(size * bt, now - start)
+        state.judged_until = start + span
+        return start, size, span / max(size, 1)
 
     def _pace(self, host: Any, state: _S100Host, now: float) -> None:
         """Read no further ahead of the serial line than :data:`LINE_AHEAD_S`: a pty takes a flood at
@@ -904,6 +952,7 @@ class S100Emulator(EmulatedModem):
         for state in self.states.values():
             self.scheduler.cancel(state.idle_timer)
             self.scheduler.cancel(state.resume_timer)
+        self.scheduler.unwatch_inputs(self.watch)
         super().close()
 
 

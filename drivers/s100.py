@@ -39,7 +39,8 @@ class S100Backend(ModemBackend):
 
     @property
     def idle(self) -> bool:
-        return not self.queue and not self.pieces
+        # (the last piece is still leaving the modem while its pacing runs: not idle yet)
+        return not self.queue and not self.pieces and self.piece_timer is None
 
     def close(self) -> None:
         self.scheduler.cancel(self.piece_timer)
@@ -55,7 +56,9 @@ class S100Backend(ModemBackend):
             self.pump()
 
     def pump(self) -> None:
-        if self._state != "up" or self.pieces or not self.queue:
+        # a frame sent while the last piece's pacing runs waits for it: written at once, it would land in
+        # a modem still holding that piece (pieces are paced at exactly the air bitrate)
+        if self._state != "up" or self.pieces or self.piece_timer is not None or not self.queue:
             return
         frame = self.queue.popleft()
         real = frame.real if not isinstance(self.packet, Raw) else self.wire.encode(frame.payload)

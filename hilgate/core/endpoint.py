@@ -67,8 +67,9 @@ class LinkPort(Protocol):
         endpoint it came through, when its applications take the link as BUSY once they send
         (:attr:`Endpoint.assumes_busy`)."""
 
-    def lost(self, cause: str, size: int, src: str = "medium", n: int = 1) -> None:
-        """A frame this endpoint could not take or pass on (``n`` alike): counted by cause and traced."""
+    def lost(self, cause: str, size: int, src: str = "medium", n: int = 1, **fields: Any) -> None:
+        """A frame this endpoint could not take or pass on (``n`` alike): counted by cause and traced
+        (``fields``: what else the trace line says of it)."""
 
     def state_changed(self) -> None:
         """Something that READY depends on changed (an emulated modem's pending acknowledgement)."""

@@ -27,6 +27,12 @@ timer's time instead would back-date it: after a preemption, a frame an applicat
 another frame had arrived would be placed on air while that frame was still arriving, and collide
 with it in the model although it never did.)  When the loop was late as it read an input, by how
 much is kept in :attr:`input_lateness` for the trace: the input may have waited up to that long.
+Lateness is seen only when the loop is awake to see it (a deadline passed while it waited, or time
+spent away from its descriptors): a part that must know when its input came (an emulated serial line,
+which judges a byte's arrival against a modem's buffer) asks the loop to look at least every few
+milliseconds (:meth:`watch_inputs`), and :meth:`input_window` then says how long before the clock's
+reading the input may have been ready: a frozen machine (a virtual machine's host busy with its disk,
+a preemption, SIGSTOP) is seen as such, not taken for a writer that wrote everything at once.
 ``speed`` K runs the model at K times real time.
 """
 
@@ -42,11 +48,14 @@ from typing import Any, Callable
 
 from .ioloop import IoLoop
 from .scheduler import INF, VirtualScheduler
+from .stall import HostStall
 from .waiting import AdaptiveWait
 
 log = logging.getLogger(__name__)
 
 PR_SET_TIMERSLACK = 29
+LONGEST_WAIT_S = 0.5  # the loop looks at the clock at least this often (wall seconds), unless asked to more
+WALL_LATE_S = 0.002  # a wall-clock timer this late lets the inputs ready by then be read first
 
 
 def lower_timer_slack(nanoseconds: int = 1000) -> bool:
@@ -118,6 +127,10 @@ class RealtimeScheduler(VirtualScheduler):
         self.input_lateness = 0.0
         """Model seconds by which the loop was late when it read the input being handled (0 if on time)."""
         self.late_threshold = 0.0005
+        self.watch_s = LONGEST_WAIT_S
+        """The longest the loop waits before it looks at the clock again (wall seconds): :meth:`watch_inputs`."""
+        self._watchers: list[list[float]] = []
+        self._stall: HostStall | None = None  # opened when first asked
         self.epoch_ns = 0
         """The UNIX clock (ns) at model time 0, once the clock runs: how hosts relate their model times."""
 
@@ -129,6 +142,31 @@ class RealtimeScheduler(VirtualScheduler):
             wall_ns, counter = paired_clocks()
             self._origin = counter - self.now() / self.speed
             self.epoch_ns = wall_ns - round(self.now() / self.speed * 1e9)
+
+    def after_wall(self, seconds: float, fn: Callable[..., Any], *args: Any) -> list[Any]:
+        """``fn(*args)`` ``seconds`` of wall clock after the wall clock's reading, not after :meth:`now`:
+        a timer that fired late holds the clock at its own due time, and a driver pacing its serial
+        writes from it would write the next piece early by that lateness (a burst that overflows a modem
+        without flow control), a timeout would end early.  (The model's own timers keep :meth:`after`.)
+
+        Such a timer that comes due while the loop is late (it was frozen, or busy) runs only once the
+        inputs ready by then are read: a device's answer that came in time, but was not read because the
+        whole machine stood still, is not taken for a device that did not answer."""
+        t = self.model_time() if self._origin is not None else self._now
+        entry = self.at((t if t > self._now else self._now) + seconds * self.speed, self._wall_due)
+        entry[3] = (entry, fn, args)
+        return entry
+
+    def _wall_due(self, entry: list[Any], fn: Callable[..., Any], args: tuple) -> None:
+        if self.model_time() - self._now > WALL_LATE_S * self.speed:
+            self.io.post(self._wall_after_inputs, entry, fn, args)
+        else:
+            fn(*args)
+
+    @staticmethod
+    def _wall_after_inputs(entry: list[Any], fn: Callable[..., Any], args: tuple) -> None:
+        if entry[2] is not None:  # (not cancelled meanwhile: an answer read just before may have done that)
+            fn(*args)
 
     def model_time(self) -> float:
         """Where the wall clock is, in model seconds."""
@@ -156,12 +194,36 @@ class RealtimeScheduler(VirtualScheduler):
     def on_signal(self, signum: int, handler: Callable[[int], Any]) -> None:
         self.io.on_signal(signum, handler)
 
+    def watch_inputs(self, every_s: float) -> list[float]:
+        handle = [every_s]
+        self._watchers.append(handle)
+        self.watch_s = min(LONGEST_WAIT_S, *(h[0] for h in self._watchers))
+        return handle
+
+    def unwatch_inputs(self, handle: Any) -> None:
+        if handle in self._watchers:
+            self._watchers.remove(handle)
+        self.watch_s = min([LONGEST_WAIT_S] + [h[0] for h in self._watchers])
+
+    def input_window(self) -> float:
+        """The input being handled was ready at most this long before :meth:`now` (model seconds): the
+        lateness the loop saw, plus what it cannot see, the longest it waits without looking at the clock
+        (a machine frozen during a shorter wait, or a wake-up delayed by other processes, is within it)."""
+        return self.input_lateness + (self.watch_s + self.late_threshold) * self.speed
+
+    def host_stall(self) -> float | None:
+        if self._stall is None:
+            self._stall = HostStall()
+        return self._stall.seconds()
+
     def stop(self) -> None:
         self._running = False
         self.io.post(lambda: None)
 
     def close(self) -> None:
         self.io.close()
+        if self._stall is not None:
+            self._stall.close()
 
     # -- the loop -------------------------------------------------------------------------------
 
@@ -301,7 +363,7 @@ class RealtimeScheduler(VirtualScheduler):
                 self._collect_if_idle(wait)
                 entry = self.model_time()  # (read once: the wait is reckoned from it, and the blind time)
                 wait = (min(next_t, until) - entry) / self.speed
-                self._handle_inputs(min(max(0.0, wait - spin), 0.5), entry)
+                self._handle_inputs(min(max(0.0, wait - spin), self.watch_s), entry)
             else:
                 self._handle_inputs(0.0)
         return fired

@@ -10,9 +10,10 @@ fires its timers with the same :meth:`fire_due` and only adds the wall clock, a 
 I/O loop; the models cannot tell them apart.  Two clocks, one meaning for every call:
 
 - :meth:`at` / :meth:`after` are model time;
-- :meth:`after_wall` is wall-clock seconds (model seconds × ``speed`` in real time; the same as
-  :meth:`after` in virtual time, where ``speed`` is 1): for what the operator or a device waits for
-  (timeouts, retries, periodic flushes), never for the model;
+- :meth:`after_wall` is wall-clock seconds (model seconds × ``speed`` in real time, reckoned from the
+  wall clock's reading, not from a late timer's due time; the same as :meth:`after` in virtual time,
+  where ``speed`` is 1): for what the operator or a device waits for (timeouts, retries, periodic
+  flushes, a serial line's pacing), never for the model;
 - :meth:`defer` runs a call once the events due at the current instant have all fired, before the
   clock moves on (to a later timer, or to an input's time in real time), in both clocks.
 
@@ -49,6 +50,14 @@ class Scheduler(Clock, Protocol):
     def after_wall(self, seconds: float, fn: Callable[..., Any], *args: Any) -> Any: ...
 
     def defer(self, fn: Callable[[], Any]) -> None: ...
+
+    def watch_inputs(self, every_s: float) -> Any: ...
+
+    def unwatch_inputs(self, handle: Any) -> None: ...
+
+    def input_window(self) -> float: ...
+
+    def host_stall(self) -> float | None: ...
 
 
 class Loop(Scheduler, Protocol):
@@ -87,6 +96,28 @@ class VirtualScheduler:
         self._deferred: list[Callable[[], Any]] = []
         self.defer = self._deferred.append  # (the list's own append: every READY defers, one Python call fewer)
         self.events = 0
+
+    # -- how well an input's time is known ------------------------------------------------------
+
+    def watch_inputs(self, every_s: float) -> Any:
+        """Ask that the loop look at its inputs at least every ``every_s`` wall seconds, so that
+        :meth:`input_window` is that tight (a real-time concern: nothing to do in virtual time, where an
+        input is handled at its exact time); the handle is for :meth:`unwatch_inputs`."""
+        return None
+
+    def unwatch_inputs(self, handle: Any) -> None:
+        pass
+
+    def input_window(self) -> float:
+        """How long before :meth:`now` (model seconds) the input being handled may have been ready to
+        read: 0 in virtual time."""
+        return 0.0
+
+    def host_stall(self) -> float | None:
+        """Seconds that tasks on this host have waited for a CPU, memory or I/O so far (None: unknown): a
+        bound on what the kernel may have delayed meanwhile (:mod:`hilgate.core.stall`).  Nothing waits
+        in virtual time."""
+        return 0.0
 
     # -- the clock ------------------------------------------------------------------------------
 
