@@ -8,8 +8,9 @@
 - **A data cycle**, finished or failed every time (a host library whose state timers never fire, as
   ``acomms``', would otherwise wait for ever): ``$CCCYC,0,src,dest,rate,ack,n`` → ``$CACYC`` echo →
   ``$CADRQ`` for each frame ← ``$CCTXD`` (echoed ``$CATXD``) → the packet on the channel → ``$CATXF`` when
-  the model's transmission ends.  A frame not given within ``DTO`` seconds (or too long for the rate) is
-  ``$CAERR,…,DATA_TIMEOUT,<frame>``: the frames given so far go, or, at the first, the cycle ends there.
+  the model's transmission ends.  A frame not given within ``DTO`` seconds of the wall clock (the host's
+  time, whatever ``--speed``), or too long for the rate, is ``$CAERR,…,DATA_TIMEOUT,<frame>``: the
+  frames given so far go, or, at the first, the cycle ends there.
   Rate 0 (FH-FSK) sends its cycle-init minipacket first (``$CATXF`` after it, then the ``$CADRQ``).  A
   packet is one frame of the model with the rate's own air time (:data:`~.micromodem_codec.RATES`), so
   the model loses or keeps it whole.
@@ -160,7 +161,7 @@ class MicromodemEmulator(EmulatedModem):
             return
         self.cycle = cycle = _Cycle(src, dest, rate, bool(ack), count)
         self._say("CACYC", 0, src, dest, rate, ack, count)
-        cycle.timer = self.scheduler.at(self.scheduler.now() + self.config["CTO"] + 60.0, self._give_up, cycle)
+        cycle.timer = self.scheduler.after_wall(self.config["CTO"] + 60.0, self._give_up, cycle)
         if rate == 0:
             ci = AppFrame(b"\x00" * 4, b"", Raw(), 0, self.port.address, self._dst(dest), self.scheduler.now())
             ci.meta = {"mm": "ci", "src": src, "dest": dest}
@@ -173,7 +174,9 @@ class MicromodemEmulator(EmulatedModem):
         number = len(cycle.frames) + 1
         self._say("CADRQ", self._clock(), cycle.src, cycle.dest, int(cycle.ack), RATES[cycle.rate].frame_bytes, number)
         self.scheduler.cancel(cycle.timer)
-        cycle.timer = self.scheduler.at(self.scheduler.now() + self.config["DTO"], self._data_timeout, cycle)
+        # the host's answer takes the host's time, not the model's: at --speed 4 a model-time DTO gave a busy
+        # host a quarter of the modem's 5 s, and its frame was taken as never given
+        cycle.timer = self.scheduler.after_wall(self.config["DTO"], self._data_timeout, cycle)
 
     def _data(self, s: Sentence) -> None:
         cycle = self.cycle
@@ -219,7 +222,7 @@ class MicromodemEmulator(EmulatedModem):
             frame.ack_retries = 0  # the receiving modem acknowledges; the modem itself does not retry
             frame.on_acknowledged = self._acknowledged
         cycle.frame = frame
-        cycle.timer = self.scheduler.at(self.scheduler.now() + self.config["CTO"] + 60.0, self._give_up, cycle)
+        cycle.timer = self.scheduler.after_wall(self.config["CTO"] + 60.0, self._give_up, cycle)
         self._send(frame, cycle)
 
     def _send(self, frame: AppFrame, cycle: _Cycle | None) -> None:

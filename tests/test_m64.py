@@ -229,7 +229,7 @@ def driver_scene(tmp_path, da, ea, eb, packet, db=None):
 """
 
 
-def test_hilgate_drivers_carry_frames_application_to_application_through_emulated_m64s(tmp_path, daemon_of):
+def test_hilgate_drivers_carry_frames_application_to_application_through_emulated_m64s(tmp_path, daemon_of, busy_host):
     da, db, ea, eb = unique("da"), unique("db"), unique("ea"), unique("eb")
     daemon = daemon_of(driver_scene(tmp_path, da, ea, eb, "vl2b", db), [da, db, ea, eb], "--speed", str(SPEED))
     daemon.wait_up(da, db)

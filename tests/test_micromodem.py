@@ -169,7 +169,7 @@ def driver_scene(tmp_path, da, db, ea, eb, rate=1, ack=True, packet="vl2b"):
 """
 
 
-def test_hilgate_drivers_carry_frames_application_to_application_through_emulated_micromodems(tmp_path, daemon_of):
+def test_hilgate_drivers_carry_frames_application_to_application_through_emulated_micromodems(tmp_path, daemon_of, busy_host):
     da, db, ea, eb = unique("da"), unique("db"), unique("ea"), unique("eb")
     daemon = daemon_of(driver_scene(tmp_path, da, db, ea, eb), [da, db, ea, eb], "--speed", str(SPEED))
     daemon.wait_up(da, db)

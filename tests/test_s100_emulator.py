@@ -495,3 +495,42 @@ def test_a_write_larger_than_the_modem_holds_overflows_whatever_the_host(tmp_pat
                                                       Fraction(1000, 8)) > 0
     finally:
         emulator.close()
+
+
+def test_forty_frames_in_pieces_cross_an_emulated_s100_beside_busy_neighbours(tmp_path, daemon_of, busy_host):
+    """Issue 36: hilgate's S100 driver writes 40 frames of 100 bytes on air (vl2b, 1800 bit/s, 19 200 baud,
+    no flow control) into an emulated S100 on a pty, and a simulated link's socket application receives
+    them, while CPU-bound neighbours, neighbours that wake every 6 ms and a disk writer that syncs share
+    the machine.  A real S100 on that line loses nothing: all 40 arrive, in order, nothing dropped."""
+    from hilgate.client import Link
+    from hilgate.core.packets import packet_class
+
+    d, e, s = unique("drv"), unique("emu"), unique("sim")
+    daemon = daemon_of(f"""\
+channels: {{rf: {{speed_mps: 1500}}}}
+vehicles:
+  va: {{pose: {{static: [0, 0, 0]}}}}
+  vb: {{pose: {{static: [3, 0, 0]}}}}
+links:
+  {d}: {{vehicle: va, backend: s100, port: {tmp_path / 'a'}, baud: 19200, address: 1, bitrate_bps: 1800, packet: vl2b}}
+  {e}: {{vehicle: va, address: 1, bitrate_bps: 1800, packet: vl2b, emulate: {{protocol: s100, pty: {tmp_path / 'a'},
+        baud: 19200}}}}
+  {s}: {{vehicle: vb, address: 2, bitrate_bps: 1800, packet: vl2b}}
+""", [d, e, s])
+    daemon.wait_up(d)
+    wire = packet_class("vl2b")
+    size = max(n for n in range(wire.max_payload + 1) if wire.real_length(n) == 100)
+    payloads = [bytes([i]) + bytes(range(40, 40 + size - 1)) for i in range(40)]
+    with Link.open(d, runtime_dir=daemon.runtime) as ld, Link.open(s, runtime_dir=daemon.runtime) as ls:
+        for payload in payloads:
+            ld.send(payload, dst=2)
+        got = []
+        while len(got) < len(payloads):
+            message = ls.recv(timeout=60)
+            assert message is not None, f"{len(got)} of 40 arrived\n{daemon.output()[-3000:]}"
+            got.append(message.data)
+    assert got == payloads
+    daemon.stop()
+    events = daemon.trace_events()
+    assert [ev["size"] for ev in events if ev.get("link") == e and ev["ev"] == "tx"] == [45, 45, 12] * 40  # (the last piece with its CR LF)
+    assert not [ev for ev in events if ev["ev"] in ("drop", "err")]
