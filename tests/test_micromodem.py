@@ -154,6 +154,22 @@ def test_a_host_that_gives_no_data_gets_a_data_timeout_and_the_cycle_ends(tmp_pa
     port.close()
 
 
+def test_the_data_timeout_is_the_hosts_seconds_whatever_the_speed(tmp_path, daemon_of):
+    """DTO is 5 s of the host's time (a real modem counts it in its own seconds, the host answers in its
+    own): a host that gives its frame 2 s after ``$CADRQ`` is in time although the model runs 4 times
+    faster (it was a model-time DTO: 1.25 s of the host's time, and a busy host's frame was refused)."""
+    ea, eb = unique("ma"), unique("mb")
+    daemon_of(scene(tmp_path, ea, eb), [ea, eb], "--speed", str(SPEED))
+    port = serial.Serial(str(tmp_path / "a"), 19200, timeout=30)
+    port.write(b"$CCCYC,0,1,2,1,0,1\r\n")
+    assert port.read_until(b"\n") == sentence("CACYC", 0, 1, 2, 1, 0, 1)
+    assert port.read_until(b"\n").startswith(b"$CADRQ,")
+    time.sleep(2.0)  # at least 2 s of the host's time: more than DTO / speed
+    port.write(b"$CCTXD,1,2,0," + b"ab" * 8 + b"\r\n")
+    assert port.read_until(b"\n") == sentence("CATXD", 1, 2, 0, 8)
+    port.close()
+
+
 # -- hilgate's driver against the emulator -----------------------------------------------------------------
 
 
