@@ -89,8 +89,10 @@ class Daemon:
                  preset_dirs: list[str] | tuple[str, ...] = (), host: str | None = None,
                  zenoh_connect: list[str] | tuple[str, ...] = (), zenoh_listen: list[str] | tuple[str, ...] = (),
                  clock_offset_s: float = 0.0, tcp_token: str | None = None,
-                 zenoh_credentials: str | None = None, zenoh_insecure: bool = False, web: str | None = None):
+                 zenoh_credentials: str | None = None, zenoh_insecure: bool = False, web: str | None = None,
+                 auth_timeout_s: float = 5.0):
         self.web = web
+        self.auth_timeout_s = auth_timeout_s
         self.web_server: Any = None
         self.web_feed: Any = None
         self.tcp_token = tcp_token
@@ -171,7 +173,7 @@ class Daemon:
                              "scene": scene.name, "path": os.path.abspath(self.scene_path), "version": __version__,
                              "speed": self.speed, "scene_hash": view_hash(view), "scene_view": view})
         self.router = Router(scheduler, self.recorder, max_link_clients=self.max_link_clients, host=host)
-        self.clients = ClientLimits(self.max_clients, self.max_link_clients)
+        self.clients = ClientLimits(self.max_clients, self.max_link_clients, auth_timeout_s=self.auth_timeout_s)
         self.router.doors = [
             QueueDoor(scheduler, plan_message_size(sum(1 for l in scene.links.values()
                                                         if host in (None, l.host) and "mq" in l.gli)),
@@ -316,7 +318,7 @@ class Daemon:
         if ros2 is not None:  # only once the daemon is on ROS 2
             status["ros2"] = {**ros2, "poses_in": self.live.ros2_status()}
         if self.tcp_listener is not None:  # what the TCP GLI refused, by cause; how many wait to authenticate
-            status["tcp"] = {"refused": dict(self.clients.refused), "waiting": sum(self.clients.pending.values())}
+            status["tcp"] = {"refused": dict(self.clients.refused), "waiting": len(self.clients.pending)}
         if self.web_server is not None:  # where the web view is, and the token its pages prove
             status["web"] = {"url": self.web_server.url, "pages": self.web_server.clients,
                              "token_file": self.web_server.token_hint}
