@@ -264,6 +264,11 @@ def _print_status(status: dict, as_json: bool) -> None:
     if tcp:
         refused = ", ".join(f"{cause} {n}" for cause, n in sorted(tcp["refused"].items()) if n) or "none"
         print(f"\nTCP GLI: refused {refused}; {tcp['waiting']} connections waiting to authenticate", flush=True)
+    web = status.get("web")
+    if web and "refused" in web:
+        refused = ", ".join(f"{cause} {n}" for cause, n in sorted(web["refused"].items()) if n) or "none"
+        print(f"\nweb view: {web['pages']} pages; refused {refused}; {web['waiting']} connections waiting to "
+              f"prove the token", flush=True)
     if status.get("cameras"):
         print()
         print(_render(["camera", "frames/s", "frames", "problem"],

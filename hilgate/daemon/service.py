@@ -152,7 +152,8 @@ class Daemon:
             from ..web.server import WebServer, parse_web
 
             web_host, web_port = parse_web(self.web)
-            self.web_server = WebServer(web_host, web_port, token_check, token_hint=token_check.path)
+            self.web_server = WebServer(web_host, web_port, token_check, token_file=token_check.path,
+                                        auth_timeout_s=self.auth_timeout_s)
         raise_queue_budget()
         raise_descriptor_limit()
         trace_path = self.trace_path or scene.trace_file
@@ -319,9 +320,9 @@ class Daemon:
             status["ros2"] = {**ros2, "poses_in": self.live.ros2_status()}
         if self.tcp_listener is not None:  # what the TCP GLI refused, by cause; how many wait to authenticate
             status["tcp"] = {"refused": dict(self.clients.refused), "waiting": len(self.clients.pending)}
-        if self.web_server is not None:  # where the web view is, and the token its pages prove
+        if self.web_server is not None:  # where the web view is, the token its pages prove, what it refused
             status["web"] = {"url": self.web_server.url, "pages": self.web_server.clients,
-                             "token_file": self.web_server.token_hint}
+                             "token_file": self.web_server.token_file, **self.web_server.status()}
         return status
 
     def status_text(self) -> str:
