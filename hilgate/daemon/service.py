@@ -15,7 +15,8 @@ import uuid
 from typing import Any, Callable
 
 from .. import __version__
-from .access import prepare_private_dir, raise_descriptor_limit, resolve_group
+from .access import (lock_directory, prepare_lock_directory, prepare_private_dir, raise_descriptor_limit,
+                     resolve_group)
 from .control import ControlServer
 from ..drivers.emulators import EmulatorDoor
 from ..gli.queues import QueueDoor, forget_created, plan_message_size, raise_queue_budget, unlink_created
@@ -173,7 +174,10 @@ class Daemon:
                              "start": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="milliseconds"),
                              "scene": scene.name, "path": os.path.abspath(self.scene_path), "version": __version__,
                              "speed": self.speed, "scene_hash": view_hash(view), "scene_view": view})
-        self.router = Router(scheduler, self.recorder, max_link_clients=self.max_link_clients, host=host)
+        lock_dir = lock_directory(self.runtime_dir)
+        prepare_lock_directory(lock_dir)
+        self.router = Router(scheduler, self.recorder, max_link_clients=self.max_link_clients, host=host,
+                             lock_dir=lock_dir)
         self.clients = ClientLimits(self.max_clients, self.max_link_clients, auth_timeout_s=self.auth_timeout_s)
         self.router.doors = [
             QueueDoor(scheduler, plan_message_size(sum(1 for l in scene.links.values()
