@@ -22,6 +22,7 @@ pass through as they are (:class:`S100Emulator`).
 
 from __future__ import annotations
 
+import itertools
 import logging
 import os
 import socket
@@ -142,8 +143,12 @@ class TcpHosts:
     """A loopback listener; each client is a host with its own protocol state.
 
     At most :data:`MAX_TCP_CLIENTS` at once (each holds a codec and up to :data:`TCP_OUTPUT_CAP` bytes of
-    answers it has not read): the next one is closed at once, as a modem's ``listen-single`` port does
-    with a second client, and counted in :attr:`refused`."""
+    answers it has not read).  When a host connects to a full port, the host that has been quiet longest
+    (connected or last heard from earliest) is closed to make room, and counted in :attr:`evicted`:
+    refusing the newcomer instead let eight connections that never said anything keep the lab's own
+    software out for as long as they stayed (issue 37).  A host that talks keeps its place; a stranger
+    can still close one that only listens, by connecting eight times, as it could unplug a real modem's
+    Ethernet cable: the port is as open as a real modem's (docs/security.md says how to restrict it)."""
 
     def __init__(self, port: int, scheduler: Any, on_data, on_connect, name: str, host: str = "127.0.0.1",
                  on_disconnect=None):
@@ -153,7 +158,8 @@ class TcpHosts:
         self.on_disconnect = on_disconnect
         self.name = name
         self.clients: set[_TcpClient] = set()
-        self.refused = 0
+        self.evicted = 0
+        self.heard = itertools.count()  # an order of who was heard from last (no clock needed)
         sock = socket.create_server((host, port))
         sock.setblocking(False)
         self.listener = Listener(sock, scheduler, self._accept)
@@ -162,16 +168,16 @@ class TcpHosts:
     def _accept(self, sock: socket.socket) -> None:
         if len(self.clients) >= MAX_TCP_CLIENTS:
             # hosts that left but whose end of file the loop has not read yet hold no place: a host that
-            # reconnects at once is not refused for its own old connection (seen on a loaded host)
+            # reconnects at once does not push out another for its own old connection (seen on a loaded host)
             for client in [c for c in self.clients if c.connection.hung_up()]:
                 client.connection.close()
         if len(self.clients) >= MAX_TCP_CLIENTS:
-            self.refused += 1
-            if self.refused & (self.refused - 1) == 0:  # the 1st, 2nd, 4th, 8th…: a flood costs a few lines
-                log.warning("%s: emulated modem refused a TCP client: %d connected already (%d refused so far)",
-                            self.name, len(self.clients), self.refused)
-            sock.close()
-            return
+            quiet = min(self.clients, key=lambda c: c.last_heard)
+            self.evicted += 1
+            if self.evicted & (self.evicted - 1) == 0:  # the 1st, 2nd, 4th, 8th…: a flood costs a few lines
+                log.warning("%s: emulated modem closed the TCP host quiet longest to serve a new one: %d "
+                            "connected already (%d closed so far)", self.name, len(self.clients), self.evicted)
+            quiet.close()
         client = _TcpClient(self, sock)
         self.clients.add(client)
         self.on_connect(client)
@@ -185,8 +191,12 @@ class TcpHosts:
 class _TcpClient:
     def __init__(self, hosts: TcpHosts, sock: socket.socket):
         self.hosts = hosts
-        self.connection = Connection(sock, hosts.scheduler, lambda data: hosts.on_data(self, data),
-                                     self._closed, max_buffer=TCP_OUTPUT_CAP)
+        self.last_heard = next(hosts.heard)
+        self.connection = Connection(sock, hosts.scheduler, self._data, self._closed, max_buffer=TCP_OUTPUT_CAP)
+
+    def _data(self, data: bytes) -> None:
+        self.last_heard = next(self.hosts.heard)
+        self.hosts.on_data(self, data)
 
     def _closed(self) -> None:
         self.hosts.clients.discard(self)

@@ -40,6 +40,19 @@ def accept_queue(port: int) -> int | None:
     return None
 
 
+def listening_addresses(port: int) -> list[str]:
+    """The IPv4 addresses TCP listeners on ``port`` are bound to (/proc/net/tcp)."""
+    found = []
+    with open("/proc/net/tcp") as table:
+        next(table)
+        for line in table:
+            fields = line.split()
+            address, _, local_port = fields[1].partition(":")
+            if fields[3] == "0A" and int(local_port, 16) == port:
+                found.append(socket.inet_ntoa(int(address, 16).to_bytes(4, "little")))
+    return found
+
+
 def taken(port: int) -> None:
     """Wait (a hang guard only) until the listener on ``port`` has accepted every completed connection."""
     wait_until(lambda: accept_queue(port) == 0, f"the listener on port {port} to accept its connections")
