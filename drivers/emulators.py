@@ -26,13 +26,15 @@ import itertools
 import logging
 import os
 import socket
+import stat
 import tty
 from abc import ABC, abstractmethod
 from typing import Any, Callable
 
 from hilgate.core.backend import AppFrame, PhyEvent
 from hilgate.core.endpoint import TAKEN, LinkPort
-from hilgate.core.outputs import OutputError, pty_link_problem
+from hilgate.core.outputs import OutputError, pty_link_problem_at
+from hilgate.core.safepath import PathError, open_parent
 from hilgate.core.packets import BROADCAST, Decoded, Raw
 from hilgate.core.streams import Connection, Listener
 
@@ -84,17 +86,30 @@ class PtyHost:
     def _link(self, path: str) -> None:
         """Link the pty at ``path``: where nothing is, or over a pty link a previous run left (the scene
         loader checked it too; the file system may have changed since).  symlink(2) never replaces, so
-        something that appears meanwhile is refused, not removed."""
-        problem = pty_link_problem(path)
-        if problem is not None:
-            raise OutputError(problem)
-        if os.path.islink(path):
-            os.unlink(path)
+        something that appears meanwhile is refused, not removed.  The directory is reached once, without
+        another user's links (:mod:`hilgate.core.safepath`), and kept open: the link is made, read and
+        removed by name in it, so nobody can point the removal at stop at another directory."""
         try:
-            os.symlink(self.target, path)
-        except FileExistsError:
-            raise OutputError(f"{path} appeared while the emulated modem's pty link was being made: "
-                              f"not replacing it") from None
+            self.directory, self.name = open_parent(path)
+        except PathError as exc:
+            raise OutputError(str(exc) if not exc.missing else f"cannot make the pty link {path}: {exc}") from None
+        try:
+            problem = pty_link_problem_at(self.directory, self.name, path)
+            if problem is not None:
+                raise OutputError(problem)
+            try:  # a previous run's pty link (the look above): made anew
+                if stat.S_ISLNK(os.stat(self.name, dir_fd=self.directory, follow_symlinks=False).st_mode):
+                    os.unlink(self.name, dir_fd=self.directory)
+            except FileNotFoundError:
+                pass
+            try:
+                os.symlink(self.target, self.name, dir_fd=self.directory)
+            except FileExistsError:
+                raise OutputError(f"{path} appeared while the emulated modem's pty link was being made: "
+                                  f"not replacing it") from None
+        except BaseException:
+            os.close(self.directory)
+            raise
 
     def pause(self) -> None:
         """Stop reading: what the application writes waits in the kernel's pty buffer, and once that is
@@ -133,8 +148,12 @@ class PtyHost:
             except OSError:
                 pass
         try:
-            if os.readlink(self.path) == self.target:  # only our own link: not one that replaced it since
-                os.unlink(self.path)
+            if os.readlink(self.name, dir_fd=self.directory) == self.target:  # only our own: not one put there since
+                os.unlink(self.name, dir_fd=self.directory)
+        except OSError:
+            pass
+        try:
+            os.close(self.directory)
         except OSError:
             pass
 

@@ -243,6 +243,11 @@ def test_a_directory_in_the_path_that_is_another_users_link_is_refused(tmp_path)
     in_scene.write_text(trace_scene("x", logs / "t.jsonl"))
     result = hilgate("check", str(in_scene))
     assert result.returncode == 2 and "trace.file" in result.stderr and "symbolic link of uid 65534" in result.stderr
+    in_scene.write_text(emulator_scene("x", logs / "tty"))  # an emulated modem's pty link: the same rule
+    result = hilgate("check", str(in_scene))
+    assert result.returncode == 2 and "emulate.pty" in result.stderr and "symbolic link of uid 65534" in result.stderr
+    with pytest.raises(OutputError, match="symbolic link of uid 65534"):
+        PtyHost(str(logs / "tty"), None, None, "x")
     for option in ("--trace", "--summary"):
         (tmp_path / option).mkdir()
         output = refused_run(tmp_path / option, unique("tr"), option, str(logs / "run.jsonl"))

@@ -16,6 +16,7 @@ system may have changed in between):
 - **Pty links** are symbolic links to ``/dev/pts/N``.  One is created only where nothing is (never
   replacing a file, and ``symlink(2)`` itself never replaces), an existing one only if it is such a
   link (a previous run's); at stop the daemon removes the link only if it still points at its own pty.
+  Its directory is reached as a trace's is, once, and the link is made, read and removed by name in it.
 """
 
 from __future__ import annotations
@@ -41,16 +42,30 @@ class OutputError(OSError):
 
 def pty_link_problem(path: str) -> str | None:
     """Why an emulated modem's pty link may not be made at ``path`` (something that is not a pty link
-    is there), or None."""
+    is there, or another user's link to a directory is on the way), or None."""
     try:
-        info = os.lstat(path)
+        parent, name = open_parent(path)
+    except PathError as exc:
+        return None if exc.missing else str(exc)
+    except OSError as exc:
+        return f"cannot look at {path}: {exc.strerror or exc}"
+    try:
+        return pty_link_problem_at(parent, name, path)
+    finally:
+        os.close(parent)
+
+
+def pty_link_problem_at(parent: int, name: str, path: str) -> str | None:
+    """:func:`pty_link_problem` for ``name`` in the directory open as ``parent``."""
+    try:
+        info = os.stat(name, dir_fd=parent, follow_symlinks=False)
     except FileNotFoundError:
         return None
     except OSError as exc:
         return f"cannot look at {path}: {exc.strerror or exc}"
     if stat.S_ISLNK(info.st_mode):
         try:
-            target = os.readlink(path)
+            target = os.readlink(name, dir_fd=parent)
         except OSError as exc:
             return f"cannot read the link {path}: {exc.strerror or exc}"
         if PTY_TARGET.fullmatch(target):
