@@ -196,6 +196,12 @@ def test_a_runtime_directory_that_is_a_symlink_or_someone_elses_is_refused(tmp_p
         os.chown(theirs, *OUTSIDER)
         with pytest.raises(AccessError, match="belongs to"):
             prepare_private_dir(str(theirs))
+        their_link = tmp_path / "their-link"  # another user's link on the way to it (issue 37 item 6)
+        their_link.symlink_to(theirs)
+        os.lchown(their_link, *OUTSIDER)
+        with pytest.raises(AccessError, match="symbolic link of uid 65534"):
+            prepare_private_dir(str(their_link / "rt"))
+        assert os.listdir(theirs) == []
     mine = tmp_path / "mine"
     mine.mkdir(mode=0o777)
     os.chmod(mine, 0o777)

@@ -28,6 +28,7 @@ import re
 import resource
 import stat
 
+from ..core.safepath import PathError, open_directory
 from ..scene.yaml_nodes import SceneError
 
 log = logging.getLogger(__name__)
@@ -63,6 +64,10 @@ def prepare_private_dir(path: str, group: int | None = None) -> None:
     (then give it mode 0750 and the group), and refuse anything else."""
     parent = os.path.dirname(os.path.abspath(path))
     os.makedirs(parent, exist_ok=True)
+    try:  # as a trace's directory: another user's link on the way would put the sockets where they chose
+        os.close(open_directory(parent))
+    except PathError as exc:
+        raise AccessError(f"runtime directory {path}: {exc}") from None
     try:
         os.mkdir(path, 0o750)
     except FileExistsError:
