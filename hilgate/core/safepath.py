@@ -24,8 +24,8 @@ __all__ = ["PathError", "open_directory", "open_parent"]
 
 MAX_LINKS = 40
 """Links followed in one path at most, as the kernel's own lookup allows."""
+# by name: a platform's constant (O_PATH is Linux's); a directory one may search but not list is walked too
 _DIRECTORY = getattr(os, "O_PATH", os.O_RDONLY) | os.O_DIRECTORY | os.O_NOFOLLOW | os.O_CLOEXEC
-"""O_PATH (Linux): a directory one may search but not list is walked too."""
 
 
 class PathError(OSError):
