@@ -264,6 +264,22 @@ def test_idle_strangers_on_many_addresses_do_not_keep_a_token_holder_out(daemon_
     assert tcp["refused"]["auth_pending"] == 1 and tcp["waiting"] == 63
 
 
+def test_strangers_waiting_to_authenticate_take_no_clients_place(daemon_of):
+    """--max-clients counts the clients a link serves: 64 strangers waiting on TCP kept an application
+    of the Unix socket (and the honest TCP client) out once they and the others reached it."""
+    a, b = unique("a"), unique("b")
+    port = free_port()
+    daemon = daemon_of(scene(a, b), [a, b], "--tcp", str(port), "--max-clients", "2")
+    token_file = os.path.join(daemon.runtime, "tcp.token")
+    strangers = idle(port)
+    with Link.open(a, runtime_dir=daemon.runtime) as local, Link.open(b, runtime_dir=daemon.runtime) as other:
+        assert (local.address, other.address) == (1, 2)
+        with pytest.raises(GliError, match="too many clients"):  # the limit itself holds
+            Link.open(a, runtime_dir=daemon.runtime)
+    assert honest(a, port, token_file)()
+    assert len(strangers) == 64
+
+
 def test_a_slowloris_on_many_addresses_does_not_keep_a_token_holder_out(daemon_of):
     """Issue 37 item 4: 64 connections from 127.0.0.2-9 trickling HELLO a byte a second (each closed one
     opened again at once) kept the honest client out 21 times in 23."""

@@ -211,8 +211,8 @@ def accept(sock: socket.socket, scheduler: Any, limits: ClientLimits, lookup: Ca
     """A new socket client, unless the daemon serves as many as it may: then it is told why and closed.
     On TCP it is let in even when as many wait to authenticate as may (in all, or from its address): the
     oldest of those from the address holding the most makes room (:mod:`hilgate.core.waiting_room`)."""
-    if len(limits.clients) >= limits.total:
-        log.info("GLI client refused: %d clients already (--max-clients)", len(limits.clients))
+    if len(limits.clients) - len(limits.pending) >= limits.total:  # strangers waiting to authenticate take no place
+        log.info("GLI client refused: %d clients already (--max-clients)", len(limits.clients) - len(limits.pending))
         refuse(sock, wire.encode_json(wire.ERROR, {"error": f"too many clients ({limits.total})"}))
         return
     address = ""
