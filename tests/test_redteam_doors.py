@@ -22,7 +22,7 @@ import time
 import pytest
 
 from at_client import AtClient
-from daemon_kit import free_port, quick_scene, unique, wait_until
+from daemon_kit import free_port, quick_scene, unique
 from doorkit import STRANGERS, Slowloris, connect, first_tries, idle
 from fuzzkit import examples
 from hilgate.drivers.emulators import MAX_TCP_CLIENTS
@@ -119,7 +119,8 @@ def test_every_stranger_at_once_and_the_honest_get_in_at_the_first_try(daemon_of
     print(f"\nred team, every stranger at once ({flood.opened} flood connections): "
           f"TCP GLI honest client in at the first try {sum(gli)} of {len(gli)} (slowest {max(gli_slow):.2f} s); "
           f"operator's page {sum(page)} of {len(page)} (slowest {max(web_slow):.2f} s); "
-          f"STATUS answered {len(statuses)} of 2 during the attack (slowest {max(status_s):.2f} s); TCP refused {status['tcp']['refused']}; "
+          f"STATUS answered {len(statuses)} of 2 during the attack (slowest {max(status_s):.2f} s); "
+          f"TCP refused {status['tcp']['refused']}; "
           f"web refused {status['web']['refused']}; daemon peak memory {before_kb // 1024} MB before, "
           f"{peak_kb // 1024} MB after")
     assert gli == [True] * ATTEMPTS and page == [True] * ATTEMPTS

@@ -24,7 +24,7 @@ import time
 import pytest
 
 from daemon_kit import Daemon, free_port, quick_scene, unique, wait_until
-from doorkit import STRANGERS, Slowloris, closed_by_peer, first_tries, idle
+from doorkit import Slowloris, closed_by_peer, first_tries, idle
 from hilgate.client import GliError, Link
 from hilgate.gli import wire
 from hilgate.gli.session import AuthError, Hello, Session
