@@ -254,7 +254,7 @@ def _handlers(server: WebServer, tornado: Any) -> list:
     static_files = frozenset(name for name in os.listdir(STATIC)
                              if not name.startswith(".") and os.path.isfile(os.path.join(STATIC, name)))
 
-    class Door:
+    class Guarded:
         """What every handler of the view does first: answer only to the view's own names, and log a
         failure without the request's query."""
 
@@ -285,7 +285,7 @@ def _handlers(server: WebServer, tornado: Any) -> list:
                            "default-src 'self'; connect-src 'self'; img-src 'self' data:; "
                            "style-src 'self'; script-src 'self'; frame-ancestors 'none'")
 
-    class Page(Door, web.RequestHandler):
+    class Page(Guarded, web.RequestHandler):
         def set_default_headers(self) -> None:
             harden(self)
             self.set_header("Cache-Control", "no-store")
@@ -295,7 +295,7 @@ def _handlers(server: WebServer, tornado: Any) -> list:
                 self.set_header("Content-Type", "text/html; charset=utf-8")
                 self.write(handle.read())
 
-    class Static(Door, web.StaticFileHandler):
+    class Static(Guarded, web.StaticFileHandler):
         """The folder's own files, by name: nothing else is even looked up (a path with a NUL byte was
         an HTTP 500 with a traceback)."""
 
@@ -307,7 +307,7 @@ def _handlers(server: WebServer, tornado: Any) -> list:
                 raise web.HTTPError(404)
             return url_path
 
-    class Socket(Door, tornado.websocket.WebSocketHandler):
+    class Socket(Guarded, tornado.websocket.WebSocketHandler):
         """One page: HELLO with a nonce, its AUTH, then pictures (and, for a trace, its player's commands)."""
 
         door_stream: Any = None  # its connection, the door's key (once open)
