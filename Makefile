@@ -75,9 +75,11 @@ $(BELLHOP_VENV)/.installed:
 	$(BELLHOP_VENV)/bin/python -m pip install --quiet --disable-pip-version-check 'pelagic==$(PELAGIC)'
 	touch $@
 
-# The fuzz tests (test_fuzz_*) for minutes instead of seconds: HILGATE_FUZZ multiplies their examples.
+# The fuzz tests (test_fuzz_*) for minutes instead of seconds: HILGATE_FUZZ multiplies their examples; and the
+# red team at the doors (tests/test_redteam_doors.py: every stranger at once, the honest clients' tries, -s
+# prints the figures) with more tries.
 fuzz: $(VENV)/.installed-test
-	HILGATE_FUZZ=$(FUZZ) $(BIN)/python -m pytest -q -k fuzz
+	HILGATE_FUZZ=$(FUZZ) $(BIN)/python -m pytest -q -k "fuzz or redteam"
 
 # The paper comparison (docs/paper-comparison.md, docs/paper-exp2.md) and the formation figure
 # (docs/figures/exp3-formation.png, from the virtual-time run): virtual time only. 42 s on this project's

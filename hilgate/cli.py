@@ -147,7 +147,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                     args.max_clients, args.max_link_clients, plugins=args.plugins, preset_dirs=args.preset_dirs,
                     host=args.host, zenoh_connect=args.zenoh_connect, zenoh_listen=args.zenoh_listen,
                     clock_offset_s=args.clock_offset_s, tcp_token=args.tcp_token,
-                    zenoh_credentials=args.zenoh_credentials, zenoh_insecure=args.zenoh_insecure, web=args.web)
+                    zenoh_credentials=args.zenoh_credentials, zenoh_insecure=args.zenoh_insecure, web=args.web,
+                    auth_timeout_s=args.auth_timeout)
     return daemon.run()
 
 
@@ -263,6 +264,11 @@ def _print_status(status: dict, as_json: bool) -> None:
     if tcp:
         refused = ", ".join(f"{cause} {n}" for cause, n in sorted(tcp["refused"].items()) if n) or "none"
         print(f"\nTCP GLI: refused {refused}; {tcp['waiting']} connections waiting to authenticate", flush=True)
+    web = status.get("web")
+    if web and "refused" in web:
+        refused = ", ".join(f"{cause} {n}" for cause, n in sorted(web["refused"].items()) if n) or "none"
+        print(f"\nweb view: {web['pages']} pages; refused {refused}; {web['waiting']} connections waiting to "
+              f"prove the token", flush=True)
     if status.get("cameras"):
         print()
         print(_render(["camera", "frames/s", "frames", "problem"],
@@ -437,6 +443,16 @@ def _web_address(value: str) -> str:
     from .web.server import parse_web
 
     return _parsed_by(parse_web, value)
+
+
+def _handshake_seconds(value: str) -> float:
+    try:
+        seconds = float(value)
+    except ValueError:
+        seconds = float("nan")
+    if not 0.1 <= seconds <= 3600:
+        raise argparse.ArgumentTypeError(f"{value!r} is not a number of seconds from 0.1 to 3600")
+    return seconds
 
 
 def _parsed_by(parse, value: str) -> str:
@@ -701,6 +717,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--web", metavar="[ADDR:]PORT", type=_web_address,
                    help="serve the live operator view in a browser (loopback by default; port 0: any free one); "
                         "pages prove the token of --tcp-token, and `hilgate view` prints the address with it")
+    p.add_argument("--auth-timeout", type=_handshake_seconds, default=5.0, metavar="S",
+                   help="how long a --tcp or --web connection has, from its connection on, to prove the token "
+                        "(default 5; the handshake is one round trip)")
     p.add_argument("--runtime-dir", help="where the sockets go (default: $RUNTIME_DIRECTORY, /run/hilgate, "
                                           "$XDG_RUNTIME_DIR/hilgate or /tmp/hilgate-UID)")
     p.add_argument("--trace", help="append the event trace (JSON lines) here")

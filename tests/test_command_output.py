@@ -16,7 +16,7 @@ import pytest
 
 from daemon_kit import Daemon, HANG_GUARD_S, free_port, hilgate, unique, wait_until
 from hilgate.client import Link
-from hilgate.daemon.access import AccessError, LinkLock
+from hilgate.daemon.access import AccessError, LinkLock, prepare_lock_directory
 from hilgate.gli.queues import unlink_queues
 from hilgate.scene import SceneError
 from hilgate.scene.load import load_scene
@@ -246,21 +246,23 @@ def test_the_address_error_says_how_to_go_past_254(tmp_path):
 HOLDER = """
 import sys
 from hilgate.daemon.access import LinkLock
-lock = LinkLock(sys.argv[1])
+lock = LinkLock(sys.argv[2], sys.argv[1])
 print("held", flush=True)
 sys.stdin.read()
 """
 
 
-def test_a_held_link_names_the_holders_whole_command_line():
+def test_a_held_link_names_the_holders_whole_command_line(tmp_path):
     link = unique("held")
+    locks = str(tmp_path / "locks")
+    prepare_lock_directory(locks)
     tail = "--trace /var/log/some/where/far/down/a/long/path/" + "x" * 200 + "/trace.jsonl scene-of-the-holder.yaml"
-    holder = subprocess.Popen([sys.executable, "-c", HOLDER, link, tail], stdin=subprocess.PIPE,
+    holder = subprocess.Popen([sys.executable, "-c", HOLDER, locks, link, tail], stdin=subprocess.PIPE,
                               stdout=subprocess.PIPE, text=True)
     try:
         assert holder.stdout.readline() == "held\n"
         with pytest.raises(AccessError) as caught:
-            LinkLock(link)
+            LinkLock(link, locks)
         assert f"process {holder.pid} of " in str(caught.value)
         assert str(caught.value).endswith(f"{link} {tail}") or f"{link} {tail}" in str(caught.value)
     finally:

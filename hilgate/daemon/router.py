@@ -442,7 +442,8 @@ class Router:
     a reload changed (:func:`hilgate.scene.diff.diff`).  The daemon gives it the doors."""
 
     def __init__(self, scheduler: Any, recorder: Recorder, doors: list[Door] | None = None,
-                 max_link_clients: int = 32, host: str | None = None):
+                 max_link_clients: int = 32, host: str | None = None, lock_dir: str = ""):
+        self.lock_dir = lock_dir  # where the links' locks are (hilgate.daemon.access.lock_directory)
         self.host = host  # in a scene spread over hosts, the links of this host only (scene/hosts.py)
         self.network: Any = None  # hilgate.daemon.network.Network, when there are several hosts
         self.scheduler = scheduler
@@ -569,7 +570,7 @@ class Router:
             self.world.start()
 
     def _add(self, spec: LinkSpec, announce: bool) -> None:
-        lock = LinkLock(spec.id)  # one daemon per link id on this host, or refused here
+        lock = LinkLock(spec.id, self.lock_dir)  # one daemon per link id of this user, or refused here
         account = self.accounts.get(spec.id) or LinkAccount(spec.id)  # a link re-added goes on counting
         link = RoutedLink(spec, self, account)
         link.lock = lock
