@@ -534,12 +534,34 @@ def cmd_emulate(args: argparse.Namespace) -> int:
         raise SceneError("hilgate emulate", 0, "", "give --pty PATH or --tcp PORT")
     line = {key: value for key, value in (("baud", args.baud), ("rtscts", args.rtscts)) if value is not None}
     emulate = {"protocol": args.protocol, **where, **line}  # the scene checks the line options (S100 only)
-    args.overrides = [*args.overrides, f"links.{args.link}.emulate={json.dumps(emulate)}"]
-    args.tcp = None  # here --tcp is the emulated modem's port, not a GLI listener
     from .core.paths import default_scene
 
     args.scene = args.scene or default_scene()
+    _emulated_link_exists(args.scene, args.link, args.overrides)
+    args.overrides = [*args.overrides, f"links.{args.link}.emulate={json.dumps(emulate)}"]
+    args.tcp = None  # here --tcp is the emulated modem's port, not a GLI listener
     return cmd_run(args)
+
+
+def _emulated_link_exists(scene_path: str, link: str, overrides: list[str]) -> None:
+    """``--link`` names a link of the scene (or of a ``--set``): said as such, with the scene's links, not as
+    the ``--set`` that ``emulate`` makes of it ("links.X: missing required key 'vehicle'")."""
+    import difflib
+
+    import yaml
+
+    try:
+        with open(scene_path, encoding="utf-8") as file:
+            data = yaml.safe_load(file)
+    except (OSError, yaml.YAMLError):
+        return  # the scene's own loading says what is wrong with the file
+    links = list((data or {}).get("links") or {}) if isinstance(data, dict) else []
+    if link in links or any(o.startswith(f"links.{link}.") or o.startswith(f"links.{link}=") for o in overrides):
+        return
+    close = difflib.get_close_matches(link, links, n=1)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    raise SceneError("--link", 0, "", f"no link {link!r} in {scene_path}{hint}; its links: "
+                                      f"{', '.join(links) or 'none'}")
 
 
 def cmd_report(args: argparse.Namespace) -> int:
@@ -896,7 +918,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     except OSError as exc:
         print(f"hilgate: {exc}", file=sys.stderr)
-        return 1
+        return getattr(exc, "exit_status", 1)  # (2 where trying again cannot help: an extra not installed)
     except Exception as exc:  # a client tool's error (GliError, …): one line, no traceback
         from .channel.runner import BellhopError
         from .gli.socket_client import GliError

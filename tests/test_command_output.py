@@ -270,6 +270,53 @@ def test_a_held_link_names_the_holders_whole_command_line(tmp_path):
         holder.wait(HANG_GUARD_S)
 
 
+# -- errors that say what to do (issue 40 item 3) -------------------------------------------------------
+
+def test_a_link_the_daemon_does_not_serve_is_answered_with_its_links(pair, tmp_path):
+    daemon, a, b = pair
+    result = hilgate("send", "nc_nope", "hi", "--runtime-dir", daemon.runtime)
+    assert result.returncode == 1
+    assert result.stderr == (f"hilgate: the daemon at {daemon.runtime} serves no link 'nc_nope' over its sockets; "
+                             f"its links: {', '.join(sorted([a, b]))}\n")
+    nobody = tmp_path / "nobody"
+    nobody.mkdir()
+    result = hilgate("listen", a, "--runtime-dir", str(nobody))
+    assert result.returncode == 1
+    assert result.stderr == (f"hilgate: no hilgate daemon runs with the runtime directory {nobody} (cannot reach "
+                             f"link {a!r}): start one, or give this command the --runtime-dir the daemon was "
+                             f"started with\n")
+
+
+def test_an_application_without_credentials_is_told_to_bring_them(tmp_path):
+    """A network made with ``hilgate network init`` takes only applications with their credentials: one
+    without them is told so, not sent to look at the key prefix."""
+    creds = tmp_path / "creds"
+    assert hilgate("network", "init", str(creds), "--hosts", "h1", "--apps", "1").returncode == 0
+    link, port = unique("zc"), free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    daemon = Daemon(tmp_path, scene({link: ""}, f"zenoh: {{lease_s: 5, credentials: {creds}}}\n"), [link],
+                    "--host", "h1", "--zenoh-listen", endpoint)
+    try:
+        daemon.wait_for("READY=1")
+        result = hilgate("send", link, "hello", "--zenoh", endpoint)
+        assert result.returncode == 1 and "--zenoh-credentials DIR/apps/NAME" in result.stderr, result.stderr
+        assert "prefix" not in result.stderr
+        apps = sorted((creds / "apps").iterdir())
+        result = hilgate("send", link, "hello", "--zenoh", endpoint, "--zenoh-credentials", str(apps[0]))
+        assert result.returncode == 0, result.stderr
+    finally:
+        daemon.close()
+
+
+def test_emulate_names_a_link_the_scene_lacks_as_such(tmp_path):
+    scene_file = tmp_path / "lab.yaml"
+    scene_file.write_text(scene({"rov2_ac": "", "rov2_rf": ""}))
+    result = hilgate("emulate", "evologics", str(scene_file), "--link", "rov2_a", "--pty", str(tmp_path / "tty"))
+    assert result.returncode == 2
+    assert result.stderr == (f"hilgate: --link: no link 'rov2_a' in {scene_file} (did you mean 'rov2_ac'?); "
+                             f"its links: rov2_ac, rov2_rf\n")
+
+
 # -- the Zenoh prefix ----------------------------------------------------------------------------------
 
 def test_applications_name_the_networks_zenoh_prefix(tmp_path):

@@ -59,7 +59,10 @@ MISSING = ("the web view needs tornado, an optional extra: pip install 'hilgate[
 
 class MissingTornado(OSError):
     """tornado is not installed; the message says how to install it (an OSError: the command's one-line
-    error, as for a port in use)."""
+    error, as for a port in use).  Exit status 2, a configuration error: under the systemd unit
+    (``RestartPreventExitStatus=2``) a restart every 2 s cannot install it."""
+
+    exit_status = 2
 
 
 def parse_web(value: str) -> tuple[str, int]:
