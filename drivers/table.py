@@ -253,10 +253,11 @@ class MicromodemOptions:
 @dataclass(frozen=True)
 class UnetOptions:
     """``backend: unet`` (:mod:`hilgate.drivers.unet`): a UnetStack modem (Subnero's) reached through its fjåge
-    API at ``host``:``port`` (1100 by default, fjåge's); the link's frames go as datagrams of
-    ``unet_protocol`` and its received datagrams of that protocol come back as frames."""
+    API at ``modem_host``:``port`` (1100 by default, fjåge's; ``host`` is the scene's key for the daemon
+    that serves the link); the link's frames go as datagrams of ``unet_protocol`` and its received
+    datagrams of that protocol come back as frames."""
 
-    host: str = option(Option("host", hint="the modem's address, such as 192.168.1.12"))
+    modem_host: str = option(Option("host", hint="the modem's address, such as 192.168.1.12"))
     port: int = option(Option("integer", 1, 65535), 1100)
     unet_protocol: int = option(Option("integer", 0, 63), 0)  # 0: DATA; 32-63: USER protocols
     command_timeout_s: float = option(Option("number", above=0), 5.0)
