@@ -119,6 +119,9 @@ class NodeHost(Protocol):
 
     def close_client(self, client: Any) -> None: ...
 
+    def refused(self, cause: str) -> None:
+        """The node refused something a peer said (``cause``): counted and traced where the host keeps such."""
+
 
 @dataclass
 class _Peer:
@@ -203,8 +206,7 @@ class UnetNode:
                 action: str | None = None) -> None:
         """One refusal: counted by cause, said once to the peer (as the answer to its question, when it
         asked one, so a gateway is not left waiting), logged for the 1st, 2nd, 4th… of a cause."""
-        self.refused[cause] += 1
-        count = self.refused[cause]
+        count = self.count(cause)
         if count & (count - 1) == 0:
             log.warning("%s: UnetStack peer refused: %s (%d refused so far for this cause)",
                         self.host.node_name, reason, count)
@@ -215,6 +217,12 @@ class UnetNode:
         if close:
             self.peers.pop(client, None)
             self.host.close_client(client)
+
+    def count(self, cause: str) -> int:
+        """One more refusal of ``cause``: counted here and by the host (the link's trace and status)."""
+        self.refused[cause] += 1
+        self.host.refused(cause)
+        return self.refused[cause]
 
     def _write(self, client: Any, data: bytes) -> None:
         if not self.host.write(client, data):
@@ -256,7 +264,7 @@ class UnetNode:
             self._write(other, fjage.send(msg))
         if not others and data.get("perf") == "REQUEST":
             self._reply(client, data, MESSAGE, "FAILURE", sender=recipient or "?")
-            self.refused["no_agent"] += 1
+            self.count("no_agent")
 
     def _reply(self, client: Any, request: dict, clazz: str, perf: str, sender: str | None = None,
                **fields: Any) -> None:
@@ -279,7 +287,7 @@ class UnetNode:
             else:
                 self._reply(client, data, ADDRESS_RSP, "INFORM", name=name, address=to_unet(address))
         elif data.get("perf") == "REQUEST":
-            self.refused["not_understood"] += 1
+            self.count("not_understood")
             self._reply(client, data, MESSAGE, "NOT_UNDERSTOOD")
 
     # -- parameters ----------------------------------------------------------------------------------
@@ -333,12 +341,11 @@ class UnetNode:
             fields["param"], fields["value"] = items[0]
             fields["values"] = dict(items[1:])
         self._reply(client, data, PARAM_RSP, "INFORM", sender=agent, **fields)
+        self.address_changed()
 
     def _set(self, agent: str, name: str, value: Any) -> None:
         if agent == "node" and name.endswith(".address") and type(value) is int and 1 <= value <= 254:
-            before = self.host.address
-            if self.host.set_address(value) and before != self.host.address:
-                self.address_changed()
+            self.host.set_address(value)  # (told to the peers once the answer is out: _parameters)
 
     def address_changed(self) -> None:
         """The node's address changed (set by a peer, or the link's by a reload): every peer that wants
@@ -379,7 +386,7 @@ class UnetNode:
             datagram = Datagram(agent, client, msg_id, requester, payload, from_unet(to), protocol, reliable)
             reason = self.host.transmit(datagram)
         if reason is not None:
-            self.refused["datagram"] += 1
+            self.count("datagram")
             self._reply(client, data, REFUSE_RSP, "REFUSE", sender=agent, reason=reason)
             return
         self._reply(client, data, MESSAGE, "AGREE", sender=agent)

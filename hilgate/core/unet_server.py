@@ -9,7 +9,8 @@ datagrams are the modem's own bytes on air.  What they share is here:
 - a loopback TCP listener (``host`` elsewhere only when the scene says so), at most :data:`MAX_CLIENTS`
   peers at once (a newcomer beyond is told why and closed, counted, as the GLI refuses one), each with
   at most :data:`OUTPUT_CAP` bytes of notifications it has not read (then it is closed: it stopped
-  reading), and the node's own refusals (bad JSON, floods…, counted in :attr:`refused`);
+  reading), and the node's own refusals (bad JSON, floods…, counted by cause in the link's status,
+  ``unet_<cause>``, and traced);
 - each datagram's fate from the link: its transmission as the simulated PHY reports it (``TxFrameNtf``
   with the model's start time), its acknowledgement (a reliable datagram's, from the model's ACK on
   the channel: :mod:`hilgate.models.acoustic_ack`), its drop before the air (``DatagramFailureNtf``);
@@ -22,7 +23,6 @@ from __future__ import annotations
 import logging
 import socket
 from abc import ABC, abstractmethod
-from collections import Counter
 from typing import Any
 
 from .backend import AppFrame, PhyEvent
@@ -65,13 +65,6 @@ class NodeServer(ABC):
         self.where = f"{host}:{tcp}"
         log.info("%s: UnetStack node on tcp://%s", port.id, self.where)
 
-    @property
-    def refused(self) -> Counter[str]:
-        counts = Counter(self.node.refused)
-        if self.refused_clients:
-            counts["clients"] += self.refused_clients
-        return counts
-
     # -- peers ----------------------------------------------------------------------------------------
 
     def _accept(self, sock: socket.socket) -> None:
@@ -80,6 +73,7 @@ class NodeServer(ABC):
                 connection.close()  # gone, though the loop has not read it yet: no place held
         if len(self.connections) >= MAX_CLIENTS:
             self.refused_clients += 1
+            self.refused("clients")
             if self.refused_clients & (self.refused_clients - 1) == 0:
                 log.warning("%s: UnetStack peer refused: %d connected already (%d refused so far)",
                             self.port.id, len(self.connections), self.refused_clients)
@@ -117,7 +111,7 @@ class NodeServer(ABC):
         held = self.held.get(client)
         if held is not None:
             if sum(map(len, held)) + len(data) > OUTPUT_CAP:  # a flood of questions: not kept without end
-                self.node.refused["client_slow"] += 1
+                self.node.count("client_slow")
                 client.close()
                 return False
             held.append(data)
@@ -128,13 +122,17 @@ class NodeServer(ABC):
         if client.write(data):
             return True
         if not client.closed and not client.write_failed:
-            self.node.refused["client_slow"] += 1
+            self.node.count("client_slow")
             log.info("%s: UnetStack peer stopped reading: closed", self.port.id)
             client.close()
         return False
 
     def close_client(self, client: Connection) -> None:
         client.close()
+
+    def refused(self, cause: str) -> None:
+        """Counted in the link's status (``drop_causes``, ``unet_<cause>``) and traced (``ev: refused``)."""
+        self.port.lost(f"unet_{cause}", 0, src="unet", ev="refused")
 
     # -- the node's host (hilgate.core.unet_node.NodeHost) -------------------------------------------------
 
