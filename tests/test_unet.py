@@ -200,9 +200,10 @@ def test_unetsocket_and_fjagepy_through_emulated_unetstack_modems_with_the_model
 # -- hilgate's driver ---------------------------------------------------------------------------------------------
 
 
-def driver_scene(ap, far, em, port, real, modem_there=True):
+def driver_scene(ap, far, em, port, real, modem_there=True, door=0):
+    gli = f"gli: [socket, unet], unet: {{tcp: {door}}}"
     app = (f"{{vehicle: va, model: unet-m25m, backend: unet, modem_host: 127.0.0.1, port: {port}, address: 1, "
-           f"gli: [socket]}}" if real else f"{{vehicle: va, model: unet-m25m, address: 1, gli: [socket]}}")
+           f"{gli}}}" if real else f"{{vehicle: va, model: unet-m25m, address: 1, {gli}}}")
     text = head("unet-driver") + f"""\
   {ap}: {app}
   {far}: {{vehicle: vb, model: unet-m25m, address: 2, gli: [socket]}}
@@ -213,25 +214,33 @@ def driver_scene(ap, far, em, port, real, modem_there=True):
 
 
 def test_hilgates_driver_comes_in_by_a_reload_meets_the_emulator_and_loses_nothing_it_queued(daemon_of):
-    ap, far, em, port = unique("ap"), unique("far"), unique("em"), free_port()
-    daemon = daemon_of(driver_scene(ap, far, em, port, real=False), [ap, far, em], "--speed", "4")
+    """The swap of the other families: the link's applications (a socket client, and a UnetSocket on its
+    door) stay connected while a reload puts a real modem's driver behind the link."""
+    ap, far, em, port, door = unique("ap"), unique("far"), unique("em"), free_port(), free_port()
+    daemon = daemon_of(driver_scene(ap, far, em, port, real=False, door=door), [ap, far, em], "--speed", "4")
+    usock = UnetSocket("localhost", door)
     with Link.open(ap, runtime_dir=daemon.runtime) as la, Link.open(far, runtime_dir=daemon.runtime) as lf:
         la.send(b"simulated", dst=2)
         assert lf.recv(timeout=HANG_GUARD_S).data == b"simulated"
-        daemon.reload(driver_scene(ap, far, em, port, real=True))
+        assert usock.send(b"a UnetSocket, simulated", to=2)
+        assert lf.recv(timeout=HANG_GUARD_S).data == b"a UnetSocket, simulated"
+        daemon.reload(driver_scene(ap, far, em, port, real=True, door=door))
         daemon.wait_up(ap)  # the driver set the emulated modem's address and found its agents
+        assert usock.send(b"a UnetSocket, through the real modem", to=2)
+        assert lf.recv(timeout=HANG_GUARD_S).data == b"a UnetSocket, through the real modem"
         la.send(b"through the driver", dst=2)
         message = lf.recv(timeout=HANG_GUARD_S)
         assert (message.data, message.src) == (b"through the driver", 1)  # the driver set the modem's address 1
         lf.send(b"back to the driver", dst=1)
         assert la.recv(timeout=HANG_GUARD_S).data == b"back to the driver"
-        daemon.reload(driver_scene(ap, far, em, port, real=True, modem_there=False))  # its port vanishes
+        daemon.reload(driver_scene(ap, far, em, port, real=True, modem_there=False, door=door))  # its port vanishes
         wait_until(lambda: daemon.link_status(ap)["state"] != "up", "the driver's link down")
         for n in range(3):
             la.send(b"queued %d" % n, dst=2)
-        daemon.reload(driver_scene(ap, far, em, port, real=True))  # the modem is back
+        daemon.reload(driver_scene(ap, far, em, port, real=True, door=door))  # the modem is back
         got = [lf.recv(timeout=HANG_GUARD_S) for _ in range(3)]
         assert [m.data for m in got] == [b"queued 0", b"queued 1", b"queued 2"]
+    usock.close()
     daemon.stop()
     events = daemon.trace_events()
     configured = [e for e in events if e["ev"] == "modem_config" and e.get("link") == ap]
