@@ -117,9 +117,11 @@ def test_the_codec_refuses_bad_lines_in_one_line_each_and_breaks_only_on_framing
     assert FjageCodec().receive_data(b"{\"id\": 1\n")[0].fatal
 
 
+PIECES = [b"\n", b"{", b"}", b'"', b"[", b'{"action":"send"}\n', b'{"id":"1","action":"agents"}\n']
+
+
 @settings(max_examples=examples(300), deadline=None)
-@given(st.lists(st.one_of(st.binary(max_size=60), st.sampled_from([b"\n", b"{", b"}", b'"', b"[", b'{"action":"send"}\n',
-                                                                   b'{"id":"1","action":"agents"}\n'])), max_size=20))
+@given(st.lists(st.one_of(st.binary(max_size=60), st.sampled_from(PIECES)), max_size=20))
 def test_fuzz_the_codec_never_raises_and_holds_at_most_a_line(chunks):
     codec = FjageCodec(max_line=256)
     for chunk in chunks:
@@ -229,7 +231,8 @@ def test_received_frames_go_to_the_agents_topic_or_its_snoop_topic_once_per_peer
     assert node.received("phy", 2, 255, 0, b"\x00\xff", 3.0, -60.04) == 1
     ntf = replies(h)[0]["message"]
     assert ntf["clazz"] == "org.arl.unet.phy.RxFrameNtf"
-    assert (ntf["data"]["from"], ntf["data"]["to"], ntf["data"]["rxTime"], ntf["data"]["rssi"]) == (2, 0, 3000000, -60.0)
+    fields = ntf["data"]
+    assert (fields["from"], fields["to"], fields["rxTime"], fields["rssi"]) == (2, 0, 3000000, -60.0)
     assert fjage.decode_bytes(ntf["data"]["data"]) == b"\x00\xff"
     assert node.received("phy", 2, 9, 0, b"x", 3.0) == 1  # for another node: overheard
     assert replies(h)[0]["message"]["data"]["recipient"] == "#phy__snoop__ntf"
@@ -250,7 +253,8 @@ def test_what_the_node_cannot_act_on_is_refused_once_and_counted():
     assert [r.get("error", "")[:8] for r in replies(h)] == ["not JSON"] and h.closed == ["p"]
     node.receive("q", b"x" * (fjage.MAX_LINE + 1))
     assert replies(h, "q") == [{"error": f"a line longer than {fjage.MAX_LINE} bytes"}] and h.closed == ["p", "q"]
-    assert dict(node.refused) == {"unknown_action": 1, "not_understood": 1, "no_agent": 1, "bad_json": 1, "long_line": 1}
+    assert dict(node.refused) == {"unknown_action": 1, "not_understood": 1, "no_agent": 1, "bad_json": 1,
+                                  "long_line": 1}
     assert sorted(h.refusals) == sorted(node.refused)
 
 

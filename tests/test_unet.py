@@ -13,7 +13,6 @@ counted, and the other clients are served throughout.
 
 import json
 import socket
-import time
 
 import pytest
 
@@ -209,7 +208,8 @@ def driver_scene(ap, far, em, port, real, modem_there=True, door=0):
   {far}: {{vehicle: vb, model: unet-m25m, address: 2, gli: [socket]}}
 """
     if real and modem_there:
-        text += f"  {em}: {{vehicle: va, model: unet-m25m, address: 3, gli: [], emulate: {{protocol: unet, tcp: {port}}}}}\n"
+        text += (f"  {em}: {{vehicle: va, model: unet-m25m, address: 3, gli: [], "
+                 f"emulate: {{protocol: unet, tcp: {port}}}}}\n")
     return text
 
 
