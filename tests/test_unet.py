@@ -20,10 +20,11 @@ pytest.importorskip("unetpy")
 
 from daemon_kit import HANG_GUARD_S, free_port, peer_events, unique, wait_until  # noqa: E402
 from hilgate.client import Link  # noqa: E402
+from hilgate.scene import SceneError, load_scene_text  # noqa: E402
 from fjagepy import Gateway, Performative  # noqa: E402
 from unetpy import Protocol, UnetSocket  # noqa: E402
 from unetpy.constants import Services  # noqa: E402
-from unetpy.messages import DatagramReq, RxFrameNtf, TxFrameNtf  # noqa: E402
+from unetpy.messages import DatagramFailureNtf, DatagramReq, RxFrameNtf, TxFrameNtf  # noqa: E402
 
 WAIT_MS = int(HANG_GUARD_S * 1000)  # a receive's hang guard: it returns as soon as the datagram is there
 DELAY_US = 100_000  # 150 m at 1500 m/s
@@ -52,6 +53,30 @@ def closing(*sockets):
 
 def tx_times(events, link):
     return [e["t"] for e in events if e.get("link") == link and e["ev"] == "tx" and "kind" not in e]
+
+
+# -- the scene ---------------------------------------------------------------------------------------------------
+
+
+def scene_error(link):
+    with pytest.raises(SceneError) as info:
+        load_scene_text(head("checks") + f"  x: {{vehicle: va, {link}}}\n", "/tmp/scene.yaml")
+    return str(info.value).split(": ", 2)[2]
+
+
+def test_the_scene_says_what_a_door_or_a_unetstack_modem_lacks_in_one_line():
+    spec = load_scene_text(head("ok") + "  x: {vehicle: va, gli: [unet], unet: {tcp: 1100, host: localhost}}\n"
+                           "  y: {vehicle: vb, model: unet-m25m, backend: unet, modem_host: 10.0.0.2}\n", "/tmp/s.yaml")
+    assert spec.links["x"].unet == (("tcp", 1100), ("host", "127.0.0.1"), ("protocol", 0))
+    assert dict(spec.links["y"].options) == {"modem_host": "10.0.0.2"}
+    assert scene_error("gli: [socket, unet]") == "a UnetStack door needs both gli: [..., unet] and unet: {tcp: PORT}"
+    assert scene_error("unet: {tcp: 1100}") == "a UnetStack door needs both gli: [..., unet] and unet: {tcp: PORT}"
+    assert scene_error("gli: [unet], unet: {tcp: 1100, protocol: 64}") == "must be at most 63, not 64"
+    assert scene_error("gli: [unet], unet: {tcp: 1100, host: a.host.name}").startswith("'a.host.name' is not an IP")
+    assert scene_error("emulate: {protocol: unet, pty: /tmp/u}") == \
+        "the UnetStack modem speaks TCP only: give tcp (a loopback port)"
+    assert scene_error("backend: unet").startswith("backend unet needs 'modem_host'")
+    assert scene_error("backend: unet, modem_host: 'no spaces'") == "'no spaces' is not a host name or an IP address"
 
 
 # -- the door ---------------------------------------------------------------------------------------------------
@@ -196,6 +221,33 @@ def test_unetsocket_and_fjagepy_through_emulated_unetstack_modems_with_the_model
     assert [e["ev"] for e in retx][-1] == "giveup"  # the failure is the model's: the retries, then giving up
 
 
+def test_a_datagram_the_modems_fifo_has_no_room_for_fails_at_once_with_the_models_cause(daemon_of):
+    a, b, pa = unique("fa"), unique("fb"), free_port()
+    scene = head("unet-fifo") + f"""\
+  {a}: {{vehicle: va, model: unet-m25m, address: 1, fifo_bytes: 64, gli: [], emulate: {{protocol: unet, tcp: {pa}}}}}
+  {b}: {{vehicle: vb, model: unet-m25m, address: 2, gli: [socket]}}
+"""
+    daemon = daemon_of(scene, [a, b])
+    gw = Gateway("localhost", pa)
+    try:
+        phy = gw.agentForService(Services.PHYSICAL)
+        requests = [DatagramReq(recipient=phy, to=2, protocol=0, data=[n] * 60) for n in range(3)]
+        for req in requests:  # at once: the first goes on air, the second waits in the FIFO, the third has no room
+            gw.send(req)
+        fates = {}
+        while len(fates) < 3:
+            msg = gw.receive(lambda m: isinstance(m, (TxFrameNtf, DatagramFailureNtf)), WAIT_MS)
+            assert msg is not None, f"fates so far: {fates}"
+            fates[msg.inReplyTo] = msg
+    finally:
+        gw.close()
+    assert [type(fates[r.msgID]).__name__ for r in requests] == ["TxFrameNtf", "TxFrameNtf", "DatagramFailureNtf"]
+    assert fates[requests[2].msgID].reason == "dropped by the modem (fifo)"
+    daemon.stop()
+    drops = [e for e in daemon.trace_events() if e["ev"] == "drop" and e.get("link") == a]
+    assert [e["cause"] for e in drops] == ["fifo"]
+
+
 # -- hilgate's driver ---------------------------------------------------------------------------------------------
 
 
@@ -213,9 +265,10 @@ def driver_scene(ap, far, em, port, real, modem_there=True, door=0):
     return text
 
 
-def test_hilgates_driver_comes_in_by_a_reload_meets_the_emulator_and_loses_nothing_it_queued(daemon_of):
+def test_hilgates_driver_comes_in_by_a_reload_meets_the_emulator_and_loses_nothing_it_queued(daemon_of, busy_host):
     """The swap of the other families: the link's applications (a socket client, and a UnetSocket on its
-    door) stay connected while a reload puts a real modem's driver behind the link."""
+    door) stay connected while a reload puts a real modem's driver behind the link; beside busy neighbours,
+    as every family's driver meets its emulator (tests/conftest.py's busy_host)."""
     ap, far, em, port, door = unique("ap"), unique("far"), unique("em"), free_port(), free_port()
     daemon = daemon_of(driver_scene(ap, far, em, port, real=False, door=door), [ap, far, em], "--speed", "4")
     usock = UnetSocket("localhost", door)
