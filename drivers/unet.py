@@ -84,6 +84,9 @@ class UnetBackend(QueuedBackend):
     def close(self) -> None:
         self._forget()
         self.port.close()
+        if self.inflight is not None:  # not answered for: dropped with the queue, counted (closed)
+            self.queue.appendleft(self.inflight[0])
+            self.inflight = None
         super().close()
 
     # -- the line -----------------------------------------------------------------------------------------
@@ -245,6 +248,7 @@ class UnetBackend(QueuedBackend):
             log.warning("%s: the modem did not answer a datagram request: restarting", self.link_id)
             self.queue.appendleft(frame)
             self.inflight = None
+            self._forget()
             self.set_state("starting", "the modem did not answer a datagram request")
             self._start()
             return
