@@ -6,13 +6,15 @@ the UnetStack door of a simulated link (``gli: [unet]``) and to emulated UnetSta
 (``txTime`` the transmission's start, ``rxTime`` the arrival's, 150 m at 1500 m/s apart: 100 000 µs, as
 in the trace).  A UnetSocket application and a dccomms application share one channel; hilgate's own
 ``unet`` driver meets the emulated modem, comes in by a reload as the other families' drivers do, and
-after its modem's port vanishes and comes back sends what it queued meanwhile, in order.  At the door
+after its modem's port vanishes and comes back sends what it queued meanwhile, in order; against a scripted
+modem it counts a refusal with the modem's reason and sends again, first, the frame the modem hung up on.  At the door
 bad JSON, unknown actions, over-long lines, floods and a client too many are refused once each and
 counted, and the other clients are served throughout.
 """
 
 import json
 import socket
+import threading
 
 import pytest
 
@@ -364,3 +366,97 @@ def test_bad_json_unknown_actions_long_lines_floods_and_a_client_too_many_are_re
         "unet_bad_json": 1, "unet_unknown_action": 1, "unet_long_line": 1, "unet_flood": 1}
     assert causes["unet_clients"] >= 1
     assert "Traceback" not in daemon.output()
+
+
+class ScriptedModem:
+    """A UnetStack modem's API reduced to a script, on a loopback port: it answers the driver's start-up,
+    refuses the first datagram, hangs up on the second without answering, and agrees to everything on the
+    next connection.  What each connection received is kept."""
+
+    def __init__(self):
+        self.server = socket.create_server(("127.0.0.1", 0))
+        self.port = self.server.getsockname()[1]
+        self.connections = []
+        self.thread = threading.Thread(target=self._serve, daemon=True)
+        self.thread.start()
+
+    def _serve(self):
+        self.server.settimeout(HANG_GUARD_S)
+        for number in range(2):
+            try:
+                conn, _ = self.server.accept()
+            except OSError:
+                return
+            got = []
+            self.connections.append(got)
+            with conn:
+                self._talk(conn, number, got)
+
+    def _talk(self, conn, number, got):
+        reader = conn.makefile("rb")
+        for raw in reader:
+            obj = json.loads(raw)
+            action = obj.get("action")
+            if action in ("agentForService", "agentsForService"):
+                service = obj["service"].rsplit(".", 1)[1]
+                answer = {"id": obj["id"], "inResponseTo": action}
+                if action == "agentsForService":
+                    answer["agentIDs"] = ["phy"]
+                elif service in ("NODE_INFO", "PHYSICAL"):
+                    answer["agentID"] = "node" if service == "NODE_INFO" else "phy"
+                conn.sendall(json.dumps(answer).encode() + b"\n")
+            elif action == "send":
+                data = obj["message"]["data"]
+                reply = {"msgID": f"r{len(got)}", "sender": data["recipient"], "recipient": data["sender"],
+                         "inReplyTo": data["msgID"]}
+                if obj["message"]["clazz"].endswith("ParameterReq"):
+                    got.append(("address", data["value"]))
+                    reply.update(perf="INFORM", param=data["param"], value=data["value"])
+                    clazz = "org.arl.fjage.param.ParameterRsp"
+                else:
+                    got.append(("datagram", bytes(data["data"]), data["to"], data["protocol"]))
+                    datagrams = sum(1 for g in got if g[0] == "datagram")
+                    if number == 0 and datagrams == 2:
+                        return  # hangs up with the datagram unanswered
+                    refused = number == 0 and datagrams == 1
+                    reply.update(perf="REFUSE", reason="scripted refusal") if refused else reply.update(perf="AGREE")
+                    clazz = "org.arl.unet.RefuseRsp" if refused else "org.arl.fjage.Message"
+                self._send(conn, clazz, reply)
+                if clazz == "org.arl.fjage.Message":
+                    ntf = {"msgID": "t", "perf": "INFORM", "sender": "phy", "recipient": data["sender"],
+                           "inReplyTo": data["msgID"], "txTime": 1}
+                    self._send(conn, "org.arl.unet.phy.TxFrameNtf", ntf)
+
+    @staticmethod
+    def _send(conn, clazz, data):
+        conn.sendall(json.dumps({"action": "send", "message": {"clazz": clazz, "data": data}}).encode() + b"\n")
+
+    def close(self):
+        self.server.close()
+
+
+def test_the_driver_counts_a_refusal_and_sends_again_what_the_modem_had_not_answered_for(daemon_of):
+    link = unique("dr")
+    modem = ScriptedModem()
+    scene = head("unet-scripted") + f"""\
+  {link}: {{vehicle: va, backend: unet, modem_host: 127.0.0.1, port: {modem.port}, address: 6, unet_protocol: 33,
+           packet: raw, gli: [socket]}}
+"""
+    daemon = daemon_of(scene, [link])
+    try:
+        daemon.wait_up(link)
+        with Link.open(link, runtime_dir=daemon.runtime) as app:
+            for text in (b"refused", b"cut short", b"after"):
+                app.send(text, dst=9)
+            wait_until(lambda: len(modem.connections) == 2 and len(modem.connections[1]) >= 3,
+                       lambda: f"the modem got {modem.connections}")
+    finally:
+        modem.close()
+    first, second = modem.connections
+    assert first == [("address", 6), ("datagram", b"refused", 9, 33), ("datagram", b"cut short", 9, 33)]
+    assert second == [("address", 6), ("datagram", b"cut short", 9, 33), ("datagram", b"after", 9, 33)]
+    daemon.stop()
+    events = [e for e in daemon.trace_events() if e.get("link") == link]
+    assert [e["cause"] for e in events if e["ev"] == "drop"] == ["refused"]
+    refusals = [e["reason"] for e in events if e["ev"] == "err" and e.get("cause") == "modem"]
+    assert refusals == ["refused: scripted refusal"]
