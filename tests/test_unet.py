@@ -419,7 +419,10 @@ class ScriptedModem:
                     if number == 0 and datagrams == 2:
                         return  # hangs up with the datagram unanswered
                     refused = number == 0 and datagrams == 1
-                    reply.update(perf="REFUSE", reason="scripted refusal") if refused else reply.update(perf="AGREE")
+                    if refused:
+                        reply.update(perf="REFUSE", reason="scripted refusal")
+                    else:
+                        reply["perf"] = "AGREE"
                     clazz = "org.arl.unet.RefuseRsp" if refused else "org.arl.fjage.Message"
                 self._send(conn, clazz, reply)
                 if clazz == "org.arl.fjage.Message":
