@@ -164,6 +164,28 @@ class RoutedLink:
         return self.spec.limits
 
     @property
+    def bitrate_bps(self) -> float:
+        return self.spec.params.bitrate_bps
+
+    @property
+    def unet(self) -> dict[str, Any]:
+        return dict(self.spec.unet)
+
+    def address_of(self, name: str) -> int | None:
+        scene = self.router.scene
+        if scene is None:
+            return None
+        channel = self.spec.params.tx_channel
+        spec = scene.links.get(name)
+        if spec is None:
+            mine = [s for s in scene.links.values() if s.vehicle == name and s.params.rx_channel == channel]
+            spec = mine[0] if len(mine) == 1 else None
+        if spec is None or spec.params.rx_channel != channel:
+            return None
+        other = self.router.links.get(spec.id)
+        return other.address if other is not None else spec.params.address
+
+    @property
     def ready(self) -> bool:
         backend = self.backend
         if backend is None or backend.state != "up":

@@ -21,6 +21,7 @@ from .control import ControlServer
 from ..drivers.emulators import EmulatorDoor
 from ..gli.queues import QueueDoor, forget_created, plan_message_size, raise_queue_budget, unlink_created
 from ..gli.sockets import ClientLimits, SocketDoor, tcp_listener
+from ..gli.unet_door import UnetDoor
 from ..gli.token import TOKEN_FILE, TokenCheck, load_or_create
 from .live_sources import LiveSources
 from .ros2_bridge import Ros2Bridge
@@ -72,6 +73,10 @@ def _endpoint_list(scene: Scene, host: str | None, runtime_dir: str, tcp: str | 
         parts.append(f"sockets {runtime_dir}/gli/ID.sock ({_links(sockets)})")
     if tcp:
         parts.append(f"TCP {tcp}")
+    for link in served:
+        if link.unet:
+            door = dict(link.unet)
+            parts.append(f"{link.id} as a UnetStack node at {door['host']}:{door['tcp']}")
     for link in served:
         emulate = dict(link.emulate)
         if emulate:
@@ -185,6 +190,7 @@ class Daemon:
                       self.gli_backlog, group),
             SocketDoor(os.path.join(self.runtime_dir, "gli"), scheduler, self.clients, self.router.port, group),
             EmulatorDoor(scheduler),
+            UnetDoor(scheduler),
         ]
         self.ros2 = Ros2Bridge(scheduler, self.router, self.scene_path)
         self.router.doors.append(self.ros2)  # opens nothing, and loads no DDS, for links not on ROS 2
