@@ -365,6 +365,7 @@ class _Writer:
         self.plt, self.out, self.formats, self.subtitle, self.inspect, self.title = \
             plt, out, formats, subtitle, inspect, title
         self.written: list[tuple[str, str]] = []
+        self.files: list[str] = []  # every file saved, each format of each figure
 
     def save(self, fig, stem: str, caption: str) -> None:
         caption = caption + (f" ({self.subtitle})" if self.subtitle else "")
@@ -388,7 +389,9 @@ class _Writer:
         for fmt in self.formats:
             metadata = ({"Title": f"{self.title}: {stem}", "Subject": caption} if fmt == "pdf"
                         else {"Title": f"{self.title}: {stem}", "Description": caption})
-            fig.savefig(os.path.join(self.out, f"{stem}.{fmt}"), dpi=110, metadata=metadata)
+            path = os.path.join(self.out, f"{stem}.{fmt}")
+            fig.savefig(path, dpi=110, metadata=metadata)
+            self.files.append(path)
         self.plt.close(fig)
         self.written.append((f"{stem}.{self.formats[0]}", caption))
 
@@ -398,11 +401,13 @@ class _Writer:
 
 def figures(trace: Trace, summaries: dict[str, dict], vehicles: list[str], out: str,
             title: str = "", formats: tuple[str, ...] = ("png",), subtitle: str = "",
-            inspect: dict[str, dict] | None = None, width: float | None = None) -> list[tuple[str, str]]:
+            inspect: dict[str, dict] | None = None, width: float | None = None,
+            files: list[str] | None = None) -> list[tuple[str, str]]:
     """Write the figures (PNG, and SVG/PDF when asked), ``width`` inches wide (default ``WIDTH_IN``,
-    and the bars of many flows wider); returns (file name, caption) pairs.  ``inspect`` collects what
-    was drawn, figure by figure (scales, series and their styles, what was left out, whether texts
-    overlap), for tests that check a figure from its data."""
+    and the bars of many flows wider); returns (file name, caption) pairs, the name in the first format.
+    ``files`` collects the path of every file written (each format: what the command counts).
+    ``inspect`` collects what was drawn, figure by figure (scales, series and their styles, what was
+    left out, whether texts overlap), for tests that check a figure from its data."""
     width_given = width is not None
     width = WIDTH_IN if width is None else width
     if not (math.isfinite(width) and 2.0 <= width <= 40.0):
@@ -419,6 +424,8 @@ def figures(trace: Trace, summaries: dict[str, dict], vehicles: list[str], out: 
         _fifo_figure(plt, writer, trace, width)
     if summaries:
         _compare_figure(plt, writer, summaries, width, width_given)
+    if files is not None:
+        files.extend(writer.files)
     return writer.written
 
 
@@ -681,7 +688,7 @@ def report(trace_path: str, summary_paths: list[str], out: str, vehicles: list[s
            csv_tables: bool = False, title: str | None = None,
            window: tuple[float, float] | None = None, run: Run | None = None,
            formats: tuple[str, ...] = ("png",), width: float | None = None) -> list[str]:
-    """Everything ``hilgate report`` writes; returns the paths."""
+    """Everything ``hilgate report`` writes; returns the paths, every one (each format of each figure)."""
     if window is not None and not window[0] < window[1]:
         raise ReportError(f"--window {window[0]:g} {window[1]:g} is empty: give START < END in seconds")
     if width is not None and not (math.isfinite(width) and 2.0 <= width <= 40.0):
@@ -701,11 +708,13 @@ def report(trace_path: str, summary_paths: list[str], out: str, vehicles: list[s
             produced.append(f"{name}: scene {summary.get('scene')}, seed {summary.get('seed')}")
     if window is not None:
         produced.append(f"window {window[0]:g}–{window[1]:g} s")
+    files: list[str] = []
     try:
-        written = figures(trace, summaries, chosen, out, title, formats, "; ".join(produced), width=width)
+        written = figures(trace, summaries, chosen, out, title, formats, "; ".join(produced), width=width,
+                          files=files)
     except ReportError:
         if csv_tables:
             write_index(out, [], tables, title)
         raise
     index = write_index(out, written, tables, title)
-    return [os.path.join(out, name) for name, _ in written] + tables + [index]
+    return files + tables + [index]
