@@ -18,7 +18,8 @@ Made to go in a paper, and checked from what was drawn (``inspect``):
 - tick labels never overlap, at any ``--width``: labels that would are thinned or turned;
 - each flow's timeline has its own time axis, fitted to that flow's activity; timelines too dense for
   marks are counted per window;
-- plain tick values, delays in ms below a second, one colour per loss cause everywhere;
+- plain tick values, delays in ms below a second; loss causes in words and one colour each, from the
+  table the tables and the web view use too (:mod:`.causes`);
 - ``--out`` holds only this run's figures: what an earlier report wrote there is removed first.
 
 matplotlib is an optional extra (``pip install 'hilgate[report]'``); without it the command says so
@@ -38,11 +39,11 @@ import warnings
 from collections import defaultdict
 from typing import Any
 
+from .causes import RECEIVED, legend_order
+from .causes import colour as cause_colour
+from .causes import words as cause_words
 from .tracedata import Packet, ReportError, Run, Trace, load_summary, load_trace
 
-CAUSE_COLOURS = {"prop": "#e69f00", "col": "#d62728", "mult": "#9467bd", "fifo": "#222222", "range": "#1f77b4",
-                 "closed": "#7f7f7f", "band": "#17becf", "modulation": "#bcbd22"}
-OTHER_LOSS = "#8c564b"
 REAL_SHADE = "#9ecae1"
 MISSING_MATPLOTLIB = ("hilgate report needs matplotlib, an optional extra: pip install 'hilgate[report]' "
                       "(or pip install matplotlib); --csv tables need nothing more")
@@ -115,9 +116,10 @@ def write_csv(trace: Trace, summaries: dict[str, dict], vehicles: list[str], out
         files.append(path)
 
     table("packets.csv", ["pkt", "src", "dst", "size", "t_enq", "t_tx", "receiver", "t_outcome", "outcome", "cause",
-                          "delay_s"],
+                          "delay_s", "cause_in_words"],
           ([p.pkt, p.src, p.dst, p.size, p.t_enq, p.t_tx[0] if p.t_tx else "", receiver, t, ev, cause or "",
-            t - p.t_enq if ev == "rx" and p.t_enq is not None else ""]
+            t - p.t_enq if ev == "rx" and p.t_enq is not None else "",
+            cause_words(cause) if ev in ("err", "drop") else ""]
            for p in sorted(trace.packets.values(), key=lambda p: str(p.pkt)) for t, receiver, ev, cause in p.outcomes))
     table("fifo.csv", ["t", "link", "fifo_bytes"],
           ([t, link, size] for link, points in sorted(trace.fifo.items()) for t, size in points))
@@ -463,15 +465,17 @@ def _timeline_figure(plt, writer: _Writer, trace: Trace, flows: dict[tuple[str, 
     fig, axes = plt.subplots(len(chosen), 1, figsize=(width, 1.0 + 1.45 * len(chosen)), squeeze=False)
     aggregated, spans, shaded = [], {}, {}
     handles: dict[str, Any] = {}
+    ranks: dict[str, tuple] = {}  # the legend's order: sent, received, losses as the causes' table lists them
     for ax, flow in zip(axes[:, 0], chosen):
         packets = flows[flow]
         sent = [t for p in packets for t in p.t_tx]
         received = [t for p in packets for t, _, ev, _ in p.outcomes if ev == "rx"]
-        lost_by_cause: dict[str, list[float]] = defaultdict(list)
+        lost_by_cause: dict[str | None, list[float]] = defaultdict(list)
         for p in packets:
             for t, _, ev, cause in p.outcomes:
                 if ev in ("err", "drop"):
-                    lost_by_cause[cause or "?"].append(t)
+                    lost_by_cause[cause].append(t)
+        causes = sorted(lost_by_cause, key=legend_order)
         activity = sent + received + [t for times in lost_by_cause.values() for t in times] + \
             [p.t_enq for p in packets if p.t_enq is not None]
         low, high = _span(activity) if activity else (0.0, 1.0)
@@ -488,24 +492,28 @@ def _timeline_figure(plt, writer: _Writer, trace: Trace, flows: dict[tuple[str, 
                 return [c / bin_s for c in counts]
 
             peak = 0.0
-            for label, times, colour in [("sent /s", sent, "#555555"), ("received /s", received, "#2ca02c")] + \
-                    [(f"lost: {cause} /s", times, CAUSE_COLOURS.get(cause, OTHER_LOSS))
-                     for cause, times in sorted(lost_by_cause.items())]:
+            for label, times, colour, rank in [("sent /s", sent, "#555555", (0, 0)),
+                                               (f"{RECEIVED.words} /s", received, RECEIVED.colour, (0, 1))] + \
+                    [(f"lost: {cause_words(cause)} /s", lost_by_cause[cause], cause_colour(cause),
+                      (1, legend_order(cause))) for cause in causes]:
                 if times:
                     values = rate(times)
                     peak = max(peak, max(values))
                     handles[label] = ax.step(edges[:-1], values, where="post", color=colour, label=label)[0]
+                    ranks[label] = rank
             ax.set_ylim(0, peak * 1.45 or 1.0)
             ax.set_ylabel(f"per s ({bin_s:.3g} s bins)", fontsize="x-small")
         else:
             handles["sent"] = ax.scatter(sent, [2] * len(sent), marker="|", s=40, color="#555555", label="sent")
-            handles["received"] = ax.scatter(received, [1] * len(received), marker="|", s=40, color="#2ca02c",
-                                             label="received")
-            for cause, lost in sorted(lost_by_cause.items()):
-                handles[f"lost: {cause}"] = ax.scatter(lost, [0] * len(lost), marker="x", s=18,
-                                                       color=CAUSE_COLOURS.get(cause, OTHER_LOSS),
-                                                       label=f"lost: {cause}")
-            ax.set_yticks([0, 1, 2], ["lost", "rx", "tx"])
+            handles[RECEIVED.words] = ax.scatter(received, [1] * len(received), marker="|", s=40,
+                                                 color=RECEIVED.colour, label=RECEIVED.words)
+            ranks.update({"sent": (0, 0), RECEIVED.words: (0, 1)})
+            for cause in causes:
+                label = f"lost: {cause_words(cause)}"
+                handles[label] = ax.scatter(lost_by_cause[cause], [0] * len(lost_by_cause[cause]), marker="x", s=18,
+                                            color=cause_colour(cause), label=label)
+                ranks[label] = (1, legend_order(cause))
+            ax.set_yticks([0, 1, 2], ["lost", RECEIVED.words, "sent"])
             ax.set_ylim(-0.6, 3.3)
         periods = []
         for link in dict.fromkeys(flow):
@@ -526,7 +534,8 @@ def _timeline_figure(plt, writer: _Writer, trace: Trace, flows: dict[tuple[str, 
                 bbox={"facecolor": "white", "alpha": 0.8, "lw": 0, "pad": 1})
         ax.grid(axis="x", alpha=0.3)
     axes[-1, 0].set_xlabel("time (s)")
-    _legend(axes[0, 0], width, list(handles.values()), list(handles))
+    labels = sorted(handles, key=lambda label: ranks.get(label, (2,)))
+    _legend(axes[0, 0], width, [handles[label] for label in labels], labels)
     writer.inspect["timeline"] = {"aggregated": aggregated, "xlim": spans, "real_periods": shaded,
                                   "panels": [f"{a} → {b}" for a, b in chosen]}
     note = f"; counted per window for {', '.join(aggregated)}" if aggregated else ""
