@@ -193,6 +193,18 @@ def test_causes_read_the_same_in_the_figures_the_tables_and_the_web_view(tmp_pat
     assert not any(json.dumps(cause.words) in script for cause in CAUSES.values())
 
 
+def test_the_docs_table_of_causes_is_the_one_the_code_uses():
+    """docs/reports.md shows the channel's causes in words: the rows are checked against the table, so
+    the page cannot drift from it."""
+    from hilgate.report.causes import RECEIVED, words
+
+    page = open(os.path.join(REPO, "docs", "reports.md"), encoding="utf-8").read()
+    rows = re.findall(r"^\| `(\w+)` \| ([^|]+?) \|$", page, re.M)
+    assert len(rows) >= 8 and {code for code, _ in rows} >= {"prop", "col", "mult", "range", "fifo"}
+    assert [(code, text) for code, text in rows if text != words(code)] == []
+    assert f'is "{RECEIVED.words}"' in page
+
+
 # -- captions, resolution, fonts --------------------------------------------------------------------
 
 
