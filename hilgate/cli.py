@@ -565,7 +565,7 @@ def _emulated_link_exists(scene_path: str, link: str, overrides: list[str]) -> N
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from .report.figures import report
+    from .report.figures import DPI, report
     from .report.tracedata import pick_run, trace_runs
     from .report.tracefile import TraceError
 
@@ -577,13 +577,14 @@ def cmd_report(args: argparse.Namespace) -> int:
             print(f"{args.trace} holds {len(runs)} runs of the daemon; showing {which}: run {run.id} started "
                   f"{run.start} (scene {run.scene}); choose another with --run ID or --run N", file=sys.stderr)
         formats = tuple(dict.fromkeys(["png", *(args.formats or [])]))
+        dpi = DPI if args.dpi is None else args.dpi
         written = report(args.trace, args.summaries, args.out, args.vehicles, args.csv, args.title,
                          tuple(args.window) if args.window else None, run if len(runs) > 1 else None, formats,
-                         args.width)
+                         args.width, dpi, args.captions)
         if args.water:
             from .waterfig import water_figures
 
-            drawn = water_figures(args.trace, args.water, args.out, formats)
+            drawn = water_figures(args.trace, args.water, args.out, formats, dpi)
             if not drawn:
                 print(f"{args.water}: no channel with water, or no simulated sender with a pose in the trace: "
                       f"no field drawn", file=sys.stderr)
@@ -835,6 +836,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--width", type=float, metavar="INCHES",
                    help="draw the figures this wide, e.g. 3.5 for one column of a paper (default 9, the bars of "
                         "many flows wider; text keeps its size, tick labels are thinned where they would overlap)")
+    p.add_argument("--dpi", type=float, metavar="N",
+                   help="the PNGs' resolution in dots per inch (default 300, what journals ask; 600 or more for "
+                        "line art); SVG and PDF are vector")
+    p.add_argument("--captions", action="store_true",
+                   help="also draw each figure's caption under it (it is always in the file's metadata and "
+                        "index.html; a journal sets captions itself)")
     p.add_argument("--run", metavar="ID|N", help="a trace the daemon appended to across restarts holds several runs: "
                                                  "this one (its id, or 1 for the first, -1 the last; default the last)")
     p.add_argument("--water", metavar="SCENE", help="also draw each channel with water's BELLHOP transmission loss "
