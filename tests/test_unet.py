@@ -300,7 +300,7 @@ def test_hilgates_driver_comes_in_by_a_reload_meets_the_emulator_and_loses_nothi
     events = daemon.trace_events()
     configured = [e for e in events if e["ev"] == "modem_config" and e.get("link") == ap]
     assert len(configured) >= 2 and all(e["value"] == e["asked"] == 1 for e in configured)
-    assert not [e for e in events if e["ev"] == "drop" and e.get("link") == ap]
+    assert not [e for e in events if e["ev"] == "drop" and e.get("link") == ap], [(e.get("cause"), e.get("src"), e.get("size")) for e in events if e["ev"] == "drop"]
 
 
 # -- what the door refuses -----------------------------------------------------------------------------------------
