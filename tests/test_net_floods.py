@@ -5,6 +5,8 @@ B's certificate.
 - A flood of 60 kB garbage transmissions under B's name: the daemon that receives it keeps its memory
   within a bound, answers STATUS all along, counts (and traces) what it could not hold, and still hears
   B's honest frames afterwards.
+- One forged message (a session a nanosecond newer than B's, an epoch of 2⁶², a number far ahead in B's
+  own session): B's later frames are still heard, and so are those of a B restarted after it.
 
 Nothing is timed: every wait is the kit's hang guard.
 """
@@ -23,7 +25,8 @@ from hilgate.daemon import netcodec  # noqa: E402
 
 zenoh = pytest.importorskip("zenoh")
 
-from test_netauth import Lab, attacker, creds, lab, peers, rss_mb  # noqa: E402, F401 (creds, lab: fixtures)
+from test_netauth import (Lab, attacker, creds, lab, peers, rss_mb,  # noqa: E402, F401 (creds, lab: fixtures)
+                          transmission)
 
 FLOOD_BOUND_MB = 64.0
 """What a flood of transmissions may add to the receiving daemon's memory: Zenoh's queue for the loop and
@@ -115,3 +118,106 @@ def test_a_flood_of_transmissions_with_a_hosts_key_costs_bounded_memory_and_stat
     assert sum(e["n"] for e in full) == counters.get("inbox_full", 0)  # every one traced, with its host
     print(f"transmission flood: {sent[0]} messages of 60 kB; daemon RSS {baseline:.0f} MB -> peak {peak[0]:.0f} MB; "
           f"{answers.count(False)} STATUS answered during it; counters {counters}")
+
+
+# -- one forged message ------------------------------------------------------------------------------------
+
+
+def heard_from_b(lab, la, lb, text: bytes) -> None:
+    """B's application sends ``text``; A's receives it, or A counts it a replay (then it fails at once)."""
+    before = lab.counters().get("replay", 0)
+    lb.send(text, dst=1)
+    got = []
+
+    def heard():
+        message = la.recv(timeout=0.2)
+        if message is not None:
+            got.append(message.data)
+        return text in got or lab.counters().get("replay", 0) > before
+
+    wait_until(heard, what=f"{text!r} at A")
+    assert text in got, f"{text!r} refused as a replay: {lab.counters()}"
+
+
+def capture_b(lab):
+    """A session with B's key that hears B's transmissions: (session, decoded transmissions heard)."""
+    from hilgate.daemon.netcodec import decode_transmission
+
+    listener = attacker(lab.ports[0], os.path.join(lab.creds, "hosts", "B"))
+    heard: list = []
+    wait_until(lambda: peers(listener), what="the listener to connect")
+    listener.declare_subscriber(f"{lab.prefix}/tx/B/**",
+                                lambda s: heard.append(decode_transmission(s.payload.to_bytes())))
+    return listener, heard
+
+
+def forge(lab, la, thief, blob: bytes) -> str:
+    """The thief puts ``blob`` on B's transmission key; once A delivered it (a stolen key forges:
+    ``"heard"``) or counted it (``"counted"``)."""
+    from hilgate.daemon.netcodec import decode_transmission
+
+    text = bytes(decode_transmission(blob).frame.app_frame.payload)
+    counted = sum(lab.counters().values())
+    thief.put(f"{lab.prefix}/tx/B/ac", blob)
+    heard = []
+
+    def taken():
+        message = la.recv(timeout=0.2)
+        heard.append(message is not None and message.data == text)
+        return any(heard) or sum(lab.counters().values()) > counted
+
+    wait_until(taken, what=f"the forged {text!r} heard or counted")
+    return "heard" if any(heard) else "counted"
+
+
+@pytest.mark.parametrize("forgery", ["session 1 ns newer", "epoch 2**62", "number far ahead"])
+def test_one_forged_message_with_a_hosts_key_does_not_silence_it(lab, forgery):
+    """B is heard; the thief puts one message under B's name; B's next frames are heard all the same."""
+    from hilgate.daemon.netcodec import ReplayWindow
+
+    thief = attacker(lab.ports[0], os.path.join(lab.creds, "hosts", "B"))
+    listener, heard = capture_b(lab)
+    try:
+        wait_until(lambda: peers(thief), what="the thief to connect")
+        with lab.app(lab.a) as la, Link.open(lab.b, runtime_dir=lab.hosts["B"].daemon.runtime) as lb:
+            heard_from_b(lab, la, lb, b"before")
+            wait_until(lambda: heard, what="B's transmission overheard")
+            genuine = heard[-1]
+            if forgery == "session 1 ns newer":
+                forged = transmission("B", lab.b, lab.a, b"forged", number=1, session="f0f0",
+                                      epoch_ns=genuine.epoch_ns + 1)
+            elif forgery == "epoch 2**62":
+                forged = transmission("B", lab.b, lab.a, b"forged", number=1, session="f0f0", epoch_ns=2 ** 62)
+            else:
+                forged = transmission("B", lab.b, lab.a, b"forged", number=genuine.number + ReplayWindow.MAX_JUMP - 1,
+                                      session=genuine.session, epoch_ns=genuine.epoch_ns)
+            forge(lab, la, thief, forged)
+            for i in range(3):
+                heard_from_b(lab, la, lb, b"after %d" % i)
+    finally:
+        thief.close()
+        listener.close()
+    if forgery == "epoch 2**62":
+        assert lab.counters().get("out_of_time") == 1  # an epoch no host can have: refused, and nothing moved
+
+
+def test_a_restarted_host_is_heard_again_whatever_was_forged_before(lab):
+    """With B's key, a session whose epoch is 30 s ahead (later than B's next start) and one of 2⁶²; B
+    is restarted after them and is heard."""
+    thief = attacker(lab.ports[0], os.path.join(lab.creds, "hosts", "B"))
+    try:
+        wait_until(lambda: peers(thief), what="the thief to connect")
+        with lab.app(lab.a) as la:
+            with Link.open(lab.b, runtime_dir=lab.hosts["B"].daemon.runtime) as lb:
+                heard_from_b(lab, la, lb, b"first run")
+            forge(lab, la, thief, transmission("B", lab.b, lab.a, b"forged ahead", number=5, session="a0a0",
+                                               epoch_ns=time.time_ns() + 30_000_000_000))
+            forge(lab, la, thief, transmission("B", lab.b, lab.a, b"forged far", number=5, session="b0b0",
+                                               epoch_ns=2 ** 62))
+            lab.hosts["B"].daemon.close()
+            B = lab.start_b(where="B-again")
+            with Link.open(lab.b, runtime_dir=B.daemon.runtime) as lb:
+                for i in range(3):
+                    heard_from_b(lab, la, lb, b"second run %d" % i)
+    finally:
+        thief.close()

@@ -29,7 +29,8 @@ from the lab's credentials, :mod:`hilgate.gli.zenoh_auth`) lets each host publis
 tokens only under its own name.  What a key's host says is then checked against the scene (a
 transmission from a link the scene gives another host, a token of a link that is not its own: ignored,
 counted ``foreign_sender``), against the message (a transmission whose host is not its key's:
-``forged``), and against what was heard before (:class:`~.netcodec.ReplayWindow`: ``replay``).
+``forged``; a time or an epoch no host can have: ``out_of_time``), and last, only once the message is
+good in every other way, against what was heard before (:class:`~.netcodec.ReplayWindow`: ``replay``).
 
 Key layout (under ``<prefix>``, ``hilgate`` unless the scene's ``zenoh.prefix`` says otherwise):
 ``tx/<host>/<channel>`` transmissions, ``pose/<host>/<vehicle>`` poses, ``alive/<host>/host/<zid>`` and
@@ -375,31 +376,36 @@ class Network:
             if message.host != self.host:
                 self.counters["foreign_sender"] += 1
             return
-        verdict = view.window.admit(message.session, message.epoch_ns, message.number)
-        if isinstance(verdict, str):
-            self.counters[verdict] += 1
-            self.recorder.event({"t": round(self.scheduler.now(), 9), "ev": "drop", "link": "*",
-                                 "src": message.host, "cause": verdict})
-            return
-        if verdict:
-            view.gaps += verdict
-            self.recorder.event({"t": round(self.scheduler.now(), 9), "ev": "drop", "link": "*",
-                                 "src": message.host, "cause": "net_gap", "n": verdict})
         frame = message.frame
         world = self.router.world
         modem = world.modems.get(frame.src_link)
         if modem is None or modem.radio.listens or self.remote_links.get(frame.src_link) != message.host:
             self.counters["foreign_sender"] += 1  # not a link the scene gives that host: ignored
             return
+        now = self.scheduler.now()
+        t = to_local(message.t, message.epoch_ns, self.epoch_ns)
+        # A clock that far off (or a forged time) would schedule nonsense; and no host started later than
+        # now (its epoch, the UNIX clock at its model time 0, is its start: 2**62 is no start, however its
+        # t makes up for it)
+        if abs(now - t) > TIME_WINDOW_S or message.epoch_ns - self.epoch_ns > (now + TIME_WINDOW_S) * 1e9:
+            self.counters["out_of_time"] += 1
+            return
+        # Only now, the message known good in every other way, may it move the replay window (a message
+        # refused above moved it before issue 37: one forged epoch made the host's every frame a replay)
+        verdict = view.window.admit(message.session, message.epoch_ns, message.number, message.session in view.zids)
+        if isinstance(verdict, str):
+            self.counters[verdict] += 1
+            self.recorder.event({"t": round(now, 9), "ev": "drop", "link": "*", "src": message.host,
+                                 "cause": verdict})
+            return
+        if verdict:
+            view.gaps += verdict
+            self.recorder.event({"t": round(now, 9), "ev": "drop", "link": "*", "src": message.host,
+                                 "cause": "net_gap", "n": verdict})
         if message.ref_key is not None:
             mine = self.sent.get(message.ref_key) if message.ref_key[0] not in self.remote_links else None
             frame.ref = mine or self.heard.get(message.ref_key) or frame.ref
         self._remember(self.heard, (frame.src_link, frame.id), frame)
-        now = self.scheduler.now()
-        t = to_local(message.t, message.epoch_ns, self.epoch_ns)
-        if abs(now - t) > TIME_WINDOW_S:  # a clock that far off (or a forged time) would schedule nonsense
-            self.counters["out_of_time"] += 1
-            return
         view.heard += 1
         delay = now - t
         view.delay_sum += delay
