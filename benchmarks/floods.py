@@ -77,7 +77,9 @@ def scene(links: str, zenoh: str = "", extra: str = "") -> str:
             f"links:\n{links}trace: {{poses_s: 0}}\n{extra}")
 
 
-def link_line(name: str, vehicle: str, address: int, host: str = "", gli: str = "") -> str:
+def link_line(name: str, vehicle: str, address: int, host: str = "", gli: str = ", gli: [socket]") -> str:
+    """A link of the cases' scenes: no POSIX queues unless asked (no dccomms application here, and the
+    user's queue budget is every run's on the machine)."""
     where = f", host: {host}" if host else ""
     return (f"  {name}: {{vehicle: {vehicle}, address: {address}, bitrate_bps: {BITRATE}, "
             f"addressing: strict{where}{gli}}}\n")
@@ -292,7 +294,7 @@ def case_ros2(args) -> None:
 
     domain, ns = random.SystemRandom().randrange(0, 233), f"/b{uuid.uuid4().hex[:8]}"
     a, b = f"fr{os.getpid()}a", f"fr{os.getpid()}b"
-    daemon = Daemon(scene(link_line(a, "va", 1, gli=", gli: [ros2]") + link_line(b, "vb", 2, gli=", gli: [socket]"),
+    daemon = Daemon(scene(link_line(a, "va", 1, gli=", gli: [ros2]") + link_line(b, "vb", 2),
                           extra=f"ros2: {{domain_id: {domain}, namespace: {ns}}}\n"), (a, b), name="ros2")
     node = Participant(domain)
     Frame = message_class("hilgate_msgs/msg/Frame")
@@ -327,8 +329,7 @@ def case_ros2(args) -> None:
 
 def case_socket(args) -> None:
     a, b = f"fs{os.getpid()}a", f"fs{os.getpid()}b"
-    daemon = Daemon(scene(link_line(a, "va", 1, gli=", gli: [socket]") + link_line(b, "vb", 2, gli=", gli: [socket]")),
-                    (a, b), name="socket")
+    daemon = Daemon(scene(link_line(a, "va", 1) + link_line(b, "vb", 2)), (a, b), name="socket")
     try:
         receiver = Receiver(b, daemon.runtime)
         honest = Link.open(a, runtime_dir=daemon.runtime)
