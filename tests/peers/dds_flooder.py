@@ -3,7 +3,8 @@
 ``--writers`` writers of one link's ``send`` topic, each writing frames as fast as it can or at ``--rate``
 frames a second in all, until its standard input closes.
 
-Prints ``matched`` once every writer sees hilgate's reader, then nothing; the frames it sends are
+Prints ``matched`` once every writer sees hilgate's reader (``no reader`` and exits 1 if none comes
+within the tests' hang guard), then nothing; the frames it sends are
 ``dst`` 2 and ``F`` bytes, so a test tells them from an honest node's.
 
     dds_flooder.py DOMAIN TOPIC [--writers N] [--rate HZ] [--size B]
@@ -36,7 +37,11 @@ def main() -> None:
     topic = node._topic(args.topic, "hilgate_msgs/msg/Frame")
     writers = [DataWriter(node.participant, topic, qos=qos("hilgate_msgs/msg/Frame", "reliable", depth=100))
                for _ in range(args.writers)]
+    deadline = time.monotonic() + 90.0  # (the tests' hang guard: no reader, no flood)
     while not all(w.get_publication_matched_status().current_count for w in writers):
+        if time.monotonic() > deadline:
+            print("no reader", flush=True)
+            os._exit(1)
         time.sleep(0.02)
     print("matched", flush=True)
     stop = threading.Event()
