@@ -53,6 +53,18 @@ def test_the_modem_takes_commands_with_or_without_checksum_and_payloads_by_their
     assert ModemCodec.refusal(BadChecksum()) == b"wr!*1e\n" and ModemCodec.refusal(Malformed("x")).startswith(b"wr?*")
 
 
+def test_a_payload_that_ends_in_cr_is_the_payload_not_a_line_end():
+    """``wlmodem`` sends ``wcq,8,<8 bytes>`` and LF, no checksum: a payload whose 8th byte is CR ends in CR LF,
+    and that CR is the payload's (it was taken for a CR LF line end: 7 bytes, ``wrq,n``, and the datagram
+    lost, about one random WlUDPSocket packet in 256)."""
+    modem = ModemCodec()
+    assert modem.receive_data(b"wcq,8,1234567\r\n") == [Command("q", ("8",), b"1234567\r")]
+    assert modem.receive_data(b"wcq,8,\r\r\r\r\r\r\r\r\r\n") == [Command("q", ("8",), b"\r" * 8)]
+    assert modem.receive_data(b"wcv\r\n") == [Command("v")]  # a CR after the sentence is still its line end
+    host = HostCodec(with_checksum=False)
+    assert host.receive_data(b"wrp,8,1234567\r\r\n") == [Packet(b"1234567\r")]  # CR LF after the payload
+
+
 def test_the_host_reads_what_wlmodem_reads():
     host = HostCodec()
     assert host.receive_data(ModemCodec.packet(b"\n*\r\n\x00abc") + b"wr?\nwr!\n" + ModemCodec.response("d", "y", "3", "1", "0.0")) == [
@@ -140,6 +152,8 @@ def test_wlmodem_connects_configures_queues_flushes_and_receives_between_two_emu
     assert a.cmd_queue_packet(b"HelloSea") and a.cmd_queue_packet(b"Hi*there")  # '*' as 6th byte: wlmodem's quirk
     assert b.get_data_packet(timeout=30) == b"HelloSea"
     assert b.get_data_packet(timeout=30) == b"Hi*there"
+    assert a.cmd_queue_packet(b"1234567\r")  # its CR is the payload's, not a line end (was wrq,n)
+    assert b.get_data_packet(timeout=30) == b"1234567\r"
     assert b.cmd_queue_packet(b"HelloTop")
     assert a.get_data_packet(timeout=30) == b"HelloTop"
     for _ in range(3):
