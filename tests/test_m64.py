@@ -201,6 +201,49 @@ def test_a_wlmodem_datagram_crosses_two_emulated_m64s_both_ways(tmp_path, daemon
             s.stop()
 
 
+def test_a_modem_whose_partner_falls_silent_misses_several_packets_and_loses_sync(tmp_path, daemon_of):
+    """Water Linked: B "will go back to listen mode if several consecutive packets from the modem with role A
+    cannot be decoded (i.e. signal is lost)", and an undecodable packet counts in ``pkt_loss_cnt``.  When A
+    moves to another channel nothing more arrives at B: B misses a packet a slot (counted, traced ``missed``)
+    until it has missed three, then listens (link ``n``) and counts no more.  B follows A there, the pair is
+    in sync again, and B leaves: A, which hears no answers any more, the same.  (Before, nothing that never
+    arrived was counted: the figures froze and the link flag only said that nothing came lately.)"""
+    ea, eb = unique("ma"), unique("mb")
+    daemon = daemon_of(scene(tmp_path, ea, eb), [ea, eb], "--speed", str(SPEED))
+    a, b = open_modems(tmp_path / "a", tmp_path / "b")
+
+    def in_sync(modem):
+        return wait_until(lambda: (d := modem.cmd_get_diagnostic()) and d["link_up"] and d or None)
+
+    def moved(link, band):
+        t = wait_until(lambda: next((e["t"] for e in daemon.trace_so_far()[::-1] if e["ev"] == "band"
+                                     and e["link"] == link and e["band_khz"] == band), None))
+        wait_until(lambda: any(e["t"] > t + 8 for e in daemon.trace_so_far()) or None)  # the model's 8 s
+        return t
+
+    assert a.cmd_configure("a", 3) and b.cmd_configure("b", 3)
+    assert in_sync(b)["pkt_loss_cnt"] == 0 and in_sync(a)["pkt_loss_cnt"] == 0
+    assert a.cmd_configure("a", 6)  # B is left alone on channel 3 (A starts a new pairing: it counts nothing)
+    a_moved = moved(ea, [187.0, 218.0])
+    silent_b = b.cmd_get_diagnostic()
+    assert not silent_b["link_up"] and silent_b["pkt_loss_cnt"] == 3
+    assert b.cmd_configure("b", 6)  # B follows: in sync again
+    assert in_sync(a)["pkt_loss_cnt"] == 0 and in_sync(b)
+    assert b.cmd_configure("b", 2)  # and leaves: A is left alone
+    b_moved = moved(eb, [62.25, 93.75])
+    silent_a = a.cmd_get_diagnostic()
+    close_modems(a, b)
+    daemon.stop()
+    assert not silent_a["link_up"] and silent_a["pkt_loss_cnt"] == 3
+    events = daemon.trace_events()
+    for link, since in ((eb, a_moved), (ea, b_moved)):
+        missed = [e for e in events if e.get("link") == link and e["ev"] == "err" and e["cause"] == "missed"]
+        assert len(missed) == 3 and [e.get("sync") for e in missed] == [None, None, "lost"]
+        times = [e["t"] for e in missed]
+        assert [round(t2 - t1, 9) for t1, t2 in zip(times, times[1:])] == [1.0, 1.0]  # one a slot
+        assert times[0] > since
+
+
 def test_packets_the_model_loses_show_in_wcd_and_in_the_trace_and_channels_do_not_meet(tmp_path, daemon_of):
     ea, eb = unique("ma"), unique("mb")
     # B's receiver loses half of what it hears (its error model); A hears B perfectly
@@ -221,8 +264,13 @@ def test_packets_the_model_loses_show_in_wcd_and_in_the_trace_and_channels_do_no
     heard = [e for e in events if e.get("link") == eb and e.get("src") == ea and e["ev"] in ("rx", "err")]
     lost = [e for e in heard if e["ev"] == "err"]
     assert lost and {e["cause"] for e in lost} <= {"prop", "col"}
-    # B counts every packet from its A that reached it, good or lost: the model's own lines
-    assert final["pkt_loss_cnt"] == len(lost)
+    # B counts every packet from its A that reached it, good or lost: the model's own lines; and, in sync
+    # when A moved, those it then missed until three in a row were undecodable (fewer when the last ones
+    # before the move were lost already; none when it was listening)
+    missed = [e for e in events if e.get("link") == eb and e["ev"] == "err" and e["cause"] == "missed"]
+    assert len(missed) <= 3 and all(e["t"] > moved for e in missed)
+    assert [e.get("sync") for e in missed[-1:]] in ([], ["lost"])
+    assert final["pkt_loss_cnt"] == len(lost) + len(missed)
     assert final["pkt_cnt"] == len(heard) - len(lost)
     assert not [e for e in heard if e["t"] > moved + 2.0]  # nothing from channel 5 reached channel 3
 
