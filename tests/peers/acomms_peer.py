@@ -57,6 +57,19 @@ def main() -> None:
         except Empty:
             pass
         say(event="acks", count=acks.qsize())
+    elif scenario == "wait":
+        # Micromodem.wait_for_data_packet: $CARXP (a packet detected), then the frames, then its $CACST
+        # (at rate 0, fsk=True: the cycle init's $CACST first); every sentence's type and the raw $CACST
+        seen = {"a": [], "b": []}
+        a.nmea_listeners.append(lambda msg: seen["a"].append(msg["type"]))
+        b.nmea_listeners.append(lambda msg: seen["b"].append(msg["type"]))
+        csts = []
+        b.nmea_listeners.append(lambda msg: msg["type"] == "CACST" and csts.append(msg["raw"].strip()))
+        for rate, data, fsk in ((1, b"waited for, at rate one; " * 7, False), (0, b"an FSK packet, waited for", True)):
+            a.send_packet_data(b.id, data, rate_num=rate)
+            got = b.wait_for_data_packet(fsk=fsk, timeout=60)
+            say(event="waited", rate=rate, data=None if got is None else bytes(got).hex())
+        say(event="sentences", a=seen["a"], b=seen["b"], cst=csts)
     say(event="done", a=str(a.state), b=str(b.state))
 
 
