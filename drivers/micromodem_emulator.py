@@ -32,9 +32,16 @@
   ``$CAMPR,dest,src,<owtt>`` back at the sender with the one-way travel time the model measured from
   the round trip (the geometry's, as ``AT?T`` is for the EvoLogics emulator), in seconds.
 
+- **The rest of what a host library asks.**  The modem's clock (``$CCTMS``/``$CATMS``, ``$CCTMQ``/``$CATMQ``,
+  the Micro-Modem 1's ``$CCCLK``/``$CCCLQ`` → ``$CACLK``; the times the modem prints follow it), user
+  minipackets (``$CCMUC`` → ``$CAMUC``, ``$CAMUA`` at the far modem) and the local hardware lines
+  (``$CCMEC`` → ``$CAMEC``, no line modelled).  Received minipackets (a ping, its reply, a user
+  minipacket) have their ``$CACST`` too.
+
 Not emulated: uplink requests (a ``$CCCYC`` whose source is another modem: ``$CAERR``), FDP/JANUS
-packets (``$CCTFP``, ``$CCTDP``, ``$CCTJN``), navigation pings, the modem's clock, hibernation, ``$CAXST``;
-they answer ``$CAERR``.  Micro-Modem address 0 is broadcast (hilgate's 255 on the channel).
+packets (``$CCTFP``, ``$CCTDP``, ``$CCTJN``, ``$CCCMD``), navigation pings (``$CCPDT``, ``$CCPNT``),
+hibernation, sweeps, ``$CAXST``; they answer ``$CAERR`` (docs/modems.md lists each).  Micro-Modem address 0
+is broadcast (hilgate's 255 on the channel).
 """
 
 from __future__ import annotations
@@ -80,6 +87,16 @@ class _Cycle:
     timer: Any = None
 
 
+def _iso_time(text: str) -> datetime.datetime | None:
+    """An ISO 8601 time as ``$CCTMS`` carries it (``2025-06-06T23:01:23Z``, fractions allowed), in UTC;
+    ``acomms`` writes ``…ZZ`` (its time already ends in Z before it adds one), which the modem takes."""
+    try:
+        when = datetime.datetime.fromisoformat(text.strip().rstrip("Zz") + "+00:00")
+    except ValueError:
+        return None
+    return when if when.tzinfo is not None else when.replace(tzinfo=datetime.timezone.utc)
+
+
 class MicromodemEmulator(EmulatedModem):
     """A WHOI Micro-Modem (the module's docstring)."""
 
@@ -92,6 +109,7 @@ class MicromodemEmulator(EmulatedModem):
         self.cycle: _Cycle | None = None
         self.pings: set[int] = set()  # ids of ping frames awaiting their reply
         self.statistics = 0  # $CACST printed (version 8's sequence number)
+        self.clock_offset = 0.0  # what $CCTMS / $CCCLK moved the modem's clock by (s)
         self._serve_hosts()
 
     def close(self) -> None:
@@ -106,7 +124,11 @@ class MicromodemEmulator(EmulatedModem):
         return hhmmss(self._epoch() + self.scheduler.now())
 
     def _epoch(self) -> float:
-        return self.scheduler.epoch_ns / 1e9
+        """The modem's clock at model time 0 (UNIX seconds): the daemon's, moved by ``$CCTMS``/``$CCCLK``."""
+        return self.scheduler.epoch_ns / 1e9 + self.clock_offset
+
+    def _now(self) -> datetime.datetime:
+        return datetime.datetime.fromtimestamp(self._epoch() + self.scheduler.now(), datetime.timezone.utc)
 
     def _error(self, module: str, number: int, text: str) -> None:
         self._say("CAERR", self._clock(), module, number, text)
@@ -277,8 +299,72 @@ class MicromodemEmulator(EmulatedModem):
             self.pings.add(id(frame))
         self._send(frame, None)
 
+    def _set_time(self, s: Sentence) -> None:
+        """``$CCTMS,<ISO 8601 time>,<mode>``: the modem's clock reads that time now; ``$CATMS,0,<time>``."""
+        when = _iso_time(s.field(0) or "")
+        if when is None:
+            self._error("CCTMS", 1, "Bad time")
+            return
+        self._move_clock(when)
+        self._say("CATMS", 0, self._iso(self._now()))
+
+    def _query_time(self, s: Sentence) -> None:
+        """``$CCTMQ`` → ``$CATMQ,<ISO 8601 time>,<clock source>,<PPS source>`` (the emulator's own clock, no PPS)."""
+        self._say("CATMQ", self._iso(self._now()), "RTC", "NONE")
+
+    def _set_clock(self, s: Sentence) -> None:
+        """``$CCCLK,yyyy,MM,dd,HH,mm,ss`` (the Micro-Modem 1's clock command) → ``$CACLK`` with the time set."""
+        numbers = [s.number(i) for i in range(6)]
+        try:
+            when = datetime.datetime(*numbers, tzinfo=datetime.timezone.utc)  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            self._error("CCCLK", 1, "Bad time")
+            return
+        self._move_clock(when)
+        self._clock_query(s)
+
+    def _clock_query(self, s: Sentence) -> None:
+        """``$CCCLQ`` → ``$CACLK,yyyy,MM,dd,HH,mm,ss`` (``libumutil.h``'s answer to the clock query)."""
+        now = self._now()
+        self._say("CACLK", now.year, now.month, now.day, now.hour, now.minute, now.second)
+
+    def _move_clock(self, when: datetime.datetime) -> None:
+        self.clock_offset += when.timestamp() - (self._epoch() + self.scheduler.now())
+
+    @staticmethod
+    def _iso(when: datetime.datetime) -> str:
+        return when.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+
+    def _hardware_line(self, s: Sentence) -> None:
+        """``$CCMEC,src,dest,line,mode,arg``: this modem's own lines only; echoed ``$CAMEC`` (no line is
+        modelled: the echo is all a host sees of it)."""
+        numbers = [s.number(i) for i in range(5)]
+        if None in numbers or numbers[1] != self.config["SRC"]:
+            self._error("CCMEC", 1, "Only the local modem's lines are emulated")
+            return
+        self._say("CAMEC", *numbers)
+
+    def _minipacket(self, s: Sentence) -> None:
+        """``$CCMUC,src,dest,<13 bits in hex>``: a user minipacket (FSK, :data:`MINIPACKET_S` on the
+        channel), echoed ``$CAMUC``; the far modem prints ``$CAMUA,src,dest,<hex>``."""
+        src, dest, data = s.number(0), s.number(1), (s.field(2) or "").upper()
+        try:
+            value = int(data, 16)
+        except ValueError:
+            value = -1
+        if src is None or dest is None or dest > 254 or not 0 <= value <= 0x1FFF or len(data) > 4:
+            self._error("CCMUC", 1, "Bad minipacket")
+            return
+        self._say("CAMUC", src, dest, data)
+        frame = AppFrame(value.to_bytes(2, "big"), b"", Raw(), 0, self.port.address, self._dst(dest),
+                         self.scheduler.now())
+        frame.meta = {"mm": "mini", "src": self.config["SRC"], "dest": dest, "data": data}
+        frame.airtime_s = MINIPACKET_S
+        self._send(frame, None)
+
     COMMANDS = {"CCCFQ": _query, "CCCFG": _configure, "CCALQ": _api_level, "CCCYC": _cycle_init, "CCTXD": _data,
-                "CCMPC": _ping}
+                "CCMPC": _ping, "CCTMS": _set_time, "CCTMQ": _query_time, "CCCLK": _set_clock, "CCCLQ": _clock_query,
+                "CCMEC": _hardware_line, "CCMUC": _minipacket}
 
     @staticmethod
     def _dst(dest: int) -> int:
@@ -301,6 +387,9 @@ class MicromodemEmulator(EmulatedModem):
         if delivered and tau is not None:
             meta = frame.meta or {}
             self._say("CAMPR", meta["dest"], meta["src"], f"{tau:.4f}")
+            # the reply is a minipacket this modem received: its statistics (from the replying modem)
+            self._statistics({"src": meta["dest"], "dest": meta["src"]}, self.scheduler.now(), bad=False,
+                             minipacket=True)
 
     def phy(self, event: PhyEvent) -> None:
         frame = event.frame
@@ -350,6 +439,10 @@ class MicromodemEmulator(EmulatedModem):
             return TAKEN
         if kind == "ping":
             self._say("CAMPA", meta["src"], meta["dest"])
+            self._statistics(meta, t, bad=False, minipacket=True)
+        elif kind == "mini":
+            self._say("CAMUA", meta["src"], meta["dest"], meta["data"])
+            self._statistics(meta, t, bad=False, minipacket=True)
         elif kind == "ci":  # rate 0's cycle init, an FSK minipacket of its own
             self._say("CACYC", 0, meta["src"], meta["dest"], 0, int(meta.get("ack", False)), meta.get("count", 1))
             self._statistics(meta, t, bad=False, minipacket=True)

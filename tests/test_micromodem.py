@@ -264,3 +264,23 @@ def test_hilgate_drivers_carry_frames_application_to_application_through_emulate
     assert losses == [(da, "size")]  # the 200-byte frame, refused when the application sent it
 
 
+
+
+def test_every_other_acomms_call_a_modem_answers(tmp_path, daemon_of):
+    """API level, configuration (all, set, one), the modem's clock (``set_time``, ``get_time_info``), a hardware
+    line, a user minipacket, a ping with its statistics and a test packet: each answered as a modem does
+    (before, the clock, the minipacket and the line were ``$CAERR``: ``change_gpio`` raised a TypeError)."""
+    ea, eb = unique("ma"), unique("mb")
+    daemon_of(scene(tmp_path, ea, eb), [ea, eb], "--speed", str(SPEED))
+    results = {r["event"]: r for r in run_peer(tmp_path, "calls")}
+    assert results["api"]["level"] == 11
+    assert {"SRC", "RXP", "TXP", "CST", "DTO"} <= set(results["config"]["all"])
+    assert results["config"]["set"] == ["1", "RXP"] and results["config"]["src"] == {"SRC": "1"}
+    time_ = results["time"]
+    assert time_["set"] == "2031-05-04T03:02:01+00:00" and time_["timed_out"] == "0"
+    assert 0 <= time_["ahead_s"] < 30 and (time_["clock"], time_["pps"]) == ("RTC", "NONE")  # (the host's seconds)
+    assert results["gpio"]["value"] == 1
+    assert results["minipacket"]["data"] == "1ABC"
+    assert results["ping"] == {"event": "ping", "owtt": 0.1, "cst": {"mode": 0, "src": 1, "dest": 2, "packet_type": 2}}
+    assert results["test_packet"]["got"] == results["test_packet"]["sent"] and len(results["test_packet"]["got"]) == 2
+    assert results["done"] == {"event": "done", "a": "Idle", "b": "Idle"}

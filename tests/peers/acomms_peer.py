@@ -7,6 +7,7 @@ process's end ends it.  Every wait is a hang guard: it returns as soon as the mo
 
 import json
 import sys
+from datetime import datetime, timezone
 from queue import Empty, Queue
 
 from acomms.micromodem import Micromodem
@@ -70,6 +71,26 @@ def main() -> None:
             got = b.wait_for_data_packet(fsk=fsk, timeout=60)
             say(event="waited", rate=rate, data=None if got is None else bytes(got).hex())
         say(event="sentences", a=seen["a"], b=seen["b"], cst=csts)
+    elif scenario == "calls":
+        # the rest of Micromodem's public calls that a modem answers, one by one
+        say(event="api", level=a.query_nmea_api_level())
+        a.query_modem_info()
+        say(event="config", all=sorted(a.get_config("ALL") or {}), set=sorted(a.set_config("RXP", 1) or ()),
+            src=a.get_config("SRC"))
+        when = datetime(2031, 5, 4, 3, 2, 1, tzinfo=timezone.utc)
+        set_reply = a.set_time(when)
+        now = a.get_time_info(timeout=5)
+        say(event="time", set=set_reply.time.isoformat(), timed_out=set_reply.timed_out,
+            ahead_s=(now[0] - when).total_seconds(), clock=now[1], pps=now[2])
+        say(event="gpio", value=a.change_gpio(1, 1))
+        a.send_minipacket(b.id, "1ABC")
+        say(event="minipacket", data=b.wait_for_minipacket(timeout=60))
+        b.send_ping(a.id)
+        owtt, cst = b.wait_for_ping_reply(a.id, timeout=60, include_cst=True)
+        say(event="ping", owtt=owtt, cst=None if cst is None else {k: cst[k] for k in ("mode", "src", "dest", "packet_type")})
+        frames = a.send_test_packet(b.id, rate_num=1, num_frames=2)
+        packet = packets.get(timeout=60)
+        say(event="test_packet", sent=[bytes(f.data).hex() for f in frames], got=frames_of(packet))
     say(event="done", a=str(a.state), b=str(b.state))
 
 
