@@ -82,6 +82,7 @@ class RoutedLink:
         backend.on_receive = self.deliver
         backend.on_idle = self.state_changed
         backend.on_state = lambda state: self.state_changed()
+        self._tune()  # an emulated modem's channel (at power-on it came before the link had a backend)
         self._watch_phy()
         self.state_changed()
 
@@ -121,11 +122,15 @@ class RoutedLink:
         log.info("link %s: address %d -> %d (AT!AL)", self.id, old, address)
 
     def set_band(self, band_khz: tuple[float, float]) -> None:
-        """An emulated modem's channel (an M64's ``wcs``): the simulation has this link send and listen
-        in ``band_khz`` from now on, so that pairs on other channels never meet it."""
+        """An emulated modem's channel (an M64's ``wcs``, or its channel at power-on): the simulation has
+        this link send and listen in ``band_khz`` from now on, so that pairs on other channels never meet
+        it.  At power-on the link has no backend yet (its doors open first): the band waits for it."""
+        self.retuned = (float(band_khz[0]), float(band_khz[1]))
+        self._tune()
+
+    def _tune(self) -> None:
         backend = self.backend
-        if backend is not None and backend.set_band(band_khz):
-            self.retuned = (float(band_khz[0]), float(band_khz[1]))
+        if backend is not None and self.retuned is not None and backend.set_band(self.retuned):
             self.router.recorder.event({"t": round(self.router.scheduler.now(), 9), "ev": "band", "link": self.id,
                                         "band_khz": list(self.retuned)})
 

@@ -1,12 +1,15 @@
-"""WHOI's own ``acomms`` library (unmodified) driving two Micro-Modems, for tests/test_micromodem.py.
+"""WHOI's own ``acomms`` library (unmodified) driving Micro-Modems, for tests/test_micromodem.py and
+tests/test_fuzz_bytes_micromodem.py.
 
-Run as ``acomms_peer.py SCENARIO PTY_A PTY_B LOG_DIR``; prints one JSON line per result.  A process of
+Run as ``acomms_peer.py SCENARIO PTY_A PTY_B LOG_DIR``; prints one JSON line per result; or as
+``acomms_peer.py serve LOG_DIR NAME=PTY…``, a server of commands on stdin (:func:`serve`).  A process of
 its own, because ``acomms``' serial thread never ends (it reopens the port for ever once closed): the
 process's end ends it.  Every wait is a hang guard: it returns as soon as the modem answers.
 """
 
 import json
 import sys
+import time
 from datetime import datetime, timezone
 from queue import Empty, Queue
 
@@ -21,7 +24,42 @@ def frames_of(packet):
     return [bytes(f.data).hex() for f in packet.frames]
 
 
+def serve(logs: str, ptys: list[str]) -> None:
+    """``serve LOG_DIR NAME=PTY…``: a Micromodem on each pty, then one JSON command a line on stdin, one
+    JSON answer a line on stdout (tests/test_fuzz_bytes_micromodem.py drives it with hypothesis):
+    ``{"op": "send", "from": NAME, "dest": ADDRESS, "rate": R, "data": HEX}`` once the modem is idle;
+    ``{"op": "receive", "at": NAME, "timeout": S}`` → the next packet's frames (hex) or null."""
+    modems, received = {}, {}
+    for entry in ptys:
+        name, path = entry.split("=", 1)
+        modems[name] = Micromodem(name=name, log_path=logs)
+        modems[name].connect_serial(path, 19200)
+        received[name] = Queue()
+        modems[name].attach_packetrx_queue(received[name])
+    say(ids={name: m.id for name, m in modems.items()})
+    for line in sys.stdin:
+        command = json.loads(line)
+        if command["op"] == "send":
+            sender = modems[command["from"]]
+            for _ in range(6000):  # the previous cycle's end (a hang guard of 60 s)
+                if str(sender.state) == "Idle":
+                    break
+                time.sleep(0.01)
+            sender.send_packet_data(command["dest"], bytes.fromhex(command["data"]), rate_num=command["rate"])
+            say(sent=str(sender.state))
+        elif command["op"] == "receive":
+            try:
+                packet = received[command["at"]].get(timeout=command["timeout"])
+            except Empty:
+                say(frames=None)
+            else:
+                say(frames=frames_of(packet), src=packet.cycleinfo.src, rate=packet.cycleinfo.rate_num)
+
+
 def main() -> None:
+    if sys.argv[1] == "serve":
+        serve(sys.argv[2], sys.argv[3:])
+        return
     scenario, pty_a, pty_b, logs = sys.argv[1:5]
     a = Micromodem(name="a", log_path=logs)
     b = Micromodem(name="b", log_path=logs)
