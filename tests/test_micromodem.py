@@ -284,3 +284,58 @@ def test_every_other_acomms_call_a_modem_answers(tmp_path, daemon_of):
     assert results["ping"] == {"event": "ping", "owtt": 0.1, "cst": {"mode": 0, "src": 1, "dest": 2, "packet_type": 2}}
     assert results["test_packet"]["got"] == results["test_packet"]["sent"] and len(results["test_packet"]["got"]) == 2
     assert results["done"] == {"event": "done", "a": "Idle", "b": "Idle"}
+
+
+def test_the_calls_whose_sentences_are_not_emulated_get_the_modems_refusal(tmp_path, daemon_of):
+    """Sweeps, FDP packets and pings, JANUS, statistics requests, hibernation, navigation pings and uplink requests are not emulated (docs/modems.md says each): every such call of ``acomms``
+    gets ``$CAERR`` (those that wait for an answer return None at their timeout) and leaves the modem idle."""
+    ea, eb = unique("ma"), unique("mb")
+    daemon_of(scene(tmp_path, ea, eb), [ea, eb], "--speed", str(SPEED))
+    results = run_peer(tmp_path, "refused")
+    answers = {r["event"]: r.get("answer") for r in results if r["event"] in ("remus", "narrow")}
+    assert answers == {"remus": None, "narrow": None}
+    errors = next(r["errors"] for r in results if r["event"] == "refused")
+    assert errors == [f"NMEA,1,Unsupported {kind}" for kind in ("CCRSP", "CCTDP", "CCCMD", "CCTJN", "CCSST", "CCHIB",
+                                                                "CCPDT", "CCPNT")] + [
+        "CCCYC,2,Uplink requests are not emulated"]
+    assert results[-1] == {"event": "done", "a": "Idle", "b": "Idle"}
+
+
+def test_a_cycle_the_link_refuses_ends_with_the_modems_restart_sentence(tmp_path):
+    """When the model never puts the packet on air (the link refused it: its FIFO full), the emulated modem
+    fails the cycle with ``$CAERR,…,CYCLE,5`` and ``$CAREV`` (the one sentence after which every host
+    forgets its cycle) and is free again.  In virtual time, the link reduced to a refusal."""
+    from hilgate.core.packets import PacketError
+    from hilgate.core.scheduler import VirtualScheduler
+    from hilgate.drivers.micromodem_emulator import MicromodemEmulator
+
+    class Loop(VirtualScheduler):
+        def add_reader(self, fd, fn):
+            pass
+
+        def remove_reader(self, fd):
+            pass
+
+    class Refusing:
+        id, address, limits = "mm", 1, None
+
+        def send(self, frame):
+            raise PacketError("fifo", "the link's FIFO is full")
+
+    class Host:
+        out = b""
+
+        def write(self, data):
+            Host.out += data
+
+    emulator = MicromodemEmulator(Refusing(), {"pty": str(tmp_path / "mm")}, Loop())
+    try:
+        host = Host()
+        emulator.codecs = {host: ModemCodec()}
+        emulator._on_data(host, sentence("CCCYC", 0, 1, 2, 1, 0, 1) + sentence("CCTXD", 1, 2, 0, "41"))
+        lines = [line for line in Host.out.split(b"\r\n") if line]
+        assert [line.split(b",")[0] for line in lines] == [b"$CACYC", b"$CADRQ", b"$CATXD", b"$CAERR", b"$CAREV"]
+        assert b",CYCLE,5,Packet not transmitted" in lines[3] and b",AUV,2.0.0*" in lines[4]
+        assert emulator.cycle is None  # free for the next cycle
+    finally:
+        emulator.close()
