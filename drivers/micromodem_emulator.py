@@ -19,9 +19,9 @@
 - **The receiver** prints ``$CARXP,<0 FSK|1 PSK>`` when a packet begins to arrive (any packet it hears,
   before it can know for whom: ``RXP`` 0, not), and when the model delivers one for it ``$CACYC``, a
   ``$CARXD`` per frame and ``$CACST`` (:func:`~.micromodem_codec.cst`, version 8, padded as a Micro-Modem 2
-  prints it; ``CST`` 0: not) with the link budget's figures on the modem's scales (:meth:`_figures`); a
-  packet for it that the model lost (collision, error model) gives a ``$CACST`` whose frames are all bad
-  (mode 1).  At rate 0 the cycle-init minipacket is a packet of its own: ``$CARXP,0``, ``$CACYC`` and
+  prints it; ``CST`` 0: not) with the link budget's figures on the modem's scales
+  (:mod:`.micromodem_figures`); a packet for it that the model lost (collision, error model) gives a
+  ``$CACST`` whose frames are all bad (mode 1).  At rate 0 the cycle-init minipacket is a packet of its own: ``$CARXP,0``, ``$CACYC`` and
   its ``$CACST`` (an FSK minipacket), then the data packet's ``$CARXP``, ``$CARXD`` and ``$CACST`` (what
   ``acomms``' ``wait_for_data_packet(fsk=True)`` waits for).
 - **Acknowledgements.** With ``ack`` 1 to an address (in ``$CCCYC`` or a frame's ``$CCTXD``), the receiving modem answers on the channel
@@ -58,13 +58,11 @@ from hilgate.core.packets import BROADCAST, PacketError, Raw
 from .emulators import EmulatedModem
 from .micromodem_codec import (CI_AIRTIME_S, MINIPACKET_S, PACKET_TYPES, RATES, RXP_TYPES, BadSentence, CycleStats,
                                ModemCodec, Sentence, cst, hhmmss, sentence)
+from .micromodem_figures import figures
 
 log = logging.getLogger(__name__)
 
 FIRMWARE = "2.0.0"
-SOURCE_LEVEL_DB = 185  # dB re 1 uPa at 1 m: hilgate's figure for the modem's source level (not a datasheet's)
-NOISE_LEVEL_DB = 105   # dB re 1 uPa in the band: hilgate's constant (SNR = RSSI + 100, as before)
-CARRIER_HZ, BANDWIDTH_HZ = 25000, 5000  # the preset's band (22.5-27.5 kHz)
 MM_BROADCAST = 0
 CONFIG = {"SRC": 0, "AGN": 250, "ASD": 0, "BND": 3, "CST": 1, "CTO": 10, "DTO": 5, "PCM": 0, "REV": 0,
           "RXD": 1, "RXP": 1, "TAT": 50, "TXF": 1, "TXP": 1, "XST": 0}
@@ -474,23 +472,8 @@ class MicromodemEmulator(EmulatedModem):
         self.statistics += 1
 
     def _figures(self, src: int, t: float, psk: bool) -> dict:
-        """The link budget's reception (:mod:`hilgate.models.link_budget`: RSSI in dB re 1 V, -20 dB at 1 m)
-        on the modem's scales, all positive as a real modem prints them: the sound pressure level is
-        :data:`SOURCE_LEVEL_DB` less the transmission loss, the SNR that less :data:`NOISE_LEVEL_DB`; the
-        matched filter's peak and ratio grow with the SNR (the peak saturates at 32767, as in a capture
-        at short range); no equaliser is modelled (output SNR = input SNR, no symbol SNR: -100); the data
-        quality factor is the link budget's integrity for FSK, -1 for PSK (as the modem prints it)."""
-        heard = self.port.reception_from(src, t)
-        rssi = heard.rssi_db if heard is not None else NOISE_LEVEL_DB - SOURCE_LEVEL_DB - 20
-        spl = max(0, SOURCE_LEVEL_DB + 20 + rssi)  # (transmission loss = -20 - rssi)
-        snr = spl - NOISE_LEVEL_DB
-        integrity = heard.integrity if heard is not None else 0
-        return dict(mfd_peak=min(32767, max(0, round(100 * 10 ** (snr / 20)))), mfd_pow=max(0, round(snr)),
-                    mfd_ratio=min(9999, max(0, round(10 ** (snr / 20)))), mfd_spl=min(9999, spl),
-                    agn=round(self.config["AGN"] * 30 / 250), snr_rss=spl, snr_in=float(snr), snr_out=float(snr),
-                    snr_sym=-100, mse=-max(0.0, snr) / 2, dqf=-1 if psk else min(255, max(0, integrity)),
-                    doppler=heard.velocity_mps if heard is not None else 0.0, noise=NOISE_LEVEL_DB,
-                    carrier=CARRIER_HZ, bandwidth=BANDWIDTH_HZ)
+        """The link budget's reception of ``src`` at ``t`` on the modem's scales (:mod:`.micromodem_figures`)."""
+        return figures(self.port.reception_from(src, t), self.config["AGN"], psk)
 
     def state(self, ready: bool) -> None:
         pass
