@@ -16,7 +16,7 @@ import pytest
 from hypothesis import example, given
 
 from bytes_kit import edges, many, payloads, running
-from daemon_kit import unique, wait_until
+from daemon_kit import HANG_GUARD_S, unique, wait_until
 from hilgate.client import Link
 
 wlmodem = pytest.importorskip("wlmodem")
@@ -107,7 +107,8 @@ def test_fuzz_every_byte_crosses_in_a_wlmodem_datagram_both_ways(ends, data):
 def test_fuzz_every_byte_crosses_between_hilgates_driver_and_wlmodem_both_ways(ends, data):
     driver, far = ends["driver"]
     driver.send(data, dst=2)
-    assert wait_until(far.receive, "the driver's datagram") == data
+    # (4000 bytes are 504 slots of the model each way: a hang guard for a slow host)
+    assert wait_until(far.receive, "the driver's datagram", timeout=3 * HANG_GUARD_S) == data
     assert far.send(data)
-    message = driver.recv(timeout=120)
+    message = driver.recv(timeout=3 * HANG_GUARD_S)
     assert message is not None and message.data == data
