@@ -753,6 +753,7 @@ class _S100Host:
         self.buffer: InputBuffer | None = None  # made with the first bytes (the link's modem may come later)
         self.other = bytearray()  # bytes that are no frame of the link's class: passed on as they are
         self.waiting: tuple[Decoded, bytes] | None = None  # a frame and the part of its CR LF still to come
+        self.after_frame = False  # the last thing sent was a frame: a CR LF now is its own (the far S100 adds one)
         self.judged_until = float("-inf")  # the latest arrival the input buffer was judged with (its own line)
         self.read_at = float("-inf")  # when bytes were last read from this host, and the host's stall then
         self.stall_then: float | None = None
@@ -914,20 +915,25 @@ class S100Emulator(EmulatedModem):
             # S100 frames carry no address of their own (a DataLinkFrame's header does): broadcast
             self.port.send(AppFrame(real, event.payload, packet, 0, self.port.address, event.dst,
                                     self.scheduler.now()))
-        elif isinstance(event, Skipped):
-            if event.reason == TERMINATOR and not state.other:
-                return  # the CR LF after a frame
+            state.after_frame = True
+            return
+        after_frame, state.after_frame = state.after_frame, False
+        if isinstance(event, Skipped):
+            if event.reason == TERMINATOR and not state.other and after_frame:
+                state.after_frame = True  # (its CR and LF may come in two reads)
+                return  # the CR LF after a frame (not a CR or LF of a long frame's payload, sent in pieces)
             state.other += event.data
             if state.other.endswith(CRLF):
                 self._send_other(state)
             elif state.buffer is not None and len(state.other) >= self.piece:
                 self._piece(state, b"")
         elif isinstance(event, Notice):
-            state.other += event.text + CRLF
-            self._send_other(state)  # its CR LF ended it
+            state.other += event.data  # as it came: a notice cut short by a frame has no CR LF of its own
+            self._send_other(state)
 
     def _piece(self, state: _S100Host, data: bytes) -> None:
         """45 bytes without flow control: what is pending goes as packets of 45 bytes (the rest waits)."""
+        state.after_frame = False
         state.other += data
         piece = self.piece
         while len(state.other) >= piece:
