@@ -327,3 +327,11 @@ def test_every_quick_start_command_prints_what_the_readme_shows(walk):
 
     # and nothing the README shows was left out
     assert {command: len(outputs) for command, outputs in walk.shown.items()} == walk.checked
+
+
+def test_the_docs_point_at_nothing_outside_the_repository():
+    """Users have the repository, not the team's working material beside it (issue 39 item 4)."""
+    outside = re.compile(r"DESIGN\.md|shared/protocols|shared/peers|\.\./shared")
+    found = [f"{page.name}:{n}" for page in pages() for n, line in enumerate(page.read_text().splitlines(), 1)
+             if outside.search(line)]
+    assert found == []
