@@ -11,7 +11,7 @@ Four conditions:
 - **load**: *quiet* (nothing added; the machine's other work goes on and the load average is printed),
   or *busy*: ``tests/loadkit.py``'s ``Neighbours`` (imported: 4 CPU hogs, 4 processes that compute 5 ms
   and rest 1 ms, one writing 256 MiB files and syncing them), unpinned, at normal priority, started
-  before the busy runs and stopped after them;
+  before each busy run and stopped after it;
 - **scheduling**: *normal*, or *realtime*: the daemon with ``--realtime`` (what it got is printed, as
   it says it in ``hilgate status``), and the anchors' one time-keeping thread given the same (SCHED_RR
   10 and memory locked: the bare timer loop through ``hilgate.core.priority``, ns-3's simulation thread
@@ -30,7 +30,7 @@ first in turn from one repeat to the next), ``--repeats`` runs of each.  Printed
 lateness in ms, the daemon's CPU per wall second and the neighbours' (what real-time priority took from
 them); then a table per placement of the medians of p50 and p99 over the runs (p99 min-max in brackets).
 
-    python benchmarks/realtime_load.py [--seconds 15] [--bare-seconds 10] [--nodes 50] [--rate 0.5] [--repeats 2]
+    python benchmarks/realtime_load.py [--seconds 10] [--bare-seconds 5] [--nodes 50] [--rate 0.5] [--repeats 2]
                                        [--placement same|across|both] [--instrument realtime|normal] [--ns3-python PATH]
 """
 
@@ -95,10 +95,44 @@ def run_side(side: str, args, placement: Placement, repeat: int, scheduling: str
                   f"daemon CPU {cpu:.2f} s per wall s; the daemon says: {counted['scheduling']}")
 
 
+def measured(side: str, args, placement: Placement, repeat: int, load: str, scheduling: str,
+             instrument: int) -> tuple[float, float, float | None] | None:
+    """One run of one side in one condition, printed; its (p50, p99) in ms and the neighbours' CPU per wall
+    second (None: quiet), or None if ns-3 failed.  Busy:
+    the neighbours start before it (fresh for each run, so each finds the same load) and stop after it."""
+    neighbours = None
+    if load == "busy":
+        limit = max(args.seconds, args.bare_seconds) + 300  # a hang guard (ns-3 starts in seconds, slower when busy)
+        neighbours = Neighbours(args.hogs, args.wakers, args.writers, args.writer_mib, limit_s=limit)
+        time.sleep(SETTLE_S)
+    try:
+        loadavg = os.getloadavg()[0]
+        cpu0, wall0 = neighbours_cpu(neighbours), time.perf_counter()
+        try:
+            late, extra = run_side(side, args, placement, repeat, scheduling, instrument)
+        except (RuntimeError, OSError, ValueError) as exc:
+            if side != "ns-3":
+                raise
+            print(f"ns-3: {exc}", flush=True)
+            return None
+        share = (neighbours_cpu(neighbours) - cpu0) / (time.perf_counter() - wall0)
+    finally:
+        if neighbours is not None:
+            neighbours.stop()
+    if not late:
+        raise RuntimeError(f"{side}: no lateness measured in run {repeat}")
+    ms = [1e3 * x for x in late]
+    p50, p99 = percentile(ms, 0.5), percentile(ms, 0.99)
+    print(f"run {repeat}, {placement.name:>11}, {load:>5}, {scheduling:>8}, {side:>7}: lateness "
+          f"p50 {p50:.3f} ms  p99 {p99:.3f} ms  max {max(ms):.3f} ms; {extra}; load average "
+          f"{loadavg:.2f}" + (f"; neighbours {share:.2f} CPU s per wall s" if neighbours else ""), flush=True)
+    return p50, p99, share if neighbours else None
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--seconds", type=float, default=15.0, help="of sending, per hilgate and ns-3 run")
-    parser.add_argument("--bare-seconds", type=float, default=10.0, help="per bare run")
+    parser.add_argument("--seconds", type=float, default=10.0, help="of sending, per hilgate and ns-3 run")
+    parser.add_argument("--bare-seconds", type=float, default=5.0, help="per bare run")
     parser.add_argument("--nodes", type=int, default=50)
     parser.add_argument("--rate", type=float, default=0.5, help="frames per second per node")
     parser.add_argument("--apps", type=int, default=2, help="application processes sharing the links")
@@ -135,47 +169,24 @@ def main() -> None:
     print(f"ns-3: {'RealtimeSimulatorImpl run alongside (' + args.ns3_python + ')' if why_not_ns3 is None else 'not run (' + why_not_ns3 + ')'}",
           flush=True)
     sides = ["bare", "hilgate"] + (["ns-3"] if why_not_ns3 is None else [])
-    got: dict[tuple[str, str, str, str], list[tuple[float, float]]] = {}  # (placement, load, scheduling, side) → (p50, p99)
+    got: dict[tuple[str, str, str, str], list[tuple]] = {}  # (placement, load, scheduling, side) → (p50, p99, neighbours)
     for repeat in range(1, args.repeats + 1):
         for k in range(len(chosen)):
             placement = chosen[(repeat - 1 + k) % len(chosen)]
             for m in range(len(LOADS)):
                 load = LOADS[(repeat - 1 + m) % len(LOADS)]
-                neighbours = None
-                if load == "busy":
-                    limit = 2 * (args.seconds * 2 + args.bare_seconds + 120)  # a hang guard: stopped after the block
-                    neighbours = Neighbours(args.hogs, args.wakers, args.writers, args.writer_mib, limit_s=limit)
-                    time.sleep(SETTLE_S)
-                try:
-                    for n in range(len(SCHEDULINGS)):
-                        scheduling = SCHEDULINGS[(repeat - 1 + n) % len(SCHEDULINGS)]
-                        j = (repeat - 1) % len(sides)
-                        for side in sides[j:] + sides[:j]:
-                            if side not in sides:
-                                continue  # (ns-3 failed in an earlier run)
-                            loadavg = os.getloadavg()[0]
-                            cpu0, wall0 = neighbours_cpu(neighbours), time.perf_counter()
-                            try:
-                                late, extra = run_side(side, args, placement, repeat, scheduling, instrument)
-                            except (RuntimeError, OSError, ValueError) as exc:
-                                if side != "ns-3":
-                                    raise
-                                print(f"ns-3: failed, not run again ({exc})", flush=True)
-                                sides.remove("ns-3")
-                                continue
-                            share = (neighbours_cpu(neighbours) - cpu0) / (time.perf_counter() - wall0)
-                            if not late:
-                                raise RuntimeError(f"{side}: no lateness measured in run {repeat}")
-                            ms = [1e3 * x for x in late]
-                            p50, p99 = percentile(ms, 0.5), percentile(ms, 0.99)
-                            got.setdefault((placement.name, load, scheduling, side), []).append((p50, p99))
-                            print(f"run {repeat}, {placement.name:>11}, {load:>5}, {scheduling:>8}, {side:>7}: lateness "
-                                  f"p50 {p50:.3f} ms  p99 {p99:.3f} ms  max {max(ms):.3f} ms; {extra}; load average "
-                                  f"{loadavg:.2f}" + (f"; neighbours {share:.2f} CPU s per wall s" if neighbours else ""),
-                                  flush=True)
-                finally:
-                    if neighbours is not None:
-                        neighbours.stop()
+                for n in range(len(SCHEDULINGS)):
+                    scheduling = SCHEDULINGS[(repeat - 1 + n) % len(SCHEDULINGS)]
+                    j = (repeat - 1) % len(sides)
+                    for side in sides[j:] + sides[:j]:
+                        if side not in sides:
+                            continue  # (ns-3 failed in an earlier run)
+                        outcome = measured(side, args, placement, repeat, load, scheduling, instrument)
+                        if outcome is None:
+                            print("ns-3: failed, not run again", flush=True)
+                            sides.remove("ns-3")
+                            continue
+                        got.setdefault((placement.name, load, scheduling, side), []).append(outcome)
     print(f"lateness at the application, ms: median p50 / median p99 over the runs (p99 min-max):")
     for placement in chosen:
         print(f"  {placement.name}:")
@@ -188,19 +199,25 @@ def main() -> None:
                     if not pairs:
                         cells.append(f"{'not run':>26}")
                         continue
-                    p99s = [p99 for _, p99 in pairs]
-                    cells.append(f"{statistics.median(p for p, _ in pairs):7.3f} / {statistics.median(p99s):7.3f} "
+                    p99s = [p99 for _, p99, _ in pairs]
+                    cells.append(f"{statistics.median(p for p, _, _ in pairs):7.3f} / {statistics.median(p99s):7.3f} "
                                  f"({min(p99s):.2f}-{max(p99s):.2f})".rjust(26))
                 print(f"    {load:>5}  {scheduling:>10}  " + "  ".join(cells), flush=True)
+    print("the busy neighbours' CPU s per wall s, median over the runs (what each side's scheduling left them):")
+    for placement in chosen:
+        for scheduling in SCHEDULINGS:
+            shares = {side: [n for _, _, n in got.get((placement.name, "busy", scheduling, side), [])] for side in sides}
+            print(f"  {placement.name:>11}, {scheduling:>8}: " + ", ".join(
+                f"{side} {statistics.median(shares[side]):.2f}" for side in sides if shares[side]), flush=True)
     for placement in chosen:
         for load in LOADS:
             normal = got.get((placement.name, load, "normal", "hilgate"))
             fast = got.get((placement.name, load, "realtime", "hilgate"))
             if normal and fast:
-                before = statistics.median(p99 for _, p99 in normal)
-                after = statistics.median(p99 for _, p99 in fast)
+                before = statistics.median(p99 for _, p99, _ in normal)
+                after = statistics.median(p99 for _, p99, _ in fast)
                 print(f"  {placement.name}, {load}: hilgate's median p99 {before:.3f} ms at normal priority, "
-                      f"{after:.3f} ms with --realtime (ratio {after / before:.2f})", flush=True)
+                      f"{after:.3f} ms with --realtime ({before / after:.1f} times less)", flush=True)
 
 
 if __name__ == "__main__":

@@ -70,6 +70,7 @@ WITH_DAEMONS = {
                        r"run 1, +same CPU, +busy, +realtime, hilgate: .* the daemon says: .*; neighbours .* CPU s per wall s",
                        *(rf" +{load} +{scheduling} +[0-9.]+ / +[0-9.]+ \(" for load in ("quiet", "busy")
                          for scheduling in ("normal", "realtime")),
+                       *(rf" +same CPU, +{scheduling}: bare [0-9.]+, hilgate [0-9.]+" for scheduling in ("normal", "realtime")),
                        r"  same CPU, busy: hilgate's median p99 .* with --realtime "]),
     # 4 daemons (in network namespaces as root, else on loopback) against one
     "hosts_scale": (["benchmarks/hosts_scale.py", "--links", "2", "--rate", "2", "--seconds", "2", "--repeats", "1"],
