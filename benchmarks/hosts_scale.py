@@ -27,7 +27,7 @@ runs of each.  Printed per run: lateness p50/p99/max over all deliveries and per
 (seconds per wall second, over the sending window), frames delivered of those sent, what the daemons
 dropped, and the transmissions heard too late or missing between hosts; then the medians over the runs.
 
-    python benchmarks/hosts_scale.py [--links 50] [--rate 10] [--seconds 20] [--repeats 2] [--loopback]
+    python benchmarks/hosts_scale.py [--links 50] [--rate 10] [--seconds 20] [--repeats 2] [--loopback] [--realtime]
 """
 
 from __future__ import annotations
@@ -103,7 +103,7 @@ def _application(runtime_dir: str, links: list[tuple[int, str]], per_host: int, 
 class Hosts:
     """The 4 daemons, each serving its host's links, in namespaces (``spaces``) or on loopback."""
 
-    def __init__(self, per_host: int, prefix: str, spaces: netns.Namespaces | None):
+    def __init__(self, per_host: int, prefix: str, spaces: netns.Namespaces | None, extra: tuple[str, ...] = ()):
         from hilgate.netinit import init_network
 
         self.dir = tempfile.mkdtemp(prefix="hilgate-hosts-bench-")
@@ -121,7 +121,7 @@ class Hosts:
                 for other in endpoints[:h]:
                     args += ["--zenoh-connect", other]
                 links = tuple(f"{prefix}{h * per_host + i}" for i in range(per_host))
-                self.daemons.append(Daemon(text, links, tuple(args), directory=self.dir, name=host,
+                self.daemons.append(Daemon(text, links, (*args, *extra), directory=self.dir, name=host,
                                            within=spaces.command(h) if spaces is not None else ()))
             deadline = time.monotonic() + 60
             while not all(self._sees_all(d) for d in self.daemons):
@@ -149,9 +149,9 @@ class Hosts:
 class One:
     """One daemon serving every link."""
 
-    def __init__(self, per_host: int, prefix: str):
+    def __init__(self, per_host: int, prefix: str, extra: tuple[str, ...] = ()):
         links = tuple(f"{prefix}{k}" for k in range(len(HOSTS) * per_host))
-        self.daemons = [Daemon(scene_text(per_host, prefix, False), links)]
+        self.daemons = [Daemon(scene_text(per_host, prefix, False), links, extra)]
 
     def runtime(self, h: int) -> str:
         return self.daemons[0].runtime
@@ -163,7 +163,8 @@ class One:
 def run(side: str, args, repeat: int, spaces: netns.Namespaces | None) -> dict:
     per_host = args.links
     prefix = f"hs{os.getpid()}x{repeat}{side[0]}_"
-    setup = Hosts(per_host, prefix, spaces) if side == "4 daemons" else One(per_host, prefix)
+    extra = ("--realtime",) if args.realtime else ()
+    setup = Hosts(per_host, prefix, spaces, extra) if side == "4 daemons" else One(per_host, prefix, extra)
     try:
         results = [FORK.Queue() for _ in HOSTS]
         start_at = time.perf_counter() + WARM_UP_S
@@ -199,12 +200,14 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=20.0, help="of sending, per run")
     parser.add_argument("--repeats", type=int, default=2, help="runs of each side, alternating")
     parser.add_argument("--loopback", action="store_true", help="4 daemons on loopback even where namespaces could be made")
+    parser.add_argument("--realtime", action="store_true", help="every daemon with `hilgate run --realtime`")
     args = parser.parse_args()
     why = "--loopback" if args.loopback else netns.why_not()
     total = len(HOSTS) * args.links
     print(f"{len(HOSTS)} hosts x {args.links} links = {total} links on one channel, {args.rate:g} frames/s each "
           f"({total * args.rate:,.0f} frames/s offered), {args.seconds:g} s per run, {args.repeats} run(s) of each side, "
-          f"alternating; one application process per host; nothing pinned", flush=True)
+          f"alternating; one application process per host; nothing pinned; daemons "
+          f"{'with --realtime' if args.realtime else 'at normal priority'}", flush=True)
     spaces = None
     if why is None:
         try:
