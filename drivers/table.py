@@ -35,17 +35,17 @@ from typing import Any, Callable, Iterator
 
 __all__ = [
     "Option", "Driver", "DRIVERS", "ModemLimits", "MODES", "SEND_AS", "limits_for", "EvologicsOptions", "S100Options", "S100EmulatorOptions", "option", "from_link", "scene_options", "emulator_options",
-    "M64Options", "M64EmulatorOptions", "MicromodemOptions", "driver_names", "emulated_protocols", "open_backend", "emulator_for",
+    "M64Options", "M64EmulatorOptions", "MicromodemOptions", "UnetOptions", "UnetEmulatorOptions", "driver_names", "emulated_protocols", "open_backend", "emulator_for",
 ]
 
-KINDS = ("port", "integer", "number", "boolean", "choice")
+KINDS = ("port", "integer", "number", "boolean", "choice", "host")
 
 
 @dataclass(frozen=True)
 class Option:
     """How a scene gives one driver option: ``kind`` is port (a device path relative to the scene, or a
-    URL hilgate can open), integer, number, boolean or choice, with its bounds; ``hint`` says what to
-    give when a required option is missing."""
+    URL hilgate can open), integer, number, boolean, choice or host (a host name or IP address), with
+    its bounds; ``hint`` says what to give when a required option is missing."""
 
     kind: str
     minimum: float | None = None
@@ -251,6 +251,30 @@ class MicromodemOptions:
 
 
 @dataclass(frozen=True)
+class UnetOptions:
+    """``backend: unet`` (:mod:`hilgate.drivers.unet`): a UnetStack modem (Subnero's) reached through its fjåge
+    API at ``modem_host``:``port`` (1100 by default, fjåge's; ``host`` is the scene's key for the daemon
+    that serves the link); the link's frames go as datagrams of ``unet_protocol`` and its received
+    datagrams of that protocol come back as frames."""
+
+    modem_host: str = option(Option("host", hint="the modem's address, such as 192.168.1.12"))
+    port: int = option(Option("integer", 1, 65535), 1100)
+    unet_protocol: int = option(Option("integer", 0, 63), 0)  # 0: DATA; 32-63: USER protocols
+    command_timeout_s: float = option(Option("number", above=0), 5.0)
+    send_timeout_s: float = option(Option("number", above=0), 60.0)  # a datagram's transmission, at most
+    queue_frames: int = option(Option("integer", 0, 100_000), 50)
+    limits: "ModemLimits | None" = from_limits(None)  # None: UNET_LIMITS
+
+
+@dataclass(frozen=True)
+class UnetEmulatorOptions:
+    """``emulate: {protocol: unet}`` (:class:`hilgate.drivers.unet_emulator.UnetEmulator`): the protocol
+    number the node gives received frames of other families, which carry none on air."""
+
+    unet_protocol: int = option(Option("integer", 0, 63), 0)
+
+
+@dataclass(frozen=True)
 class Driver:
     """One row of the table (see the module's docstring)."""
 
@@ -260,6 +284,7 @@ class Driver:
     backend: str    # "module:Class" of the backend
     emulator: str | None = None  # "module:Class" of the emulated device, if there is one
     emulator_tcp: bool = False   # the emulated device also listens on a loopback TCP port
+    emulator_pty: bool = True    # …and can be on a pty (a UnetStack modem's API is TCP only)
     emulator_options: type | None = None  # the emulated device's own ``emulate:`` keys (option() fields)
     limits: ModemLimits | None = None  # what the modem accepts when the link's preset does not say
 
@@ -285,6 +310,10 @@ MICROMODEM_LIMITS = ModemLimits("micromodem", tuple((f"rate{n}", size) for n, si
 RATES, WHOI's software interface guide); 19200 baud, its default serial rate; GLI frames go as one packet
 of the driver's ``rate`` (1 by default)."""
 
+UNET_LIMITS = ModemLimits("unet", (("datagram", 64),), send_as="datagram")
+"""A UnetStack modem's DATA frame as hilgate assumes it without a preset (the modem's own ``phy[2].MTU``
+decides; ``models/unet-m25m.yaml`` says where its figures come from)."""
+
 DRIVERS: dict[str, Driver] = {driver.name: driver for driver in (
     Driver("evologics", "EvoLogics modem", EvologicsOptions, "hilgate.drivers.evologics:EvologicsBackend",
            "hilgate.drivers.emulators:EvologicsEmulator", emulator_tcp=True, limits=EVOLOGICS_LIMITS),
@@ -294,6 +323,9 @@ DRIVERS: dict[str, Driver] = {driver.name: driver for driver in (
            "hilgate.drivers.m64_emulator:M64Emulator", emulator_options=M64EmulatorOptions, limits=M64_LIMITS),
     Driver("micromodem", "Micro-Modem", MicromodemOptions, "hilgate.drivers.micromodem:MicromodemBackend",
            "hilgate.drivers.micromodem_emulator:MicromodemEmulator", limits=MICROMODEM_LIMITS),
+    Driver("unet", "UnetStack modem", UnetOptions, "hilgate.drivers.unet:UnetBackend",
+           "hilgate.drivers.unet_emulator:UnetEmulator", emulator_tcp=True, emulator_pty=False,
+           emulator_options=UnetEmulatorOptions, limits=UNET_LIMITS),
 )}
 
 

@@ -79,6 +79,13 @@ WITH_DAEMONS = {
                        rf"missing between hosts \d+" for side in ("4 daemons", "1 daemon")),
                      r" +4 daemons: lateness p50 .* CPU per daemon [0-9.]+ [0-9.]+ [0-9.]+ [0-9.]+ s per wall s",
                      r" +1 daemon: lateness p50 .* CPU per daemon [0-9.]+ s per wall s"]),
+    # (two of its four cases: the doors' test is tests/test_door_fairness.py, and make test's serial part is long)
+    "floods": (["benchmarks/floods.py", "--seconds", "1", "--cases", "zenoh", "tx"],
+               [*(rf"{case}, baseline: honest \d+ of \d+ frames received \(no flood\)"
+                  for case in ("zenoh door", "B's frames at A")),
+                *(rf"{case}, .*: honest \d+ of \d+ frames received during the flood .* delay p50 "
+                  for case in ("zenoh door", "B's frames at A")),
+                r"  daemon RSS \d+ MB -> peak \d+ MB \(after \d+ MB\); STATUS answered \d+ of \d+ during the flood"]),
     "web_cost": (["benchmarks/web_cost.py", "--seconds", "1", "--repeats", "1", "--warm-up", "0.5"],
                  [r" +no web door +CPU ", r" +--web, no page +CPU ", r" +a page connected +CPU .* pictures ",
                   r" +--web, no page adds ", r" +a page connected adds "]),

@@ -53,7 +53,7 @@ def test_ready_only_once_every_endpoint_is_up(pair):
     assert any(line == f"MAINPID={daemon.process.pid}" for line in ready.split("\n"))
 
 
-def test_dccomms_peers_exchange_frames_through_the_queues(pair):
+def test_dccomms_peers_exchange_frames_through_the_queues(pair, busy_host):
     daemon, a, b = pair
     receiver = daemon.peer(b, "--receive", "5", "--timeout", "60")
     time.sleep(0.3)
@@ -129,7 +129,7 @@ def test_a_frame_that_leaves_at_once_still_gets_its_ready(daemon_of):
                 queue.close()
 
 
-def test_socket_clients_over_unix_and_tcp(daemon_of):
+def test_socket_clients_over_unix_and_tcp(daemon_of, busy_host):
     a, b = unique("a"), unique("b")
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))

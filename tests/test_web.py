@@ -28,6 +28,7 @@ from browser_kit import HANG_GUARD_S, browser  # noqa: F401  (the fixture)
 from daemon_kit import Daemon, hilgate, unique
 from hilgate.client import Link
 from hilgate.gli.token import proof
+from hilgate.report.causes import RECEIVED, words
 from hilgate.report.tracedata import load_trace
 from hilgate.web.picture import Flight, frame_view, scene_message
 from hilgate.web.replay import Replay
@@ -93,6 +94,8 @@ def test_the_live_view_draws_the_scene_a_frame_in_flight_and_its_fate_and_a_swap
     assert browser.js("return location.hash") == ""  # the token left the address bar
     assert sorted(browser.view("v.state.vehicles.map(x => x.name)")) == ["auv", "glider", "topside"]
     browser.wait("document.querySelectorAll('#top [data-vehicle]').length == 3", "the vehicles drawn")
+    legend = browser.js("return [...document.querySelectorAll('#legend [data-fate]')].map(s => s.textContent)")
+    assert legend[:3] == [RECEIVED.words, words("col"), words("mult")]  # the report's words (report/causes.py)
     assert browser.view("v.scene.mode") == "live"
     for link in (a, b, c):
         assert badge(browser, link) == "sim"

@@ -292,7 +292,10 @@ class RealtimeScheduler(VirtualScheduler):
                         reader()
                     except Exception:
                         self._failed(reader)
-        while posted:
+        for _ in range(len(posted)):
+            # (only the calls posted before this round: one posted meanwhile, by another thread or by a
+            # call itself, waits for the next round, after the descriptors; taking calls until none was
+            # left kept the loop here, the control socket unanswered, for as long as a flood kept posting)
             fn, args = posted.popleft()
             self._input_time()
             try:

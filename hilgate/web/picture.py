@@ -16,7 +16,9 @@ import math
 from collections import OrderedDict, deque
 from typing import Any, Iterable
 
-__all__ = ["link_kind", "scene_message", "reach_s", "extent_m", "frame_view", "Flight", "LINGER_S", "MAX_FRAMES",
+from ..report.causes import CAUSES, RECEIVED
+
+__all__ = ["link_kind", "fates", "scene_message", "reach_s", "extent_m", "frame_view", "Flight", "LINGER_S", "MAX_FRAMES",
            "MAX_FLIGHT_S", "ERRORS_KEPT"]
 
 LINGER_S = 2.0
@@ -61,9 +63,16 @@ def link_kind(link: dict[str, Any]) -> str:
     return "sim" if link.get("backend") == "sim" else "real"
 
 
+def fates() -> dict[str, list[str]]:
+    """What the page calls each fate of a frame and draws it in: ``rx`` and every loss cause, from the
+    table the report uses (the page keeps no words of its own, so the two cannot read differently)."""
+    return {"rx": [RECEIVED.words, RECEIVED.colour], **{code: [c.words, c.colour] for code, c in CAUSES.items()}}
+
+
 def scene_message(view: dict[str, Any], mode: str) -> dict[str, Any]:
     """The page's SCENE from a scene view (:func:`hilgate.scene.view.scene_view`, or a trace's ``run``
-    and ``reload`` lines): per link its vehicle, backend kind, channel speed, range, bit rate, FIFO size."""
+    and ``reload`` lines): per link its vehicle, backend kind, channel speed, range, bit rate, FIFO size;
+    and the words and colours of frames' fates."""
     channels = view.get("channels") if isinstance(view.get("channels"), dict) else {}
     links: dict[str, Any] = {}
     raw_links = view.get("links") if isinstance(view.get("links"), dict) else {}
@@ -102,7 +111,7 @@ def scene_message(view: dict[str, Any], mode: str) -> dict[str, Any]:
         vehicles.setdefault(link["vehicle"], {"source": "?", "host": None})
     hosts = sorted({link["host"] for link in links.values() if link["host"]})
     return {"class": "SCENE", "mode": mode, "name": _text(view.get("name", "?")), "links": links,
-            "vehicles": vehicles, "hosts": hosts}
+            "vehicles": vehicles, "hosts": hosts, "fates": fates()}
 
 
 def reach_s(link: dict[str, Any] | None, size: int, extent_m: float = UNBOUNDED_REACH_M) -> float:

@@ -3,12 +3,9 @@
 "use strict";
 
 const SVG = "http://www.w3.org/2000/svg";
-const FATES = {
-  rx: ["delivered", "#2ca02c"], col: ["collided", "#d62728"], mult: ["collided (several)", "#9467bd"],
-  prop: ["lost to errors", "#e69f00"], range: ["out of range", "#1f77b4"], fifo: ["dropped from a FIFO", "#222222"],
-  closed: ["link closed", "#7f7f7f"], no_pose: ["no pose", "#7f7f7f"], band: ["outside the band", "#17becf"],
-  modulation: ["modulation not decoded", "#bcbd22"],
-};
+// The words and colours of frames' fates come with the SCENE (hilgate/report/causes.py, the report's table):
+// the page keeps none of its own, so a cause reads the same here as in the report's figures and tables.
+const LEGEND_FATES = ["rx", "col", "mult", "prop", "range", "fifo", "band", "modulation"];
 const OTHER = "#8c564b";
 const CHANNEL_COLOURS = ["#0b3954", "#087e8b", "#c1440e", "#6a4c93", "#3d5a80", "#bc4749"];
 const SPEEDS = [0.1, 0.25, 0.5, 1, 2, 5, 10, 25, 50, 100];
@@ -36,9 +33,18 @@ function cell(row, name, text) {
   return td;
 }
 
+function fates() {
+  return (view.scene && view.scene.fates) || {};
+}
+
 function fate(ev, cause) {
   const key = ev === "rx" ? "rx" : (cause || "?");
-  return [key, (FATES[key] || [key, OTHER])[1]];
+  return [key, (fates()[key] || [key, OTHER])[1]];
+}
+
+function said(cause) {  // a cause in words (a link's "modem" error and unknown codes as they are)
+  const known = fates()[cause];
+  return known ? known[0] : cause;
 }
 
 function channelColour(name) {
@@ -133,8 +139,9 @@ function onScene(scene) {
   $("scene-name").textContent = "scene " + scene.name;
   const legend = $("legend");
   legend.textContent = "";
-  for (const [key, [label, colour]] of Object.entries(FATES)) {
-    if (key === "no_pose" || key === "closed") continue;
+  for (const key of LEGEND_FATES) {
+    if (!fates()[key]) continue;
+    const [label, colour] = fates()[key];
     const item = document.createElement("span");
     item.textContent = label;
     item.dataset.fate = key;
@@ -199,7 +206,7 @@ function updateLinks(links) {
     bar.title = (link.fifo_bytes || 0) + " of " + (capacity || "?") + " bytes";
     fifo.dataset.bytes = link.fifo_bytes || 0;
     for (const key of ["tx", "rx", "drops", "lost"]) cell(row, key, link[key] === undefined ? "–" : link[key]);
-    const errors = (link.errors || []).map((e) => Number(e[0]).toFixed(1) + " s " + e[1] + (e[2] ? " " + e[2] : ""));
+    const errors = (link.errors || []).map((e) => Number(e[0]).toFixed(1) + " s " + said(e[1]) + (e[2] ? " " + e[2] : ""));
     if (link.reason) errors.push(link.reason);
     const box = cell(row, "errors");
     const text = errors.slice(-2).join("\n");
@@ -239,7 +246,7 @@ function updateFlows(flows) {
     cell(row, "name", key);
     cell(row, "sent", flow.sent);
     cell(row, "received", flow.received);
-    const lost = Object.entries(flow.lost || {}).sort().map(([cause, n]) => cause + " " + n).join(", ");
+    const lost = Object.entries(flow.lost || {}).sort().map(([cause, n]) => said(cause) + " " + n).join(", ");
     const td = cell(row, "lost", lost || "0");
     td.dataset.lost = JSON.stringify(flow.lost || {});
   }
