@@ -133,22 +133,22 @@ def cmd_sim(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     from .daemon.service import Daemon
     from .core.paths import daemon_runtime_dir, default_scene
+    from .core.priority import DEFAULT_PRIORITY
 
     scene = args.scene or default_scene()
     if args.speed <= 0:
         raise SceneError("--speed", 0, "", f"must be positive, not {args.speed:g}")
     status_line = args.status_line if args.status_line is not None else sys.stderr.isatty()
-    if args.realtime_priority:
-        from .core.realtime import make_realtime
-
-        log.info("real-time set-up: %s", make_realtime(args.realtime_priority))
+    if args.realtime_priority is not None and not 1 <= args.realtime_priority <= 99:
+        raise SceneError("--realtime-priority", 0, "", f"must be from 1 to 99, not {args.realtime_priority}")
+    realtime = args.realtime_priority or (DEFAULT_PRIORITY if args.realtime else 0)
     daemon = Daemon(scene, args.overrides, daemon_runtime_dir(args.runtime_dir), args.speed, args.tcp,
                     args.trace, args.summary, args.until, status_line, args.gli_backlog, args.group,
                     args.max_clients, args.max_link_clients, plugins=args.plugins, preset_dirs=args.preset_dirs,
                     host=args.host, zenoh_connect=args.zenoh_connect, zenoh_listen=args.zenoh_listen,
                     clock_offset_s=args.clock_offset_s, tcp_token=args.tcp_token,
                     zenoh_credentials=args.zenoh_credentials, zenoh_insecure=args.zenoh_insecure, web=args.web,
-                    auth_timeout_s=args.auth_timeout)
+                    auth_timeout_s=args.auth_timeout, realtime_priority=realtime)
     return daemon.run()
 
 
@@ -247,11 +247,14 @@ def _print_status(status: dict, as_json: bool) -> None:
 
     if as_json:
         print(json.dumps({"links": status["links"], "vehicles": status["vehicles"],
+                          **({"scheduling": status["scheduling"]} if "scheduling" in status else {}),
                           **({"ros2": status["ros2"]} if "ros2" in status else {})}), flush=True)
         return
     from .report.tables import _render
 
     print(f"t = {status.get('time', 0):.3f} s")
+    if "scheduling" in status:  # (a daemon of an older version does not say)
+        print(f"scheduling: {status['scheduling']['text']}")
     print(_render(["link", "backend", "state", "since s", "tx", "rx", "drops", "unread", "fifo B", "note"],
                   [[l["id"], l["backend"], l["state"], _since(l), str(l["tx_packets"]), str(l["rx_packets"]),
                     str(l["drops"]), str(l.get("unread", 0)), str(l["fifo_bytes"]), _link_note(l)]
@@ -750,9 +753,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--until", type=float, help="stop after this many model seconds")
     p.add_argument("--status-line", action=argparse.BooleanOptionalAction, default=None,
                    help="a live status line on stderr (default: when it is a terminal)")
-    p.add_argument("--realtime-priority", type=int, default=0, metavar="N",
-                   help="run with SCHED_FIFO priority N and locked memory (needs CAP_SYS_NICE; the systemd "
-                        "unit sets it); keeps the worst delivery lateness under a millisecond on a busy host")
+    p.add_argument("--realtime", action="store_true",
+                   help="run the loop at real-time priority (SCHED_RR 10, memory locked) where the host "
+                        "allows it (CAP_SYS_NICE or RLIMIT_RTPRIO: the systemd unit allows it), else at the lowest "
+                        "niceness allowed; the log and `hilgate status` say which")
+    p.add_argument("--realtime-priority", type=int, default=None, metavar="N",
+                   help="--realtime at priority N (1-99) instead of 10")
 
     p.add_argument("--gli-backlog", type=int, default=1000, metavar="N",
                    help="frames kept per link while an application's receive queue is full (default 1000); "

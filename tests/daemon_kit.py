@@ -174,9 +174,25 @@ def _unlimited_queue_budget() -> None:
         pass
 
 
+def _in_order(*steps):
+    """One ``preexec_fn`` that runs each of ``steps`` (None: none) in the daemon's process before it starts."""
+    steps = [step for step in steps if step is not None]
+    if not steps:
+        return None
+
+    def run() -> None:
+        for step in steps:
+            step()
+
+    return run
+
+
 class Daemon:
+    """The daemon ``hilgate run`` in a subprocess; ``preexec``: run in its process before it starts (to take
+    a privilege away, as a host would not grant it)."""
+
     def __init__(self, tmp_path, scene_text: str, links: list[str], *args: str, env: dict | None = None,
-                 runtime: str | None = None, queue_budget_unlimited: bool = False):
+                 runtime: str | None = None, queue_budget_unlimited: bool = False, preexec=None):
         self.tmp = tmp_path
         self.links = links
         self.scene = tmp_path / "scene.yaml"
@@ -192,7 +208,7 @@ class Daemon:
             args=[sys.executable, "-m", "hilgate", "-v", "run", str(self.scene), "--runtime-dir", self.runtime,
                   "--trace", str(self.trace), "--summary", str(self.summary), "--no-status-line", *args],
             stdout=self.log, stderr=subprocess.STDOUT, env=dict(os.environ, NOTIFY_SOCKET=self.notify_path, **(env or {})),
-            preexec_fn=_unlimited_queue_budget if queue_budget_unlimited else None)
+            preexec_fn=_in_order(_unlimited_queue_budget if queue_budget_unlimited else None, preexec))
         self.process = subprocess.Popen(**self._start)
         self.notifications: list[str] = []
         self.budget_waits = 0

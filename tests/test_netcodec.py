@@ -42,6 +42,19 @@ def test_a_transmission_comes_back_whole_with_its_application_frame_and_served_f
             app_back.t0, app_back.meta) == (app.real, app.payload, "vl2b", 7, 1, 2, 12.5, {"kind": "im", "ack": False})
 
 
+@pytest.mark.parametrize("name", ["simple:20", "dlf16", "raw"])
+def test_every_packet_class_crosses_hosts_by_its_name(name):
+    """simple:N's name has a colon: read as not a name of its kind, its every frame was refused by the
+    other hosts (counted bad_message) and never delivered there."""
+    packet = packet_class(name)
+    payload = b"\x01" * 17 if name.startswith("simple") else b"hi"
+    app = AppFrame(packet.encode(payload, 1, 2), payload, packet, 7, 1, 2, 12.5, None)
+    frame = Frame(41, "a", "b", 2, len(app.real), 12.5, app_frame=app)
+    frame.src_addr = 1
+    back = decode_transmission(encode_transmission("hostA", 5, 1, frame, 12.5, 0.1, None)).frame.app_frame
+    assert (back.packet.name, back.real, back.payload) == (name, app.real, app.payload)
+
+
 def test_model_times_cross_hosts_through_their_epochs():
     assert to_local(10.0, 2_000_000_000, 1_000_000_000) == 11.0   # the sender started a second later
     assert to_local(10.0, 1_000_000_000, 1_500_000_000) == 9.5

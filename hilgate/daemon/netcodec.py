@@ -63,7 +63,7 @@ MAX_TRANSMISSION = 65536
 JSON take under 24 kB): a longer message is refused before it is read."""
 LINK_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,200}|\*")  # a link id (scene.links.LINK_ID), or * (broadcast)
 KIND = re.compile(r"[a-z][a-z0-9_]{0,31}")
-PACKET_NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")
+PACKET_NAME = re.compile(r"[A-Za-z0-9_.:-]{1,64}")  # (simple:N has a colon)
 SESSION = re.compile(r"[0-9a-f]{1,32}")
 
 

@@ -25,6 +25,7 @@ from ..gli.unet_door import UnetDoor
 from ..gli.token import TOKEN_FILE, TokenCheck, load_or_create
 from .live_sources import LiveSources
 from .ros2_bridge import Ros2Bridge
+from ..core.priority import Scheduling, current, raise_priority
 from ..core.realtime import RealtimeScheduler
 from ..sim.recorder import Recorder
 from .router import Router
@@ -96,9 +97,11 @@ class Daemon:
                  zenoh_connect: list[str] | tuple[str, ...] = (), zenoh_listen: list[str] | tuple[str, ...] = (),
                  clock_offset_s: float = 0.0, tcp_token: str | None = None,
                  zenoh_credentials: str | None = None, zenoh_insecure: bool = False, web: str | None = None,
-                 auth_timeout_s: float = 5.0):
+                 auth_timeout_s: float = 5.0, realtime_priority: int = 0):
         self.web = web
         self.auth_timeout_s = auth_timeout_s
+        self.realtime_priority = realtime_priority
+        self.scheduling = Scheduling()  # what the loop thread runs at (status): set as the loop starts
         self.web_server: Any = None
         self.web_feed: Any = None
         self.tcp_token = tcp_token
@@ -250,6 +253,7 @@ class Daemon:
                                  "epoch_ns": self.network.epoch_ns})
             log.info("joined the network as host %s (zenoh %s, prefix %s)", host, self.network.zid,
                      self.network.prefix)
+        self._take_priority()
         try:
             notify("READY=1", f"STATUS=running {scene.name!r}: {len(self.router.links)} links",
                    f"MAINPID={os.getpid()}")
@@ -257,6 +261,16 @@ class Daemon:
         finally:
             self.shutdown()
         return 0
+
+    def _take_priority(self) -> None:
+        """Real-time priority for this thread (the loop's) once everything is open: the start-up's work,
+        and every thread made during it, ran at normal priority (:mod:`hilgate.core.priority`)."""
+        if not self.realtime_priority:
+            self.scheduling = current()
+            return
+        self.scheduling = raise_priority(self.realtime_priority)
+        level = logging.INFO if self.scheduling.kind == "realtime" else logging.WARNING
+        log.log(level, "scheduling: %s", self.scheduling.describe())
 
     def _host(self, scene: Scene) -> str | None:
         """This daemon's host name in a scene spread over hosts (None: the scene is for one daemon)."""
@@ -324,7 +338,8 @@ class Daemon:
             ping()
 
     def status(self) -> dict[str, Any]:
-        status = {**self.router.status(), "cameras": self.live.status()}
+        status = {**self.router.status(), "cameras": self.live.status(),
+                  "scheduling": current(self.scheduling.asked, self.scheduling.notes).as_dict()}  # (the loop's thread)
         ros2 = self.ros2.status()
         if ros2 is not None:  # only once the daemon is on ROS 2
             status["ros2"] = {**ros2, "poses_in": self.live.ros2_status()}
