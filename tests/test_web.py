@@ -337,9 +337,9 @@ def test_a_page_without_the_token_gets_nothing_and_pages_of_other_sites_are_refu
     right: list = []
     asyncio.run(_session(ws, right, answer=lambda nonce: proof(token, bytes.fromhex(nonce)),
                          commands=[{"class": "SPEED", "speed": 1000}, {"class": "SEEK", "t": "x"},
-                                   {"class": "EVAL", "code": "1"}], count=7))
+                                   {"class": "EVAL", "code": "1"}], count=8))
     kinds = [m.get("class") for m in right]
-    assert kinds[:3] == ["HELLO", "WELCOME", "SCENE"] and "STATE" in kinds
+    assert kinds[:4] == ["HELLO", "WELCOME", "SCENE", "EVENTS"] and "STATE" in kinds
     errors = [m["error"] for m in right if m.get("class") == "ERROR"]
     assert errors == ["speed must be a number from 0.1 to 100", "t must be a number of seconds",
                       "unknown command 'EVAL' (PLAY, PAUSE, SPEED, SEEK)"]

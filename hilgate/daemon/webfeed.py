@@ -47,10 +47,8 @@ class WebFeed:
     # -- the recorder's tap (only while a page is connected) ---------------------------------------
 
     def frame(self, ev: str, t: float, link: str, frame: Any, cause: str | None) -> None:
-        if frame.kind != "data":
-            return  # a MAC's control frames: not on the picture (nor in hilgate report's)
-        try:
-            self.flight.frame(ev, t, link, frame.id, frame.src_link, frame.dst_link, frame.size, cause)
+        try:  # a MAC's control frames too: the page draws them when the operator asks for them
+            self.flight.frame(ev, t, link, frame.id, frame.src_link, frame.dst_link, frame.size, cause, frame.kind)
         except Exception:
             self._broken()
 
@@ -104,12 +102,17 @@ class WebFeed:
             status = link.status()
             backend = link.backend
             lost = dict(backend.modem.stats.lost) if isinstance(backend, SimBackend) else {}
+            causes = {cause: n for cause, n in lost.items() if n}
+            for cause, n in status["drop_causes"].items():
+                if n:
+                    causes[cause] = causes.get(cause, 0) + n
             links.append({"id": status["id"], "backend": status["backend"], "state": status["state"],
                           "ready": status["ready"], "fifo_bytes": status["fifo_bytes"],
                           "tx": status["tx_packets"], "rx": status["rx_packets"], "drops": status["drops"],
                           "lost": sum(lost.values()), "unread": status["unread"], "clients": status["clients"],
                           "drop_causes": status["drop_causes"], "since_s": status["since_s"],
-                          "reason": status.get("reason"), "errors": self.flight.errors_of(status["id"])})
+                          "reason": status.get("reason"), "errors": self.flight.errors_of(status["id"]),
+                          "causes": causes})
         vehicles = router.vehicle_status()
         self.flight.extent_m = extent_m(vehicle["position"] for vehicle in vehicles)
         hosts = []

@@ -118,7 +118,7 @@ def reach_s(link: dict[str, Any] | None, size: int, extent_m: float = UNBOUNDED_
 
 def frame_view(pkt: Any, src: str, dst: str, size: int, txs: Iterable[float],
                outcomes: Iterable[tuple[float, str, str, str | None]], now: float, reach: float,
-               linger: float) -> dict[str, Any] | None:
+               linger: float, kind: str = "data") -> dict[str, Any] | None:
     """One frame as the page draws it at ``now``, or None when nothing of it is on the picture: its latest
     transmission up to ``now`` (drawn while ``now - tx <= reach``) and its judgements up to ``now``
     (``[link, t, ev, cause]``, drawn for ``linger`` after each)."""
@@ -137,8 +137,11 @@ def frame_view(pkt: Any, src: str, dst: str, size: int, txs: Iterable[float],
         return None
     if len(shown) > MAX_OUTCOMES:
         shown = shown[-MAX_OUTCOMES:]
-    return {"id": _text(pkt), "src": src, "dst": dst, "size": size,
+    view = {"id": _text(pkt), "src": src, "dst": dst, "size": size,
             "tx": None if tx is None else round(tx, 6), "reach_s": round(reach, 6), "out": shown}
+    if kind != "data":  # an acknowledgement, RTS or CTS: the page draws it only when asked to
+        view["kind"] = kind
+    return view
 
 
 def extent_m(positions: Iterable[Any]) -> float:
@@ -155,10 +158,10 @@ def extent_m(positions: Iterable[Any]) -> float:
 
 
 class _Frame:
-    __slots__ = ("pkt", "src", "dst", "size", "txs", "outcomes", "last")
+    __slots__ = ("pkt", "src", "dst", "size", "txs", "outcomes", "last", "kind")
 
-    def __init__(self, pkt: Any, src: str, dst: str, size: int, t: float):
-        self.pkt, self.src, self.dst, self.size = pkt, src, dst, size
+    def __init__(self, pkt: Any, src: str, dst: str, size: int, t: float, kind: str = "data"):
+        self.pkt, self.src, self.dst, self.size, self.kind = pkt, src, dst, size, kind
         self.txs: list[float] = []
         self.outcomes: list[tuple[float, str, str, str | None]] = []
         self.last = t
@@ -181,10 +184,10 @@ class Flight:
         self.frames.clear()
         self.errors.clear()
 
-    def _frame(self, pkt: Any, src: str, dst: str, size: int, t: float) -> _Frame:
+    def _frame(self, pkt: Any, src: str, dst: str, size: int, t: float, kind: str = "data") -> _Frame:
         frame = self.frames.get(pkt)
         if frame is None:
-            frame = self.frames[pkt] = _Frame(pkt, src, dst, size, t)
+            frame = self.frames[pkt] = _Frame(pkt, src, dst, size, t, kind)
             if len(self.frames) > self.max_frames:
                 self.frames.popitem(last=False)
         frame.last = t
@@ -197,18 +200,19 @@ class Flight:
         errors.append([round(t, 3), cause, detail])
 
     def frame(self, ev: str, t: float, link: str, pkt: Any, src: str, dst: str, size: int,
-              cause: str | None) -> None:
-        """A simulated modem's event (``enq``, ``drop``, ``tx``, ``rx``, ``err``) of data frame ``pkt``."""
+              cause: str | None, kind: str = "data") -> None:
+        """A simulated modem's event (``enq``, ``drop``, ``tx``, ``rx``, ``err``) of frame ``pkt`` (a data
+        frame, or a control frame of ``kind``: its losses are no link's errors)."""
         if ev == "enq":
             return  # queued: the FIFO's fill shows it; the frame is drawn from its transmission
-        frame = self._frame(pkt, src, dst, size, t)
+        frame = self._frame(("c", pkt) if kind != "data" else pkt, src, dst, size, t, kind)
         if ev == "tx":
             frame.txs.append(t)
             del frame.txs[:-4]
         else:
             frame.outcomes.append((t, link, ev, cause))
             del frame.outcomes[:-MAX_OUTCOMES]
-            if cause is not None:
+            if cause is not None and kind == "data":
                 self._error(link, t, cause, f"from {src}")
 
     def line(self, record: dict[str, Any]) -> None:
@@ -244,8 +248,10 @@ class Flight:
             frames.popitem(last=False)
         out = []
         for frame in reversed(frames.values()):
-            view = frame_view(frame.pkt, frame.src, frame.dst, frame.size, frame.txs, frame.outcomes, now,
-                              reach_s(links.get(frame.src), frame.size, extent), linger)
+            pkt = frame.pkt[1] if frame.kind != "data" else frame.pkt
+            view = frame_view(f"{frame.kind}:{pkt}" if frame.kind != "data" else pkt, frame.src, frame.dst,
+                              frame.size, frame.txs, frame.outcomes, now,
+                              reach_s(links.get(frame.src), frame.size, extent), linger, frame.kind)
             if view is not None:
                 out.append(view)
                 if len(out) >= MAX_FRAMES:

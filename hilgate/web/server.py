@@ -396,6 +396,7 @@ class Player:
         self.playing = False
         self.last = clock()
         page.send_json(replay.scene_at(self.t))
+        page.send_json({"class": "EVENTS", "events": replay.events, "start": replay.start, "end": replay.end})
         self.scene = replay.scene_at(self.t)
         self.timer = tornado.ioloop.PeriodicCallback(self.tick, REPLAY_TICK_S * 1000)
         self.timer.start()
