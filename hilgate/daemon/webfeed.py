@@ -14,6 +14,7 @@ import logging
 from typing import Any
 
 from ..scene.view import scene_view
+from ..sim.budget import budget_tables
 from ..sim.sim_backend import SimBackend
 from ..web.picture import Flight, LINGER_S, extent_m, scene_message
 
@@ -90,6 +91,10 @@ class WebFeed:
         message = scene_message(scene_view(scene), "live")
         served = set(self.router.links)  # in a network of hosts, the others' links are theirs to draw
         message["served"] = sorted(served)
+        try:  # the pair of modems the page hovers: SNR and PER over distance (hilgate check's budget)
+            message["budget"] = budget_tables(scene)
+        except Exception:
+            log.exception("web view: the link budget could not be tabled (the page shows no PER)")
         self.flight.links = message["links"]
         return message
 
