@@ -138,7 +138,7 @@ class WebFeed:
         speed = self.scheduler.speed
         picture = {"class": "STATE", "t": round(now, 6), "rate": speed, "playing": True, "speed": speed,
                    "linger_s": LINGER_S * speed, "vehicles": vehicles, "links": links, "hosts": hosts,
-                   "frames": self.flight.visible(now, LINGER_S * speed), "flows": flows}
+                   "frames": self.flight.visible(now, LINGER_S * speed, 2 * INTERVAL_S * speed), "flows": flows}
         if self.extra is not None:
             picture.update(self.extra())
         return picture

@@ -118,10 +118,12 @@ def reach_s(link: dict[str, Any] | None, size: int, extent_m: float = UNBOUNDED_
 
 def frame_view(pkt: Any, src: str, dst: str, size: int, txs: Iterable[float],
                outcomes: Iterable[tuple[float, str, str, str | None]], now: float, reach: float,
-               linger: float, kind: str = "data") -> dict[str, Any] | None:
+               linger: float, kind: str = "data", floor: float = 0.0) -> dict[str, Any] | None:
     """One frame as the page draws it at ``now``, or None when nothing of it is on the picture: its latest
-    transmission up to ``now`` (drawn while ``now - tx <= reach``) and its judgements up to ``now``
-    (``[link, t, ev, cause]``, drawn for ``linger`` after each)."""
+    transmission up to ``now`` (drawn while ``now - tx <= reach``, and in any case while ``now - tx <=
+    floor``: a wave shorter than the time between two pictures, a real modem's 30 ms, must reach the
+    page in one, which draws it in slow motion) and its judgements up to ``now`` (``[link, t, ev, cause]``,
+    drawn for ``linger`` after each)."""
     tx = None
     for t in txs:
         if t <= now and (tx is None or t > tx):
@@ -132,7 +134,7 @@ def frame_view(pkt: Any, src: str, dst: str, size: int, txs: Iterable[float],
         if t <= now:
             shown.append([link, round(t, 6), ev, cause])
             recent = recent or now - t <= linger
-    flying = tx is not None and now - tx <= reach
+    flying = tx is not None and now - tx <= max(reach, floor)
     if not (flying or recent):
         return None
     if len(shown) > MAX_OUTCOMES:
@@ -237,13 +239,14 @@ class Flight:
                 frame = self._frame(f"{link}#{self._real}", _text(src) if src is not None else "?", link, size, t)
                 frame.outcomes.append((t, link, "rx", None))
 
-    def visible(self, now: float, linger: float = LINGER_S) -> list[dict[str, Any]]:
+    def visible(self, now: float, linger: float = LINGER_S, floor: float = 0.0) -> list[dict[str, Any]]:
         """The frames on the picture at ``now``, newest first (at most ``MAX_FRAMES``); the oldest frames,
-        once nothing of them can be drawn any more, are forgotten."""
+        once nothing of them can be drawn any more, are forgotten.  ``floor``: model seconds a wave is
+        sent in any case (:func:`frame_view`)."""
         frames, links, extent = self.frames, self.links, self.extent_m
         while frames:
             frame = frames[next(iter(frames))]
-            if now - frame.last <= reach_s(links.get(frame.src), frame.size, extent) + linger + STALE_S:
+            if now - frame.last <= max(reach_s(links.get(frame.src), frame.size, extent), floor) + linger + STALE_S:
                 break
             frames.popitem(last=False)
         out = []
@@ -251,7 +254,7 @@ class Flight:
             pkt = frame.pkt[1] if frame.kind != "data" else frame.pkt
             view = frame_view(f"{frame.kind}:{pkt}" if frame.kind != "data" else pkt, frame.src, frame.dst,
                               frame.size, frame.txs, frame.outcomes, now,
-                              reach_s(links.get(frame.src), frame.size, extent), linger, frame.kind)
+                              reach_s(links.get(frame.src), frame.size, extent), linger, frame.kind, floor)
             if view is not None:
                 out.append(view)
                 if len(out) >= MAX_FRAMES:

@@ -115,20 +115,21 @@ class Replay:
     def linger(self, speed: float) -> float:
         return min(MAX_LINGER_S, max(LINGER_S, LINGER_S * speed))
 
-    def state(self, t: float, speed: float = 1.0, playing: bool = False) -> dict[str, Any]:
-        """The page's STATE at model time ``t`` (played at ``speed``× when ``playing``)."""
+    def state(self, t: float, speed: float = 1.0, playing: bool = False, floor: float = 0.0) -> dict[str, Any]:
+        """The page's STATE at model time ``t`` (played at ``speed``× when ``playing``; ``floor``: the model
+        seconds between two pictures, in which every transmission is sent whatever its wave's length)."""
         t = min(max(t, self.start), self.end)
         scene = self.scene_at(t)
         linger = self.linger(speed)
         return {"class": "STATE", "t": round(t, 6), "rate": speed if playing else 0.0, "playing": playing,
                 "speed": speed, "start": self.start, "end": round(self.end, 6), "linger_s": linger,
                 "vehicles": self._vehicles(scene, t), "links": self._links(scene, t), "hosts": self._hosts(scene, t),
-                "frames": self._frames(scene, t, linger), "flows": self._flows(t)}
+                "frames": self._frames(scene, t, linger, floor), "flows": self._flows(t)}
 
-    def _frames(self, scene: dict, t: float, linger: float) -> list[dict]:
+    def _frames(self, scene: dict, t: float, linger: float, floor: float = 0.0) -> list[dict]:
         seen: set[int] = set()
         chosen = []
-        for bucket in range(math.floor((t - linger) / BUCKET_S), math.floor(t / BUCKET_S) + 1):
+        for bucket in range(math.floor((t - max(linger, floor)) / BUCKET_S), math.floor(t / BUCKET_S) + 1):
             for index in self.buckets.get(bucket, ()):
                 if index not in seen:
                     seen.add(index)
@@ -139,7 +140,7 @@ class Replay:
             p = self.packets[index]
             pkt = p.pkt if p.kind == "data" else f"{p.kind}:{p.pkt}"
             view = frame_view(pkt, p.src, p.dst, p.size, p.txs, p.outcomes, t,
-                              reach_s(links.get(p.src), p.size, self.extent_m), linger, p.kind)
+                              reach_s(links.get(p.src), p.size, self.extent_m), linger, p.kind, floor)
             if view is not None:
                 out.append(view)
         out.sort(key=lambda f: -(f["tx"] if f["tx"] is not None else f["out"][-1][1]))

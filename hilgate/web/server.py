@@ -441,7 +441,8 @@ class Player:
         if scene is not self.scene:
             self.scene = scene
             self.page.send_json(scene)
-        self.page.send_text(json.dumps(self.replay.state(self.t, self.speed, self.playing)), force=force)
+        floor = 2 * REPLAY_TICK_S * self.speed  # every transmission since the last picture
+        self.page.send_text(json.dumps(self.replay.state(self.t, self.speed, self.playing, floor)), force=force)
 
     def stop(self) -> None:
         self.timer.stop()

@@ -43,7 +43,7 @@
   function seen(frame, what) {
     let entry = view.seen.get(frame.id);
     if (!entry) {
-      entry = { src: frame.src, dst: frame.dst, states: [] };
+      entry = { src: frame.src, dst: frame.dst, tx: frame.tx != null, states: [] };  // tx: sent since the page looks
       view.seen.set(frame.id, entry);
       if (view.seen.size > 5000) view.seen.delete(view.seen.keys().next().value);
     }
@@ -329,6 +329,7 @@
           flying = age >= 0 && age <= f.reach_s && radius <= reach;
         }
         if (flying) {
+          seen(f, "flight");
           group.appendChild(el("circle", { cx: project(from)[0], cy: project(from)[1], r: Math.max(1, radius * map.cam.s),
             class: "wave", stroke: channelColour(link.channel) }));
         }
@@ -361,9 +362,6 @@
           const [x, y] = project([from[0] + (at[0] - from[0]) * w, from[1] + (at[1] - from[1]) * w]);
           group.appendChild(el("circle", { cx: x, cy: y, r: 4, fill: channelColour(link.channel), class: "flight", "data-to": target }));
         }
-        seen(f, "flight");
-      } else if (flying) {
-        seen(f, "flight");
       }
       if (group.childNodes.length) layer.appendChild(group);
       if (!live && !e.inState && e.first !== null) view.frames.delete(id);
