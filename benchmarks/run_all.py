@@ -40,6 +40,7 @@ def benchmarks(ns3_python: str | None) -> list[list[str]]:
         ["benchmarks/ring_aloha.py", "--nodes", "1000", "--sim-time", "3600", "--repeats", "1"],
         ["benchmarks/aruco.py"],
         ["benchmarks/web_cost.py"],
+        ["benchmarks/web_redraws.py"],
         ["benchmarks/bellhop_lookup.py"],
     ]
 

@@ -247,7 +247,7 @@ def _print_status(status: dict, as_json: bool) -> None:
 
     if as_json:
         print(json.dumps({"links": status["links"], "vehicles": status["vehicles"],
-                          **{key: status[key] for key in ("time", "ros2", "tcp", "web") if key in status}}),
+                          **{key: status[key] for key in ("ros2", "tcp", "web") if key in status}}),
               flush=True)
         return
     from .report.tables import _render

@@ -12,8 +12,6 @@ from __future__ import annotations
 import asyncio
 import csv
 import json
-import os
-import shutil
 import signal
 import socket
 import subprocess
@@ -33,7 +31,6 @@ from hilgate.web.picture import Flight, frame_view, scene_message
 from hilgate.web.replay import Replay
 
 REPO = Path(__file__).resolve().parent.parent
-FIGURE = REPO / "docs" / "figures" / "web-live.png"
 pytest.importorskip("tornado", reason="the web view needs tornado: pip install -e '.[test]'")
 
 
@@ -127,11 +124,7 @@ def test_the_live_view_draws_the_scene_a_frame_in_flight_and_its_fate_and_a_swap
         la.send(b"one more, for the picture", dst=2)
         browser.wait(f"[...document.querySelectorAll('#top .wave')].length >= 2 &&"
                      f" document.querySelectorAll('#top .flight').length >= 1", "frames in flight", alive=alive)
-        shot = tmp_path / "web-live.png"
-        browser.screenshot(str(shot))
-        assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-        if os.environ.get("HILGATE_WRITE_FIGURES"):  # the README's screenshot (docs/live-view.md says how)
-            shutil.copyfile(shot, FIGURE)
+        browser.keep(tmp_path, "live-swapped")  # (the README's screenshot is test_web_operator.py's, at 1280×800)
         lb.recv(timeout=HANG_GUARD_S)
     status = daemon.status()
     assert status["web"]["pages"] == 1 and status["web"]["url"] in url
@@ -175,6 +168,8 @@ links:
         host_b.process.send_signal(signal.SIGKILL)
         host_b.process.wait()
         browser.wait(f"{row} == 'down'", "host B down after its daemon was killed")
+        browser.wait("[...document.querySelectorAll('#log-list li[data-kind=\"host\"][data-level=\"error\"]')]"
+                     ".some(li => li.textContent.includes('host B lost'))", "host B lost, in the event log")
         browser.wait(f"(() => {{ const r = document.querySelector('tr[data-link=\"{b}\"] td.state');"
                      f" return r && r.textContent == 'down'; }})()", "B's link down")
         assert browser.js("return document.querySelector('tr[data-host=\"B\"] td.state').className").endswith("down")

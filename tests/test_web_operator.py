@@ -18,7 +18,9 @@ Each test keeps the page's screenshot and DOM as artefacts (its tmp_path, or ``H
 from __future__ import annotations
 
 import json
+import math
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -119,7 +121,6 @@ def test_the_demo_at_1280x800_draws_every_frame_flying_and_fits_without_overlaps
     lost = browser.view("[...document.querySelectorAll('#flows td.lost')].map(td => [td.textContent, td.dataset.lost,"
                         " getComputedStyle(td).color])")
     legend = browser.view("[...document.querySelectorAll('#legend [data-fate]')].map(s => s.textContent)")
-    import re
     for text, counts, colour in lost:
         assert not re.search(CODES, text), text
         if json.loads(counts):
@@ -217,7 +218,6 @@ def test_what_an_operator_expects_of_the_live_page(demo, browser, tmp_path):  # 
     browser.wait("!document.getElementById('pair').hidden && v.pair", "the pair of modems")
     pair = browser.view("v.pair")
     spots = browser.view("Object.fromEntries(v.state.vehicles.map(x => [x.name, x.position]))")
-    import math
     assert pair["a"] == "bluerov" and pair["b"] == "auv"
     assert pair["distance_m"] == pytest.approx(math.dist(spots["bluerov"], spots["auv"]), rel=0.05)
     acoustic = [p for p in pair["pairs"] if p["src"] == names["bluerov_ac"] and p["dst"] == auv][0]
@@ -232,7 +232,7 @@ def test_what_an_operator_expects_of_the_live_page(demo, browser, tmp_path):  # 
     rov2 = names["rov2_ac"]
     data["links"][emulated] = {"vehicle": "rov2", "address": 9, "bitrate_bps": 2000, "channel": "acoustic",
                                "gli": ["socket"], "emulate": {"protocol": "evologics", "pty": str(pty)}}
-    data["links"][rov2] = {"vehicle": "rov2", "backend": "evologics", "port": str(pty), "ack": False, "address": 2,
+    data["links"][rov2] = {"vehicle": "rov2", "backend": "evologics", "port": str(pty), "ack": False, "address": 2, "channel": "acoustic",
                            "gli": ["socket"]}
     daemon.reload(yaml.safe_dump(data, sort_keys=False))
     browser.wait(f"[...document.querySelectorAll('#log-list li[data-kind=\"reload\"][data-level=\"warning\"]')]"

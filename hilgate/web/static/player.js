@@ -8,7 +8,7 @@
   const view = window.hilgateView;
   const SPEEDS = [0.1, 0.25, 0.5, 1, 2, 5, 10, 25, 50, 100];
   const $ = (id) => document.getElementById(id);
-  const player = view.player = { events: [], dragging: false, axisKey: "" };
+  const player = view.player = { events: [], dragging: false, axisKey: "", asked: null };
 
   function seek(t) {
     const state = view.state;
@@ -18,7 +18,7 @@
   }
   player.seek = seek;
 
-  function setSpeed(speed) { view.send({ class: "SPEED", speed }); $("speed").value = speed; }
+  function setSpeed(speed) { view.send({ class: "SPEED", speed }); $("speed").value = speed; player.asked = speed; }
 
   player.step = function (direction) {
     const t = view.state ? view.state.t : 0;
@@ -61,7 +61,7 @@
       if (tag === "INPUT" && event.target.type !== "range" || tag === "TEXTAREA") return;
       const state = view.state;
       if (!state) return;
-      const index = SPEEDS.indexOf(state.speed);
+      const index = SPEEDS.indexOf(Number($("speed").value));  // the speed asked for last (the picture's may lag)
       let done = true;
       switch (event.key) {
         case " ": view.send({ class: state.playing ? "PAUSE" : "PLAY" }); break;
@@ -123,7 +123,8 @@
     if (!player.dragging) slider.value = state.t;
     $("position").textContent = state.t.toFixed(1) + " / " + Number(state.end).toFixed(1) + " s";
     const speed = $("speed");
-    if (Number(speed.value) !== state.speed && document.activeElement !== speed) speed.value = state.speed;
+    if (player.asked === state.speed) player.asked = null;  // (until the player has it, keys count from the asked)
+    if (player.asked == null && Number(speed.value) !== state.speed && document.activeElement !== speed) speed.value = state.speed;
     $("prev-event").disabled = !player.events.some((e) => e.t < state.t - 1e-6);
     $("next-event").disabled = !player.events.some((e) => e.t > state.t + 1e-6);
     drawAxis(state);
