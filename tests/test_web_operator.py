@@ -100,8 +100,8 @@ def test_the_demo_at_1280x800_draws_every_frame_flying_and_fits_without_overlaps
                  "the demo's five vehicles drawn", alive=alive)
     # every frame judged (not dropped at its sender, not without a pose) was drawn flying first: RF frames
     # fly for microseconds, far less than the 100 ms between two pictures (7 of 62 were drawn before)
-    judged = ("[...v.seen.values()].filter(e => e.tx !== false && e.states.some(s => s != 'flight' && s != 'fifo'"
-              " && s != 'no_pose'))")  # (tx false: sent before the page connected)
+    judged = ("[...v.seen.values()].filter(e => e.tx !== null && e.states.some(s => s != 'flight' && s != 'fifo'"
+              " && s != 'no_pose'))")  # (tx null: sent before the page connected)
     browser.wait(f"{judged}.length >= 20", "20 frames judged", alive=alive)
     states = browser.view(f"{judged}.map(e => e.states)")
     assert all(s[0] == "flight" for s in states), [s for s in states if s[0] != "flight"]
@@ -275,10 +275,11 @@ def test_the_player_steps_from_event_to_event_takes_the_keyboard_and_fits_800_px
         assert "#token=" in line, line + viewer.stderr.read()
         browser.viewport(1280, 800)
         browser.open(line.split(" at ", 1)[1].split(" ")[0])
-        browser.wait("v.authed && v.state && v.scene && v.player.events.length", "the trace and its events")
-        # 800 px high and 1280 wide with the player: no scrollbar
+        browser.wait("v.authed && v.state && v.scene && !document.getElementById('player').hidden", "the trace")
+        # 800 px high and 1280 wide with the player: no scrollbar (a replay was 930 px high)
         assert browser.view("document.documentElement.scrollHeight") <= 800
         assert browser.view("document.documentElement.scrollWidth") <= 1280
+        browser.wait("v.player.events.length", "the trace's events")
         events = browser.view("v.player.events")
         assert {e["kind"] for e in events} >= {"burst"} and all(e["level"] in ("info", "warning", "error") for e in events)
         browser.wait(f"document.querySelectorAll('#axis [data-event]').length == {len(events)}", "the events on the axis")
@@ -297,19 +298,40 @@ def test_the_player_steps_from_event_to_event_takes_the_keyboard_and_fits_800_px
         body.send_keys(Keys.ARROW_RIGHT)
         browser.wait(f"Math.abs(v.state.t - {events[0]['t'] + 1}) < 1e-6", "a second on")
         # at 100×, every frame drawn flies and lands (before, no fate was drawn at all at 100×)
-        for _ in range(5):
+        for _ in range(6):  # 1× → 2, 5, 10, 25, 50, 100×
             body.send_keys("+")
         browser.wait("v.state.speed == 100", "100×")
         browser.driver.find_element("id", "acks").click()  # acknowledgements on request
-        body.send_keys(" ")
-        browser.wait("v.state.playing", "playing")
-        browser.wait("[...v.seen.values()].filter(e => e.states.includes('rx')).length >= 10", "fates at 100×")
-        browser.wait("[...v.seen.keys()].some(id => id.startsWith('ack:'))", "an acknowledgement drawn")
-        states = browser.view("[...v.seen.entries()].filter(([id, e]) => e.states.includes('rx')).map(([id, e]) => e.states)")
-        assert all(s[0] == "flight" for s in states), states
+        start = browser.view("v.state.t")
+        body.send_keys(" ")  # (the rest of the trace lasts half a second at 100×: the page keeps what it drew)
         browser.wait("!v.state.playing && v.state.t == v.state.end", "the end")
+        played = f"[...v.seen.entries()].filter(([id, e]) => e.tx > {start} && e.states.includes('rx'))"  # sent since
+        browser.wait(f"{played}.length >= 10", "fates at 100×")
+        browser.wait("[...v.seen.keys()].some(id => id.startsWith('ack:'))", "an acknowledgement drawn")
+        states = browser.view(f"{played}.map(([id, e]) => [id, e.tx, e.states])")
+        assert all(s[0] == "flight" for _, _, s in states), ([s for s in states if s[2][0] != "flight"], start)
         figure(browser.keep(tmp_path, "player"), "web-player.png")
     finally:
         viewer.send_signal(signal.SIGINT)
         assert viewer.wait(30) == 0
         assert "Traceback" not in viewer.stderr.read()
+
+
+# -- the trace's events, without a browser -----------------------------------------------------------
+
+def test_a_traces_events_are_bursts_by_cause_reloads_with_their_swaps_hosts_and_poses():
+    from hilgate.web.events import BURST_GAP_S, trace_events
+
+    losses = [(t, "a", "col") for t in (1.0, 2.0, 3.0, 4.0)] + [(t, "a", "prop") for t in (1.0, 2.0)] + \
+             [(10.0 + BURST_GAP_S + 0.1, "a", "col"), (20.0, "b", "fifo"), (20.1, "b", "fifo"), (20.2, "b", "fifo")]
+    sim = {"links": {"a": {"kind": "sim", "backend": "sim"}, "b": {"kind": "sim", "backend": "sim"}}, "name": "s"}
+    real = {"links": {"a": {"kind": "real", "backend": "evologics"}, "c": {"kind": "sim", "backend": "sim"}}, "name": "s"}
+    events = trace_events([(0.0, sim), (30.0, real)], [(25.0, "B", "down"), (26.0, "B", "up")],
+                          {"v": ([5.0, 6.0, 7.0], [[0, 0, 0], None, [1, 1, 1]])}, losses)
+    assert [(e["t"], e["kind"], e["level"]) for e in events] == [
+        (1.0, "burst", "warning"), (6.0, "pose", "warning"), (7.0, "pose", "info"),
+        (20.0, "burst", "warning"), (25.0, "host", "error"), (26.0, "host", "info"), (30.0, "reload", "warning")]
+    assert events[0] == {"t": 1.0, "level": "warning", "kind": "burst", "link": "a", "cause": "col", "n": 4, "until": 4.0}
+    assert events[-1]["swaps"] == [["a", "sim", "real evologics"]] and events[-1]["added"] == ["c"]
+    assert events[-1]["removed"] == ["b"]
+    json.dumps(events, allow_nan=False)

@@ -159,9 +159,10 @@ class Replay:
                     position = [a + (b - a) * w for a, b in zip(position, spots[i])]
             elif times:  # before its first sample: where it starts
                 position = spots[0]
+            lost = i > 0 and spots[i - 1] is None  # the daemon sampled no position: a stale live pose dropped
             out.append({"name": name, "source": vehicle["source"],
                         "position": None if position is None else [round(c, 4) for c in position],
-                        "age_s": None if age is None else round(age, 3)})
+                        "age_s": None if age is None else round(age, 3), "stale": "stale" if lost else None})
         return out
 
     def _links(self, scene: dict, t: float) -> list[dict]:

@@ -43,7 +43,7 @@
   function seen(frame, what) {
     let entry = view.seen.get(frame.id);
     if (!entry) {
-      entry = { src: frame.src, dst: frame.dst, tx: frame.tx != null, states: [] };  // tx: sent since the page looks
+      entry = { src: frame.src, dst: frame.dst, tx: frame.tx, states: [] };  // tx null: sent before the page looked
       view.seen.set(frame.id, entry);
       if (view.seen.size > 5000) view.seen.delete(view.seen.keys().next().value);
     }
@@ -275,13 +275,17 @@
   }
 
   // -- frames --------------------------------------------------------------------------------------------
-  map.onFrames = function (state) {
+  // ``before``: the model time of the picture before this one. A frame sent since then is new, and flies
+  // even when this picture is a paused one (the last of a trace played at 100×); one sent before it is
+  // part of a still picture while the player is paused.
+  map.onFrames = function (state, before) {
     const ids = new Set(), now = performance.now();
     for (const f of state.frames || []) {
       ids.add(f.id);
       const e = view.frames.get(f.id);
       if (e) e.f = f;
-      else view.frames.set(f.id, { f, first: null, mode: null, shown: new Map(), inState: true, born: now });
+      else view.frames.set(f.id, { f, first: null, mode: null, shown: new Map(), inState: true, born: now,
+        fresh: f.tx != null && before != null && f.tx > before });
     }
     for (const [id, e] of view.frames) e.inState = ids.has(id);
     while (view.frames.size > FRAMES_KEPT) view.frames.delete(view.frames.keys().next().value);
@@ -313,7 +317,8 @@
         const spread = farthest || Math.min(reach, 50);
         const flight = link ? (link.min_delay_s || 0) + spread / link.speed_mps : 0;
         const age = f.tx == null ? Infinity : now - f.tx;
-        e.mode = rate > 0 && flight / rate * 1000 >= MIN_FLIGHT_MS && age < flight / 2 ? "real" : rate > 0 || view.state.playing !== false ? "slow" : "still";
+        e.mode = rate > 0 && flight / rate * 1000 >= MIN_FLIGHT_MS && age < flight / 2 ? "real"
+          : rate > 0 || view.state.playing !== false || e.fresh ? "slow" : "still";
         e.spread = spread;
       }
       const group = el("g", { "data-frame": f.id, class: "frame" + (f.kind ? " control" : "") + (view.inspect.what && view.inspect.what.id === f.id ? " chosen" : "") });

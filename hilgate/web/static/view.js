@@ -132,7 +132,7 @@ const view = window.hilgateView = {
     if (before && state.t < before.t - 1e-9) view.map.clearFrames();  // a seek backwards
     view.state = state;
     view.received = performance.now();
-    view.map.onFrames(state);
+    view.map.onFrames(state, before && state.t >= before.t ? before.t : null);
     view.map.onState(state);
     const sampled = view.rates.onState(state);
     if (state.links) updateLinks(state.links, sampled);
