@@ -473,10 +473,8 @@
       if (e) view.inspect.frame(e.f);
     } else if (what.link) {
       view.inspect.link(what.link);
-    } else if (what.vehicle) {
+    } else if (what.vehicle) {  // chosen: hover another for the pair (its links are inspected by their rows)
       map.pinned = map.pinned === what.vehicle ? null : what.vehicle;
-      const links = Object.entries(view.scene.links).filter(([, l]) => l.vehicle === what.vehicle).map(([id]) => id).sort();
-      if (links.length) view.inspect.link(links[0]);
     } else {
       map.pinned = null;
     }

@@ -31,8 +31,10 @@
     const linksA = Object.entries(scene.links).filter(([, l]) => l.vehicle === a);
     const linksB = Object.entries(scene.links).filter(([, l]) => l.vehicle === b);
     const pairs = [];
-    for (const [ia, la] of linksA) {
-      for (const [ib, lb] of linksB) {
+    const directed = [];
+    for (const [ia, la] of linksA) for (const [ib, lb] of linksB) directed.push([ia, la, ib, lb], [ib, lb, ia, la]);
+    {
+      for (const [ia, la, ib, lb] of directed) {
         if (la.channel !== lb.channel) continue;
         const delay = (la.min_delay_s || 0) + d / la.speed_mps;
         const outOfRange = la.range_m[1] != null && (d > la.range_m[1] || d < la.range_m[0]);
