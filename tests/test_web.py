@@ -122,8 +122,8 @@ def test_the_live_view_draws_the_scene_a_frame_in_flight_and_its_fate_and_a_swap
         browser.wait(f"[...v.seen.values()].some(e => e.src == '{ea}' && e.states.includes('rx'))",
                      "the emulated modem's frame delivered", alive=alive)
         la.send(b"one more, for the picture", dst=2)
-        browser.wait(f"[...document.querySelectorAll('#top .wave')].length >= 2 &&"
-                     f" document.querySelectorAll('#top .flight').length >= 1", "frames in flight", alive=alive)
+        browser.wait(f"[...document.querySelectorAll('#flight .wave')].length >= 2 &&"
+                     f" document.querySelectorAll('#flight .flight').length >= 1", "frames in flight", alive=alive)
         browser.keep(tmp_path, "live-swapped")  # (the README's screenshot is test_web_operator.py's, at 1280×800)
         lb.recv(timeout=HANG_GUARD_S)
     status = daemon.status()

@@ -200,7 +200,7 @@ def test_what_an_operator_expects_of_the_live_page(demo, browser, tmp_path):  # 
     keys = browser.view("[...document.querySelectorAll('#inspect dd')].map(d => d.dataset.key)")
     assert {"vehicle", "backend", "bitrate", "range", "counts", "causes"} <= set(keys)
     # click a frame: its size, source, destination, times, fate and cause
-    clicked = browser.wait("""(() => { const f = [...document.querySelectorAll('#top [data-frame] .fate, #top [data-frame] .flight')][0];
+    clicked = browser.wait("""(() => { const f = [...document.querySelectorAll('#flight [data-frame] .fate, #flight [data-frame] .flight')][0];
         if (!f) return null; const o = {bubbles: true, clientX: 1, clientY: 1, pointerId: 1};
         f.dispatchEvent(new PointerEvent('pointerdown', o)); f.dispatchEvent(new PointerEvent('pointerup', o));
         return f.closest('[data-frame]').dataset.frame; })()""", "a frame to click", alive=alive)

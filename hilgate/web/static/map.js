@@ -15,13 +15,14 @@
   const SVG = "http://www.w3.org/2000/svg";
   const CHANNEL_COLOURS = ["#0b3954", "#087e8b", "#c1440e", "#6a4c93", "#3d5a80", "#bc4749"];
   const MIN_FLIGHT_MS = 600, FATE_MS = 1800, FRAMES_KEPT = 800;
-  const MAX_DASHED_PX = 2500;
-  const TRAIL_S = 120, TRAIL_POINTS = 400;
+  const MAX_DASHED_PX = 2500, MAX_DASHES = 2000;
+  const TRAIL_S = 120, TRAIL_POINTS = 400, DETAILS_MAX = 20;
   const $ = (id) => document.getElementById(id);
 
   const map = view.map = {
     auto: true, cam: null, dirty: true, width: 0, height: 0, trails: new Map(), lastT: null,
     pinned: null, hover: null, acks: false, drag: null, rings: { drawn: 0, dashed: 0, skipped: 0 },
+    cost: { still: [0, 0], frames: [0, 0] },  // ms spent building each layer, and how often (the benchmark's)
   };
   view.frames = new Map();  // frame id -> {f, first, mode, shown, inState}
 
@@ -152,7 +153,7 @@
 
   function drawRings(layer, spots) {
     const scene = view.scene, stats = { drawn: 0, dashed: 0, skipped: 0 };
-    const done = new Set();
+    const done = new Set(), rings = [];
     for (const [id, link] of Object.entries(scene.links)) {
       const p = spots[link.vehicle];
       if (!p || link.range_m[1] == null) continue;
@@ -163,9 +164,13 @@
       const near = Math.hypot(cx - nx, cy - ny);
       if (r >= far || r < near || done.has(key)) { stats.skipped++; continue; }  // encloses the picture, or misses it
       done.add(key);
-      const dashed = r <= MAX_DASHED_PX;
+      rings.push([id, link, cx, cy, r]);
+    }
+    // dashes are drawn one by one: only while they are few (a fleet's hundred rings are drawn solid)
+    const dashes = rings.reduce((sum, [, , , , r]) => sum + (r <= MAX_DASHED_PX ? 2 * Math.PI * r / 8 : 0), 0);
+    for (const [id, link, cx, cy, r] of rings) {
       const attrs = { cx, cy, r, class: "ring", stroke: channelColour(link.channel), "data-ring": id };
-      if (dashed) { attrs["stroke-dasharray"] = "4 4"; stats.dashed++; }
+      if (r <= MAX_DASHED_PX && dashes <= MAX_DASHES) { attrs["stroke-dasharray"] = "4 4"; stats.dashed++; }
       layer.appendChild(el("circle", attrs));
       stats.drawn++;
     }
@@ -217,10 +222,21 @@
   }
   map.place = place;
 
+  // Labels are kept from one picture to the next and only moved or reworded: laying out SVG text is the
+  // costliest part of a redraw (a fleet's hundred labels made anew ten times a second halved the redraws).
+  const labelNodes = new Map();  // vehicle -> {g, line, name, detail}
+  function put(node, key, value) {
+    const text = String(value);
+    if (node.getAttribute(key) !== text) node.setAttribute(key, text);
+  }
+  function say(node, text) { if (node.textContent !== text) node.textContent = text; }
+
   function drawVehicles(layer, labels) {
     const scene = view.scene, boxes = [];
     const vehicles = (view.state.vehicles || []).filter((v) => v.position);
+    const details = vehicles.length <= DETAILS_MAX;  // (a fleet: the source and age of the chosen, hovered and stale only)
     for (const v of vehicles) { const [x, y] = project(v.position); boxes.push([x - 7, y - 7, x + 7, y + 7]); }
+    const kept = new Set();
     for (const v of vehicles) {
       const [x, y] = project(v.position);
       const kinds = Object.values(scene.links).filter((l) => l.vehicle === v.name).map((l) => l.kind);
@@ -236,15 +252,30 @@
       g.appendChild(el("circle", { cx: x, cy: y, r: 6, fill: colour }));
       layer.appendChild(g);
       const name = v.name + (v.stale ? (v.stale === "never" ? " · NO POSE" : " · STALE") : "");
-      const detail = v.source + (v.age_s == null ? "" : " · " + v.age_s.toFixed(1) + " s");
-      const w = Math.max(textWidth(name, 11), textWidth(detail, 9)), h = 24;
+      const showDetail = details || v.stale || map.pinned === v.name || map.hover === v.name;
+      const detail = showDetail ? v.source + (v.age_s == null ? "" : " · " + v.age_s.toFixed(1) + " s") : "";
+      const w = Math.max(textWidth(name, 11), detail ? textWidth(detail, 9) : 0), h = detail ? 24 : 13;
       const [dx, dy] = place(boxes, x, y, w, h);
-      const label = el("g", { class: "label", "data-label": v.name });
-      if (Math.abs(dx) > 12 || dy > 6 || dy < -h) label.appendChild(el("line", { x1: x, y1: y, x2: x + dx + (dx < 0 ? w : 0), y2: y + dy + h / 2, class: "leader" }));
-      label.appendChild(el("text", { x: x + dx, y: y + dy + 10, class: v.stale ? "stale-name" : "" }, name));
-      label.appendChild(el("text", { x: x + dx, y: y + dy + 21, class: "small" }, detail));
-      labels.appendChild(label);
+      let node = labelNodes.get(v.name);
+      if (!node) {
+        node = { g: el("g", { class: "label", "data-label": v.name }), line: el("line", { class: "leader" }), name: el("text", {}), detail: el("text", { class: "small" }) };
+        node.g.append(node.line, node.name, node.detail);
+        labels.appendChild(node.g);
+        labelNodes.set(v.name, node);
+      }
+      kept.add(v.name);
+      const leader = Math.abs(dx) > 12 || dy > 6 || dy < -h;
+      put(node.line, "visibility", leader ? "visible" : "hidden");
+      if (leader) { put(node.line, "x1", x.toFixed(1)); put(node.line, "y1", y.toFixed(1)); put(node.line, "x2", (x + dx + (dx < 0 ? w : 0)).toFixed(1)); put(node.line, "y2", (y + dy + h / 2).toFixed(1)); }
+      put(node.name, "x", (x + dx).toFixed(1));
+      put(node.name, "y", (y + dy + 10).toFixed(1));
+      put(node.name, "class", v.stale ? "stale-name" : "");
+      say(node.name, name);
+      put(node.detail, "x", (x + dx).toFixed(1));
+      put(node.detail, "y", (y + dy + 21).toFixed(1));
+      say(node.detail, detail);
     }
+    for (const [name, node] of labelNodes) if (!kept.has(name)) { node.g.remove(); labelNodes.delete(name); }
   }
 
   function drawPair(layer) {
@@ -260,15 +291,20 @@
     const spots = positions();
     const svg = $("top");
     const still = $("still");
-    const grid = el("g"), rings = el("g"), trails = el("g"), vehicles = el("g"), labels = el("g"), overlay = el("g");
+    const grid = el("g"), rings = el("g"), trails = el("g"), vehicles = el("g"), overlay = el("g");
+    if (!map.layers) {  // the vehicles, their labels (kept: drawVehicles) and the overlay, in this order for good
+      map.layers = { vehicles: el("g"), labels: el("g"), overlay: el("g") };
+      $("above").replaceChildren(map.layers.vehicles, map.layers.labels, map.layers.overlay);
+    }
     drawGrid(grid);
     drawRings(rings, spots);
     drawTrails(trails);
-    drawVehicles(vehicles, labels);
+    drawVehicles(vehicles, map.layers.labels);
     drawPair(overlay);
     drawOverlay(overlay);
     still.replaceChildren(grid, rings, trails);
-    $("above").replaceChildren(vehicles, labels, overlay);
+    map.layers.vehicles.replaceChildren(...vehicles.childNodes);
+    map.layers.overlay.replaceChildren(...overlay.childNodes);
     svg.setAttribute("viewBox", `0 0 ${map.width} ${map.height}`);
     drawDepth(view.state.vehicles || []);
     map.dirty = false;
@@ -340,6 +376,7 @@
         }
       }
       let live = flying;
+      const marks = new Map();  // (fate, fading step) -> one path of rings (and crosses) and where: few elements a frame
       for (const [where, t, ev, cause] of f.out || []) {
         const key = where + "|" + t;
         const d = targets.get(where) || 0;
@@ -352,21 +389,32 @@
         const at = spots[(scene.links[where] || {}).vehicle];
         if (!at) continue;
         const code = ev === "rx" ? "rx" : (cause || "?");
-        const colour = W.colour(code), [x, y] = project(at), opacity = Math.max(0.2, 1 - age / FATE_MS);
-        group.appendChild(el("circle", { cx: x, cy: y, r: 9, stroke: colour, "stroke-opacity": opacity, class: "fate", "data-fate": code, "data-at": where }));
-        if (code !== "rx") group.appendChild(el("path", { d: `M${x - 5},${y - 5}l10,10m0,-10l-10,10`, stroke: colour, "stroke-opacity": opacity, class: "cross" }));
+        const [x, y] = project(at), opacity = Math.max(0.2, Math.round(10 * (1 - age / FATE_MS)) / 10);
+        const mark = code + "|" + opacity;
+        let m = marks.get(mark);
+        if (!m) marks.set(mark, m = { code, opacity, d: "", at: [] });
+        m.d += `M${(x + 9).toFixed(1)},${y.toFixed(1)}a9,9 0 1,0 -18,0a9,9 0 1,0 18,0`;
+        if (code !== "rx") m.d += `M${(x - 5).toFixed(1)},${(y - 5).toFixed(1)}l10,10m0,-10l-10,10`;
+        m.at.push(where);
         seen(f, code);
       }
-      if (flying && from) {
-        const judged = new Set(e.shown.keys());
-        for (const [target, d] of targets) {
-          if (target === f.src || [...judged].some((k) => k.startsWith(target + "|"))) continue;
+      for (const m of marks.values()) {
+        group.appendChild(el("path", { d: m.d, stroke: W.colour(m.code), "stroke-opacity": m.opacity, class: "fate", "data-fate": m.code, "data-at": m.at.join(" ") }));
+      }
+      if (flying && from) {  // one path of dots, one towards each receiver not judged yet
+        const judged = new Set([...e.shown.keys()].map((k) => k.slice(0, k.lastIndexOf("|"))));
+        let d = "";
+        const to = [];
+        for (const [target, distance] of targets) {
+          if (target === f.src || judged.has(target)) continue;
           const at = spots[(scene.links[target] || {}).vehicle];
           if (!at) continue;
-          const w = Math.min(1, radius / (d || 1));
+          const w = Math.min(1, radius / (distance || 1));
           const [x, y] = project([from[0] + (at[0] - from[0]) * w, from[1] + (at[1] - from[1]) * w]);
-          group.appendChild(el("circle", { cx: x, cy: y, r: 4, fill: channelColour(link.channel), class: "flight", "data-to": target }));
+          d += `M${(x + 4).toFixed(1)},${y.toFixed(1)}a4,4 0 1,0 -8,0a4,4 0 1,0 8,0z`;
+          to.push(target);
         }
+        if (d) group.appendChild(el("path", { d, fill: channelColour(link.channel), class: "flight", "data-to": to.join(" ") }));
       }
       if (group.childNodes.length) layer.appendChild(group);
       if (!live && !e.inState && e.first !== null) view.frames.delete(id);
@@ -376,11 +424,14 @@
   // -- the depth strip: one label per vehicle, pushed down where they would overlap ------------------------
   function drawDepth(vehicles) {
     const svg = $("depth");
-    const width = svg.clientWidth || 80, height = svg.clientHeight || 400;
+    const [width, height] = map.sizes.depth;
     const placed = vehicles.filter((v) => v.position).map((v) => ({ v, z: v.position[2] }));
     const depths = placed.map((p) => p.z);
     const bottom = Math.max(5, ...depths) * 1.15, top = Math.min(0, ...depths);
     const Y = (z) => 18 + (height - 30) * (z - top) / (bottom - top || 1);
+    const key = width + "|" + height + "|" + placed.map((p) => p.v.name + ":" + Math.round(Y(p.z)) + (p.v.stale ? "!" : "")).join(",");
+    if (key === map.depthKey) return;  // nothing moved by a pixel: its labels stay as they are
+    map.depthKey = key;
     const layer = el("g");
     layer.appendChild(el("text", { x: 3, y: 11, class: "small" }, "depth (m)"));
     layer.appendChild(el("line", { x1: 12, y1: Y(0), x2: width, y2: Y(0), class: "surface" }));
@@ -402,16 +453,23 @@
   map.draw = function (now) {
     const scene = view.scene, state = view.state;
     if (!scene || !state) return;
-    const svg = $("top");
-    const width = svg.clientWidth || 600, height = svg.clientHeight || 400;
+    const [width, height] = map.sizes.top;  // (read by a ResizeObserver: reading them here forced a layout per redraw)
     if (width !== map.width || height !== map.height) { map.width = width; map.height = height; map.dirty = true; if (map.auto) map.cam = null; }
     const spots = positions();
     if (map.auto) fit(spots);
     if (!map.cam) return;
-    if (map.dirty) drawStill();
+    const t0 = performance.now();
+    if (map.dirty) { drawStill(); map.cost.still[0] += performance.now() - t0; map.cost.still[1]++; }
+    const t1 = performance.now();
     const layer = el("g");
-    drawFrames(layer, spots, now, performance.now(), state.rate || 0);
+    drawFrames(layer, spots, now, t1, state.rate || 0);
     $("frames").replaceChildren(layer);
+    if (map.flightBox !== map.width + " " + map.height) {
+      map.flightBox = map.width + " " + map.height;
+      $("flight").setAttribute("viewBox", `0 0 ${map.width} ${map.height}`);
+    }
+    map.cost.frames[0] += performance.now() - t1;
+    map.cost.frames[1]++;
   };
 
   // -- the pointer: drag to pan, wheel to zoom, click to inspect, hover a second vehicle for the pair -------
@@ -425,14 +483,28 @@
     return {};
   }
 
+  map.sizes = { top: [600, 400], depth: [78, 400] };
+  function watchSize(id, key) {
+    const node = $(id);
+    const take = () => { map.sizes[key] = [node.clientWidth || map.sizes[key][0], node.clientHeight || map.sizes[key][1]]; map.dirty = true; };
+    take();
+    if (window.ResizeObserver) new ResizeObserver(take).observe(node);
+    else window.addEventListener("resize", take);
+  }
+
   map.setUp = function () {
-    const svg = $("top");
+    watchSize("top", "top");
+    watchSize("depth", "depth");
+    const svg = $("map-box");  // the chart and the frames' layer above it
+    const panel = (event) => event.target.closest && event.target.closest("#tools, #inspect, #pair");
     svg.addEventListener("wheel", (event) => {
+      if (panel(event)) return;  // (the inspector scrolls)
       event.preventDefault();
       const box = svg.getBoundingClientRect();
       map.zoom(Math.pow(1.0015, -event.deltaY), event.clientX - box.left, event.clientY - box.top);
     }, { passive: false });
     svg.addEventListener("pointerdown", (event) => {
+      if (panel(event)) return;
       map.drag = { x: event.clientX, y: event.clientY, moved: false, hit: hit(event.target), cam: map.cam && Object.assign({}, map.cam) };
       svg.setPointerCapture && svg.setPointerCapture(event.pointerId);
     });
@@ -457,7 +529,7 @@
       const drag = map.drag;
       map.drag = null;
       if (!drag || drag.moved) return;
-      map.choose(drag.hit.frame ? drag.hit : hit(event.target));
+      map.choose(drag.hit);  // what was under the pointer when it went down (the frames' layer is redrawn meanwhile)
     });
     svg.addEventListener("pointerleave", () => { if (map.hover) { map.hover = null; map.dirty = true; } });
     svg.addEventListener("dblclick", () => map.fit());

@@ -57,9 +57,11 @@
   // a chart of rx and lost frames per second into an <svg> of width × height
   rates.draw = function (svg, id, width, height) {
     const points = rates.of(id);
-    svg.setAttribute("viewBox", `0 0 ${width} ${height}`);
-    svg.setAttribute("width", width);
-    svg.setAttribute("height", height);
+    if (svg.getAttribute("width") !== String(width)) {  // (once: a size set again lays the table out again)
+      svg.setAttribute("viewBox", `0 0 ${width} ${height}`);
+      svg.setAttribute("width", width);
+      svg.setAttribute("height", height);
+    }
     if (!points.length) { svg.replaceChildren(); svg.dataset.points = 0; return; }
     const t1 = points[points.length - 1][0], t0 = Math.min(points[0][0], t1 - 60);
     const top = Math.max(0.1, ...points.map((p) => Math.max(p[2], p[3])));
