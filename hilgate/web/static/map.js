@@ -16,11 +16,11 @@
   const CHANNEL_COLOURS = ["#0b3954", "#087e8b", "#c1440e", "#6a4c93", "#3d5a80", "#bc4749"];
   const MIN_FLIGHT_MS = 600, FATE_MS = 1800, FRAMES_KEPT = 800;
   const MAX_DASHED_PX = 2500, MAX_DASHES = 2000;
-  const TRAIL_S = 120, TRAIL_POINTS = 400, DETAILS_MAX = 20;
+  const TRAIL_S = 120, TRAIL_POINTS = 400, DETAILS_MAX = 20, STILL_HZ = 5;
   const $ = (id) => document.getElementById(id);
 
   const map = view.map = {
-    auto: true, cam: null, dirty: true, width: 0, height: 0, trails: new Map(), lastT: null,
+    auto: true, cam: null, dirty: true, urgent: true, stillAt: 0, width: 0, height: 0, trails: new Map(), lastT: null,
     pinned: null, hover: null, acks: false, drag: null, rings: { drawn: 0, dashed: 0, skipped: 0 },
     cost: { still: [0, 0], frames: [0, 0] },  // ms spent building each layer, and how often (the benchmark's)
   };
@@ -102,11 +102,11 @@
     map.cam.n += before[0] - after[0];
     map.cam.e += before[1] - after[1];
     map.auto = false;
-    map.dirty = true;
+    map.dirty = map.urgent = true;
     $("fit").disabled = false;
   };
 
-  map.fit = function () { map.auto = true; map.bounds = null; map.cam = null; map.dirty = true; $("fit").disabled = true; };
+  map.fit = function () { map.auto = true; map.bounds = null; map.cam = null; map.dirty = map.urgent = true; $("fit").disabled = true; };
 
   function niceStep(target) {
     const p = Math.pow(10, Math.floor(Math.log10(target)));
@@ -454,12 +454,21 @@
     const scene = view.scene, state = view.state;
     if (!scene || !state) return;
     const [width, height] = map.sizes.top;  // (read by a ResizeObserver: reading them here forced a layout per redraw)
-    if (width !== map.width || height !== map.height) { map.width = width; map.height = height; map.dirty = true; if (map.auto) map.cam = null; }
+    if (width !== map.width || height !== map.height) { map.width = width; map.height = height; map.dirty = map.urgent = true; if (map.auto) map.cam = null; }
     const spots = positions();
     if (map.auto) fit(spots);
     if (!map.cam) return;
     const t0 = performance.now();
-    if (map.dirty) { drawStill(); map.cost.still[0] += performance.now() - t0; map.cost.still[1]++; }
+    // a fleet's chart follows its pictures at most STILL_HZ times a second (its frames, every redraw);
+    // what the operator does (zoom, pan, hover, a click) is drawn at once
+    const many = (state.vehicles || []).length > DETAILS_MAX;
+    if (map.dirty && (map.urgent || !many || t0 - map.stillAt >= 1000 / STILL_HZ)) {
+      drawStill();
+      map.urgent = false;
+      map.stillAt = t0;
+      map.cost.still[0] += performance.now() - t0;
+      map.cost.still[1]++;
+    }
     const t1 = performance.now();
     const layer = el("g");
     drawFrames(layer, spots, now, t1, state.rate || 0);
@@ -518,12 +527,12 @@
           map.cam.n = drag.cam.n + dy / map.cam.s;
           map.auto = false;
           $("fit").disabled = false;
-          map.dirty = true;
+          map.dirty = map.urgent = true;
         }
         return;
       }
       const over = hit(event.target).vehicle || null;
-      if (over !== map.hover) { map.hover = over; map.dirty = true; }
+      if (over !== map.hover) { map.hover = over; map.dirty = map.urgent = true; }
     });
     svg.addEventListener("pointerup", (event) => {
       const drag = map.drag;
@@ -531,7 +540,7 @@
       if (!drag || drag.moved) return;
       map.choose(drag.hit);  // what was under the pointer when it went down (the frames' layer is redrawn meanwhile)
     });
-    svg.addEventListener("pointerleave", () => { if (map.hover) { map.hover = null; map.dirty = true; } });
+    svg.addEventListener("pointerleave", () => { if (map.hover) { map.hover = null; map.dirty = map.urgent = true; } });
     svg.addEventListener("dblclick", () => map.fit());
     $("zoom-in").addEventListener("click", () => map.zoom(1.5));
     $("zoom-out").addEventListener("click", () => map.zoom(1 / 1.5));
@@ -550,6 +559,6 @@
     } else {
       map.pinned = null;
     }
-    map.dirty = true;
+    map.dirty = map.urgent = true;
   };
 })();
