@@ -74,7 +74,7 @@ def test_a_silent_pose_source_is_stale_on_the_page_in_status_and_in_the_log(tmp_
         vehicle.sending = False
         browser.wait("!!document.querySelector('#top [data-vehicle=\"bluerov\"][data-stale=\"stale\"]')",
                      "the vehicle flagged on the chart", alive=alive)
-        assert browser.js("return document.querySelector('tr[data-vehicle=\"bluerov\"] td.pose').textContent") == "STALE"
+        browser.wait("document.querySelector('tr[data-vehicle=\"bluerov\"] td.pose').textContent == 'STALE'", "the row STALE")
         assert "bluerov · STALE" in browser.js("return document.querySelector('#top [data-label=\"bluerov\"]').textContent")
         browser.wait("[...document.querySelectorAll('#log-list li[data-kind=\"pose\"]')].some(li => /pose stale/.test(li.textContent))",
                      "the event log's line", alive=alive)

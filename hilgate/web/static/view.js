@@ -112,6 +112,7 @@ const view = window.hilgateView = {
     const before = view.scene;
     view.scene = scene;
     view.map.dirty = true;
+    tablesAt = 0;  // a reload's badges in the next picture's tables
     $("scene-name").textContent = "scene " + scene.name;
     const legend = $("legend");
     legend.textContent = "";
@@ -135,7 +136,7 @@ const view = window.hilgateView = {
   }
 
   const TABLES_HZ = 4;
-  let tablesAt = 0;
+  let tablesAt = 0, lastAlarms = "";
 
   function onState(state) {
     const before = view.state;
@@ -148,7 +149,10 @@ const view = window.hilgateView = {
     const wall = performance.now();
     // the tables at most TABLES_HZ times a second (nobody reads faster; a fleet's hundred rows cost the chart
     // its redraws), and always when the rates were sampled or the player moved by hand
-    if (sampled || !tablesAt || wall - tablesAt >= 1000 / TABLES_HZ || state.rate === 0) {
+    const alarms = (state.vehicles || []).map((v) => v.stale || "").join() + "|" + (state.links || []).map((l) => l.state).join()
+      + "|" + (state.hosts || []).map((h) => h.state).join();  // a stale pose, a link or host down: at once
+    if (sampled || !tablesAt || wall - tablesAt >= 1000 / TABLES_HZ || state.rate === 0 || alarms !== lastAlarms) {
+      lastAlarms = alarms;
       tablesAt = wall;
       if (state.links) updateLinks(state.links, sampled);
       updateHosts(state.hosts || []);
