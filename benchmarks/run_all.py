@@ -43,6 +43,7 @@ def benchmarks(ns3_python: str | None) -> list[list[str]]:
         ["benchmarks/aruco.py"],
         ["benchmarks/web_cost.py"],
         ["benchmarks/floods.py"],
+        ["benchmarks/web_redraws.py"],
         ["benchmarks/bellhop_lookup.py"],
     ]
 

@@ -248,7 +248,8 @@ def _print_status(status: dict, as_json: bool) -> None:
     if as_json:
         print(json.dumps({"links": status["links"], "vehicles": status["vehicles"],
                           **({"scheduling": status["scheduling"]} if "scheduling" in status else {}),
-                          **({"ros2": status["ros2"]} if "ros2" in status else {})}), flush=True)
+                          **{key: status[key] for key in ("ros2", "tcp", "web") if key in status}}),
+              flush=True)
         return
     from .report.tables import _render
 
@@ -260,9 +261,10 @@ def _print_status(status: dict, as_json: bool) -> None:
                     str(l["drops"]), str(l.get("unread", 0)), str(l["fifo_bytes"]), _link_note(l)]
                    for l in status["links"]], left=3))
     print()
-    print(_render(["vehicle", "source", "x", "y", "z", "age s"],
+    print(_render(["vehicle", "source", "x", "y", "z", "age s", "pose"],
                   [[v["name"], v["source"], *(f"{c:.3f}" for c in (v["position"] or [float("nan")] * 3)),
-                    "-" if v["age_s"] is None else f"{v['age_s']:.2f}"] for v in status["vehicles"]]), flush=True)
+                    "-" if v["age_s"] is None else f"{v['age_s']:.2f}", _pose_note(v)] for v in status["vehicles"]]),
+          flush=True)
     tcp = status.get("tcp")
     if tcp:
         refused = ", ".join(f"{cause} {n}" for cause, n in sorted(tcp["refused"].items()) if n) or "none"
@@ -287,6 +289,12 @@ def _print_status(status: dict, as_json: bool) -> None:
                           [[p["vehicle"], p["topic"], str(p["messages"]), str(p["applied"]),
                             ", ".join(f"{cause} {n}" for cause, n in sorted(p["refused"].items())) or "none"]
                            for p in ros2["poses_in"]]), flush=True)
+
+
+def _pose_note(vehicle: dict) -> str:
+    """STALE in capitals: the one word on the table an operator must not miss."""
+    stale = vehicle.get("stale")
+    return "STALE" if stale == "stale" else "STALE (never heard)" if stale == "never" else "fresh"
 
 
 def cmd_pose(args: argparse.Namespace) -> int:

@@ -18,6 +18,7 @@ from typing import Any, Callable
 
 from .access import LinkLock
 from .accounts import Counters, LinkAccount
+from .stale_poses import staleness
 from ..core.backend import AppFrame, Backend, PhyEvent
 from ..core.endpoint import ABSENT, KEPT, TAKEN, Door, Endpoint
 from ..core.packets import Decoded, PacketClass, packet_class
@@ -671,18 +672,22 @@ class Router:
         return status
 
     def vehicle_status(self) -> list[dict[str, Any]]:
-        """Every vehicle now: its pose source, position (None: unknown) and the age of its pose."""
+        """Every vehicle now: its pose source, position (None: unknown), the age of its pose, whether it is
+        stale (:func:`.stale_poses.staleness`) and its heading when its source tells it."""
         assert self.world is not None and self.scene is not None
         now = self.scheduler.now()
         vehicles = []
         for name, pose in self.world.poses.items():
             position = pose.position(now)
             age = pose.age(now)
+            spec = self.scene.vehicles.get(name)
             vehicles.append({
                 "name": name,
-                "source": self.scene.vehicles[name].pose.source_name,
+                "source": spec.pose.source_name if spec is not None else "?",
                 "position": None if position is None else [round(v, 4) for v in position],
                 "age_s": None if age is None else round(age, 3),
+                "stale": staleness(pose, spec, now),
+                "heading": _heading(pose),
             })
         return vehicles
 
@@ -690,3 +695,13 @@ class Router:
         for link in self.links.values():
             link.close()
         self.links.clear()
+
+
+def _heading(pose: Any) -> float | None:
+    """The yaw (rad, from north through east: NED) a live source measured, else None (the page then
+    heads a vehicle along its track)."""
+    attitude = pose.attitude
+    if attitude is None:
+        return None
+    yaw = attitude[2]
+    return round(yaw, 4) if isinstance(yaw, (int, float)) and math.isfinite(yaw) else None

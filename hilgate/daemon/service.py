@@ -29,6 +29,7 @@ from ..core.priority import Scheduling, current, raise_priority
 from ..core.realtime import RealtimeScheduler
 from ..sim.recorder import Recorder
 from .router import Router
+from .stale_poses import StaleWatch
 from .network import Network
 from ..gli.zenoh_auth import CredentialError, Identity, load_identity
 from ..scene import Scene, SceneError, load_scene
@@ -234,6 +235,7 @@ class Daemon:
             scheduler.on_signal(signal.SIGTERM, self.stop)
             scheduler.on_signal(signal.SIGINT, self.stop)
             self._periodic()
+            StaleWatch(scheduler, self.router).start()
             gc.collect()
             gc.freeze()  # everything built so far is long-lived: keep it out of the collector's walks
             log.info("hilgate %s started: scene %r (%s), %s (%s), endpoints: %s; run %s",

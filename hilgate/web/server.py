@@ -399,6 +399,7 @@ class Player:
         self.playing = False
         self.last = clock()
         page.send_json(replay.scene_at(self.t))
+        page.send_json({"class": "EVENTS", "events": replay.events, "start": replay.start, "end": replay.end})
         self.scene = replay.scene_at(self.t)
         self.timer = tornado.ioloop.PeriodicCallback(self.tick, REPLAY_TICK_S * 1000)
         self.timer.start()
@@ -443,7 +444,8 @@ class Player:
         if scene is not self.scene:
             self.scene = scene
             self.page.send_json(scene)
-        self.page.send_text(json.dumps(self.replay.state(self.t, self.speed, self.playing)), force=force)
+        floor = 2 * REPLAY_TICK_S * self.speed  # every transmission since the last picture
+        self.page.send_text(json.dumps(self.replay.state(self.t, self.speed, self.playing, floor)), force=force)
 
     def stop(self) -> None:
         self.timer.stop()
