@@ -8,8 +8,9 @@ One :class:`Driver` row per modem type says
   field made with :func:`from_link` is filled from the link's own modem keys instead;
 - how to **open** it: ``"module:Class"`` of its backend, built as
   ``Class(link_id, address, packet, options, scheduler, trace)`` by :func:`open_backend`;
-- its **emulator**: ``"module:Class"`` of the emulated device that a simulated link can show on a pty
-  (and, if ``emulator_tcp``, on a loopback TCP port), found by :func:`emulator_for`;
+- its **emulator**: ``"module:Class"`` of the emulated device that a simulated link can show, found by
+  :func:`emulator_for`, and how the row's driver **reaches** it (:class:`Reach`: on a pty, on a loopback
+  TCP port, and the driver's options that name it), which also says where the emulated device can be;
 - its **limits**: what the modem accepts (:class:`ModemLimits`) when the link's preset says nothing:
   the driver and the emulator refuse beyond them, and so does a simulated link whose preset states them.
 
@@ -34,7 +35,7 @@ from dataclasses import MISSING, Field, dataclass, field, fields
 from typing import Any, Callable, Iterator
 
 __all__ = [
-    "Option", "Driver", "DRIVERS", "ModemLimits", "MODES", "SEND_AS", "limits_for", "EvologicsOptions", "S100Options", "S100EmulatorOptions", "option", "from_link", "scene_options", "emulator_options",
+    "Option", "Driver", "Reach", "BY_PTY", "DRIVERS", "ModemLimits", "MODES", "SEND_AS", "limits_for", "EvologicsOptions", "S100Options", "S100EmulatorOptions", "option", "from_link", "scene_options", "emulator_options",
     "M64Options", "M64EmulatorOptions", "MicromodemOptions", "UnetOptions", "UnetEmulatorOptions", "driver_names", "emulated_protocols", "open_backend", "emulator_for",
 ]
 
@@ -274,6 +275,36 @@ class UnetEmulatorOptions:
     unet_protocol: int = option(Option("integer", 0, 63), 0)
 
 
+WAYS = ("pty", "tcp")  # where an emulated device can be: its ``emulate:`` key
+
+
+@dataclass(frozen=True)
+class Reach:
+    """One way a row's driver reaches an emulated device of its own row on the same machine (the whole HIL
+    chain on one bench): the emulated link's ``emulate: {<way>: WHERE}`` (``pty``: a path, ``tcp``: a
+    loopback port) and the driver link's scene ``options`` that name it, ``{where}`` standing for WHERE.
+
+    Why data in the row: a driver names its modem in its own keys (a serial row's ``port`` is the pty, an
+    EvoLogics modem's may also be ``socket://HOST:PORT``, a UnetStack modem's is ``modem_host`` and
+    ``port``), and whatever builds such a bench (the driver-table suite, ``tests/bench_kit.py``) reads it
+    here: a test that knew it by the row's name would miss the next row."""
+
+    way: str
+    options: tuple[tuple[str, str], ...]
+
+    def __post_init__(self) -> None:
+        if self.way not in WAYS:
+            raise ValueError(f"reach way {self.way!r}: one of {', '.join(WAYS)}")
+
+    def driver_options(self, where: Any) -> dict[str, str]:
+        """The driver link's scene options (as text) that reach the emulated device at ``where``."""
+        return {key: value.format(where=where) for key, value in self.options}
+
+
+BY_PTY = (Reach("pty", (("port", "{where}"),)),)
+"""A serial row's: its driver's ``port`` is the emulated device's pty."""
+
+
 @dataclass(frozen=True)
 class Driver:
     """One row of the table (see the module's docstring)."""
@@ -283,10 +314,19 @@ class Driver:
     options: type   # a frozen dataclass made of option() and from_link() fields
     backend: str    # "module:Class" of the backend
     emulator: str | None = None  # "module:Class" of the emulated device, if there is one
-    emulator_tcp: bool = False   # the emulated device also listens on a loopback TCP port
-    emulator_pty: bool = True    # …and can be on a pty (a UnetStack modem's API is TCP only)
+    reach: tuple[Reach, ...] = BY_PTY  # where the emulated device can be, and how the driver reaches it there
     emulator_options: type | None = None  # the emulated device's own ``emulate:`` keys (option() fields)
     limits: ModemLimits | None = None  # what the modem accepts when the link's preset does not say
+
+    @property
+    def emulator_pty(self) -> bool:
+        """The emulated device can be on a pty (a UnetStack modem's API is TCP only)."""
+        return any(r.way == "pty" for r in self.reach)
+
+    @property
+    def emulator_tcp(self) -> bool:
+        """The emulated device can listen on a loopback TCP port."""
+        return any(r.way == "tcp" for r in self.reach)
 
 
 EVOLOGICS_LIMITS = ModemLimits("evologics", (("im", 64), ("ims", 64), ("pbm", 64), ("burst", 1024)),
@@ -316,7 +356,8 @@ decides; ``models/unet-m25m.yaml`` says where its figures come from)."""
 
 DRIVERS: dict[str, Driver] = {driver.name: driver for driver in (
     Driver("evologics", "EvoLogics modem", EvologicsOptions, "hilgate.drivers.evologics:EvologicsBackend",
-           "hilgate.drivers.emulators:EvologicsEmulator", emulator_tcp=True, limits=EVOLOGICS_LIMITS),
+           "hilgate.drivers.emulators:EvologicsEmulator", limits=EVOLOGICS_LIMITS,
+           reach=(*BY_PTY, Reach("tcp", (("port", "socket://127.0.0.1:{where}"),)))),
     Driver("s100", "S100", S100Options, "hilgate.drivers.s100:S100Backend",
            "hilgate.drivers.emulators:S100Emulator", emulator_options=S100EmulatorOptions, limits=S100_LIMITS),
     Driver("m64", "Modem-M64", M64Options, "hilgate.drivers.m64:M64Backend",
@@ -324,8 +365,8 @@ DRIVERS: dict[str, Driver] = {driver.name: driver for driver in (
     Driver("micromodem", "Micro-Modem", MicromodemOptions, "hilgate.drivers.micromodem:MicromodemBackend",
            "hilgate.drivers.micromodem_emulator:MicromodemEmulator", limits=MICROMODEM_LIMITS),
     Driver("unet", "UnetStack modem", UnetOptions, "hilgate.drivers.unet:UnetBackend",
-           "hilgate.drivers.unet_emulator:UnetEmulator", emulator_tcp=True, emulator_pty=False,
-           emulator_options=UnetEmulatorOptions, limits=UNET_LIMITS),
+           "hilgate.drivers.unet_emulator:UnetEmulator", emulator_options=UnetEmulatorOptions, limits=UNET_LIMITS,
+           reach=(Reach("tcp", (("modem_host", "127.0.0.1"), ("port", "{where}"))),)),
 )}
 
 

@@ -96,6 +96,30 @@ def test_a_new_row_can_be_emulated_and_says_it_is_serial(fake, tmp_path):
     assert table.emulator_for("fake") is FakeEmulator
 
 
+def test_a_row_says_how_its_driver_reaches_its_emulated_device_and_the_scene_follows(fake, monkeypatch):
+    """One declaration, ``reach``: where the emulated device can be (the scene's ``emulate:`` keys) and the
+    driver's options that name it there (what a bench of the row, tests/bench_kit.py, is built from)."""
+    tcp = table.Reach("tcp", (("port", "socket://127.0.0.1:{where}"),))
+    monkeypatch.setitem(DRIVERS, "fake", dataclasses.replace(fake, reach=(tcp,)))
+    spec = load_scene_text(scene("emulate: {protocol: fake, tcp: 9300}"), "/tmp/scene.yaml")
+    assert spec.links["x"].emulate == (("protocol", "fake"), ("tcp", 9300))
+    assert error_of("emulate: {protocol: fake, pty: tty0}") == \
+        "/tmp/scene.yaml:5: links.x.emulate.pty: the fake modem speaks TCP only: give tcp (a loopback port)"
+    assert tcp.driver_options(9300) == {"port": "socket://127.0.0.1:9300"}
+    with pytest.raises(ValueError, match="reach way 'usb'"):
+        table.Reach("usb", (("port", "{where}"),))
+
+
+def test_every_rows_reach_names_options_of_its_own_driver():
+    for name, driver in DRIVERS.items():
+        keys = {key for key, _, _ in table.scene_options(driver)}
+        for reach in driver.reach:
+            assert set(dict(reach.options)) <= keys, (name, reach)
+    assert [(r.way, r.driver_options(1100)) for r in DRIVERS["unet"].reach] == \
+        [("tcp", {"modem_host": "127.0.0.1", "port": "1100"})]
+    assert [r.way for r in DRIVERS["evologics"].reach] == ["pty", "tcp"]
+
+
 def test_open_backend_builds_the_rows_options_with_those_from_the_link(fake):
     spec = load_scene_text(scene("backend: fake, port: /dev/ttyFAKE0, address: 7, bitrate_bps: 900"),
                            "/tmp/scene.yaml").links["x"]

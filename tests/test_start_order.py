@@ -1,36 +1,35 @@
-"""A driver link listed before the emulated link whose pty it opens starts without a word (issue 38).
+"""A driver link listed before the emulated link whose modem it opens starts without a word (issue 38).
 
 The daemon opened each link in the scene's order, and a driver opens its port at once (in a thread):
 listed first, it looked for a pty the emulated link below it had not made yet, logged a WARNING ("cannot
 open …: No such file") and recovered half a second later, in 4 starts out of 6.  Every row of the
-driver table here, each driver before its emulated modem, at start and again added by a reload: no
+driver table here, each way its driver reaches its emulated modem (``tests/bench_kit.py``: a pty, a
+loopback TCP port), each driver before its emulated modem, at start and again added by a reload: no
 warning, every driver up at its first attempt (one ``link`` line in the trace: ``up``).
 """
 
+from bench_kit import benches
 from daemon_kit import SCENE_HEAD, unique
-from hilgate.drivers.table import DRIVERS
 
-OPTIONS = {"m64": "role: a, modem_channel: 1", "micromodem": "rate: 1"}
+BENCHES = benches()
 
 
 def pairs(tmp_path, ids, tag, first_address):
-    """A driver link before the emulated link whose pty it opens, for each row of the table (the two with
-    the same address, as a modem and its driver have)."""
+    """A driver link before the emulated link whose modem it opens, for each way of each row of the table
+    (the two with the same address, as a modem and its driver have)."""
     lines = []
-    for address, name in enumerate(DRIVERS, first_address):
-        driver, emulated = ids[name]
-        pty = tmp_path / f"{name}{tag}"
-        extra = OPTIONS.get(name, "")
-        lines.append(f"  {driver}: {{vehicle: va, backend: {name}, port: {pty}, address: {address}, gli: [socket]"
-                     f"{', ' + extra if extra else ''}}}\n")
-        lines.append(f"  {emulated}: {{vehicle: vb, address: {address}, gli: [socket], "
-                     f"emulate: {{protocol: {name}, pty: {pty}}}}}\n")
+    for address, bench in enumerate(BENCHES, first_address):
+        driver, emulated = ids[bench]
+        where = bench.place(tmp_path, f"{bench.name}-{bench.reach.way}{tag}")
+        lines.append(f"  {driver}: {{vehicle: va, backend: {bench.name}, address: {address}, gli: [socket], "
+                     f"{bench.driver_keys(where)}}}\n")
+        lines.append(f"  {emulated}: {{vehicle: vb, address: {address}, gli: [socket], emulate: {bench.emulate(where)}}}\n")
     return "".join(lines)
 
 
 def test_drivers_listed_before_their_emulated_modems_open_them_at_the_first_attempt(tmp_path, daemon_of):
-    first = {name: (unique("d"), unique("e")) for name in DRIVERS}
-    added = {name: (unique("d"), unique("e")) for name in DRIVERS}
+    first = {bench: (unique("d"), unique("e")) for bench in BENCHES}
+    added = {bench: (unique("d"), unique("e")) for bench in BENCHES}
     scene = f"{SCENE_HEAD}links:\n" + pairs(tmp_path, first, "1", 1)
     links = [link for pair in first.values() for link in pair]
     daemon = daemon_of(scene, links)

@@ -295,6 +295,9 @@ def test_hilgates_driver_comes_in_by_a_reload_meets_the_emulator_and_loses_nothi
         daemon.reload(driver_scene(ap, far, em, port, real=True, door=door))  # the modem is back
         got = [lf.recv(timeout=HANG_GUARD_S) for _ in range(3)]
         assert [m.data for m in got] == [b"queued 0", b"queued 1", b"queued 2"]
+        # the far end has the last frame; the driver its TxFrameNtf once it reads it: a daemon stopped
+        # before that closes the driver with the frame in its hands (dropped, closed)
+        wait_until(lambda: daemon.link_status(ap)["ready"], "the driver done with what it queued")
     usock.close()
     daemon.stop()
     events = daemon.trace_events()
@@ -453,6 +456,8 @@ def test_the_driver_counts_a_refusal_and_sends_again_what_the_modem_had_not_answ
                 app.send(text, dst=9)
             wait_until(lambda: len(modem.connections) == 2 and len(modem.connections[1]) >= 3,
                        lambda: f"the modem got {modem.connections}")
+            # (the modem's TxFrameNtf for the last read by the driver: stopped before, it drops it, closed)
+            wait_until(lambda: daemon.link_status(link)["tx_packets"] == 2, "both frames counted as sent")
     finally:
         modem.close()
     first, second = modem.connections

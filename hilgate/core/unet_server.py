@@ -15,7 +15,9 @@ datagrams are the modem's own bytes on air.  What they share is here:
   with the model's start time), its acknowledgement (a reliable datagram's, from the model's ACK on
   the channel: :mod:`hilgate.models.acoustic_ack`), its drop before the air (``DatagramFailureNtf``);
   on a real modem's link, which reports no PHY, a datagram counts as sent when the link is READY again;
-- each received frame's start on the channel (the PHY's ``rx_start``), UnetStack's ``rxTime``.
+- each received frame's start on the channel (the PHY's ``rx_start``), UnetStack's ``rxTime``;
+- what the node says leaves when the model says it (``TCP_NODELAY``: a line is one write, and a
+  notification must not wait behind the peer's delayed acknowledgement of the answer before it).
 """
 
 from __future__ import annotations
@@ -79,6 +81,9 @@ class NodeServer(ABC):
                             self.port.id, len(self.connections), self.refused_clients)
             refuse(sock, fjage.encode({"error": f"too many clients ({MAX_CLIENTS})"}))
             return
+        # (with Nagle's algorithm a TxFrameNtf written just after the AGREE waited for the peer's delayed ACK,
+        # up to 40 ms: the driver heard of its transmission after the far node had the frame)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         holder: list[Connection] = []
         connection = Connection(sock, self.scheduler, lambda data: self.node.receive(holder[0], data),
                                 lambda: self._left(holder[0]), max_buffer=OUTPUT_CAP)
