@@ -45,7 +45,7 @@ from hilgate.core.backend import AppFrame, PhyEvent
 from hilgate.core.endpoint import TAKEN, LinkPort
 from hilgate.core.packets import BROADCAST, Raw
 
-from .emulators import EmulatedModem
+from .emulated_modem import EmulatedModem
 from .m64_codec import BadChecksum, Command, Malformed, ModemCodec
 
 log = logging.getLogger(__name__)

@@ -55,7 +55,7 @@ from hilgate.core.backend import AppFrame, PhyEvent
 from hilgate.core.endpoint import TAKEN, LinkPort
 from hilgate.core.packets import BROADCAST, PacketError, Raw
 
-from .emulators import EmulatedModem
+from .emulated_modem import EmulatedModem
 from .micromodem_codec import (CI_AIRTIME_S, MINIPACKET_S, PACKET_TYPES, RATES, RXP_TYPES, BadSentence, CycleStats,
                                ModemCodec, Sentence, cst, hhmmss, sentence)
 from .micromodem_figures import figures

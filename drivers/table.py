@@ -201,7 +201,7 @@ class S100Options:
 
 @dataclass(frozen=True)
 class S100EmulatorOptions:
-    """``emulate: {protocol: s100}`` (:class:`hilgate.drivers.emulators.S100Emulator`): the serial line
+    """``emulate: {protocol: s100}`` (:class:`hilgate.drivers.s100_emulator.S100Emulator`): the serial line
     the emulated S100 models, so that a pty (which takes no time per byte) behaves like the real line."""
 
     baud: int = option(Option("integer", 50, 4_000_000), 9600)  # 8N1: 10 bits on the line per byte
@@ -356,10 +356,10 @@ decides; ``models/unet-m25m.yaml`` says where its figures come from)."""
 
 DRIVERS: dict[str, Driver] = {driver.name: driver for driver in (
     Driver("evologics", "EvoLogics modem", EvologicsOptions, "hilgate.drivers.evologics:EvologicsBackend",
-           "hilgate.drivers.emulators:EvologicsEmulator", limits=EVOLOGICS_LIMITS,
+           "hilgate.drivers.evologics_emulator:EvologicsEmulator", limits=EVOLOGICS_LIMITS,
            reach=(*BY_PTY, Reach("tcp", (("port", "socket://127.0.0.1:{where}"),)))),
     Driver("s100", "S100", S100Options, "hilgate.drivers.s100:S100Backend",
-           "hilgate.drivers.emulators:S100Emulator", emulator_options=S100EmulatorOptions, limits=S100_LIMITS),
+           "hilgate.drivers.s100_emulator:S100Emulator", emulator_options=S100EmulatorOptions, limits=S100_LIMITS),
     Driver("m64", "Modem-M64", M64Options, "hilgate.drivers.m64:M64Backend",
            "hilgate.drivers.m64_emulator:M64Emulator", emulator_options=M64EmulatorOptions, limits=M64_LIMITS),
     Driver("micromodem", "Micro-Modem", MicromodemOptions, "hilgate.drivers.micromodem:MicromodemBackend",

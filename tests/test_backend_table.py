@@ -142,7 +142,8 @@ def test_the_s100_paces_at_the_links_bitrate(monkeypatch):
 
 
 def test_the_built_in_rows_keep_todays_names_keys_and_classes():
-    from hilgate.drivers.emulators import EvologicsEmulator, S100Emulator
+    from hilgate.drivers.evologics_emulator import EvologicsEmulator
+    from hilgate.drivers.s100_emulator import S100Emulator
     from hilgate.drivers.evologics import EvologicsBackend, EvologicsOptions
     from hilgate.drivers.s100 import S100Backend, S100Options
 

@@ -14,14 +14,14 @@ VL2B = packet_class("vl2b")
 
 
 def piece(data: bytes, src: int = 1) -> AppFrame:
-    """What an emulated S100 puts on air for bytes that are no whole frame (emulators.S100Emulator._send_raw)."""
+    """What an emulated S100 puts on air for bytes that are no whole frame (s100_emulator.S100Emulator._send_raw)."""
     frame = AppFrame(data, data, Raw(), 0, src, BROADCAST, 0.5)
     frame.meta = {"s100": "raw"}
     return frame
 
 
 def message(data: bytes, kind: str = "im") -> AppFrame:
-    """What an emulated EvoLogics modem sends for an AT*SENDIM (emulators.EvologicsEmulator._send)."""
+    """What an emulated EvoLogics modem sends for an AT*SENDIM (evologics_emulator.EvologicsEmulator._send)."""
     frame = AppFrame(data, data, Raw(), 0, 1, 2, 0.5)
     frame.meta = {"kind": kind, "ack": False}
     return frame

@@ -31,7 +31,7 @@ def test_the_docs_hold_the_tables_the_rows_make():
 def emulator_table(family: str) -> set[str]:
     """The entries of the family's emulator's command table (what a row must cover)."""
     if family == "evologics":
-        from hilgate.drivers.emulators import EvologicsEmulator
+        from hilgate.drivers.evologics_emulator import EvologicsEmulator
         from hilgate.drivers.evologics_settings import RANGES
         return set(EvologicsEmulator.COMMANDS) | {f"{p}{name}" for name in RANGES for p in "!?"}
     if family == "m64":

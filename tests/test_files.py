@@ -14,7 +14,7 @@ import pytest
 
 from daemon_kit import Daemon, hilgate, unique
 from hilgate.core.outputs import OutputError, open_output, output_problem, pty_link_problem
-from hilgate.drivers.emulators import PtyHost
+from hilgate.drivers.emulator_pty import PtyHost
 from hilgate.scene import SceneError, load_scene_text
 
 GROUP = 54322

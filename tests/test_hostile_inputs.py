@@ -17,7 +17,7 @@ import pytest
 from at_client import AtClient
 from daemon_kit import Daemon, free_port, hilgate, unique
 from doorkit import closed_by_peer, idle, listening_addresses
-from hilgate.drivers.emulators import MAX_TCP_CLIENTS
+from hilgate.drivers.emulator_tcp import MAX_TCP_CLIENTS
 from hilgate.scene import SceneError, load_scene_text
 from hilgate.scene.flow_spec import MAX_FRAME_BYTES
 

@@ -28,8 +28,8 @@ from seamcheck import members, missing
 # interface → its implementations in the product ("module:Class")
 SEAMS = {
     Endpoint: ["hilgate.gli.queues:MqEndpoint", "hilgate.gli.sockets:GliClient",
-               "hilgate.gli.zenoh_door:ZenohEndpoint", "hilgate.drivers.emulators:EvologicsEmulator",
-               "hilgate.drivers.emulators:S100Emulator", "hilgate.drivers.m64_emulator:M64Emulator",
+               "hilgate.gli.zenoh_door:ZenohEndpoint", "hilgate.drivers.evologics_emulator:EvologicsEmulator",
+               "hilgate.drivers.s100_emulator:S100Emulator", "hilgate.drivers.m64_emulator:M64Emulator",
                "hilgate.drivers.micromodem_emulator:MicromodemEmulator", "hilgate.ros2.door:Ros2Endpoint",
                "hilgate.gli.unet_door:UnetEndpoint", "hilgate.drivers.unet_emulator:UnetEmulator"],
     Door: ["hilgate.gli.queues:QueueDoor", "hilgate.gli.sockets:SocketDoor", "hilgate.gli.zenoh_door:ZenohDoor",

@@ -25,7 +25,7 @@ from at_client import AtClient
 from daemon_kit import free_port, quick_scene, unique
 from doorkit import STRANGERS, Slowloris, connect, first_tries, idle
 from fuzzkit import examples
-from hilgate.drivers.emulators import MAX_TCP_CLIENTS
+from hilgate.drivers.emulator_tcp import MAX_TCP_CLIENTS
 from hilgate.gli import wire
 from hilgate.gli.token import read_token
 from test_hostile_inputs import evologics_daemon, stopped

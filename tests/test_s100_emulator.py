@@ -24,7 +24,7 @@ from daemon_kit import SCENE_HEAD, peer_events, unique
 from fuzzkit import examples
 from hilgate.core.packets import packet_class
 from hilgate.core.scheduler import VirtualScheduler
-from hilgate.drivers.emulators import S100Emulator
+from hilgate.drivers.s100_emulator import S100Emulator
 from hilgate.drivers.s100_codec import InputBuffer, SerialLine, byte_time
 
 
@@ -178,7 +178,7 @@ def test_without_flow_control_a_long_write_overflows_and_the_loss_is_traced(tmp_
     drops = [e for e in daemon.trace_events() if e["ev"] == "drop" and e.get("link") == ea]
     assert [e["cause"] for e in drops] == ["overflow"]
     # judged against the most favourable arrival the host's timing allows (its window: the line's own
-    # timing on a quiet host, wider when the host was busy, emulators.S100Emulator): exact for that window
+    # timing on a quiet host, wider when the host was busy, s100_emulator.S100Emulator): exact for that window
     spacing = max(Fraction(10, 19200), Fraction(drops[0]["window"]) / len(burst))
     assert drops[0]["size"] == len(burst) - expected_kept(len(burst), spacing, Fraction(1000, 8))
     assert drops[0]["size"] > 0
@@ -507,7 +507,7 @@ def test_pieces_the_host_handed_over_at_once_after_a_freeze_lose_nothing(tmp_pat
 def test_a_write_larger_than_the_modem_holds_overflows_whatever_the_host(tmp_path):
     """110 bytes written at once into 45 bytes at 1000 bit/s: lost whatever window the host's timing gives
     (a bounded one: the loop was late by 0.2 s and the host's tasks waited the cap)."""
-    from hilgate.drivers.emulators import HANDOVER_CAP_S
+    from hilgate.drivers.s100_emulator import HANDOVER_CAP_S
 
     clock = _LateLoop()
     link = _lone_link(clock)
