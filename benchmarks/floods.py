@@ -422,7 +422,7 @@ def main() -> int:
     parser.add_argument("--cases", nargs="+", default=["zenoh", "ros2", "socket", "tx"],
                         choices=["zenoh", "ros2", "socket", "tx"])
     args = parser.parse_args()
-    from hilgate.netinit import init_network
+    from hilgate.commands.credentials import init_network
 
     print(f"honest sender: {args.rate:g} frames/s of 20 bytes for {args.seconds:g} s, alone then during each flood; "
           f"links of {BITRATE} b/s; load average {', '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)

@@ -104,7 +104,7 @@ class Hosts:
     """The 4 daemons, each serving its host's links, in namespaces (``spaces``) or on loopback."""
 
     def __init__(self, per_host: int, prefix: str, spaces: netns.Namespaces | None, extra: tuple[str, ...] = ()):
-        from hilgate.netinit import init_network
+        from hilgate.commands.credentials import init_network
 
         self.dir = tempfile.mkdtemp(prefix="hilgate-hosts-bench-")
         self.daemons: list[Daemon] = []

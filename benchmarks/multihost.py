@@ -154,7 +154,7 @@ class Network:
 
     def __init__(self, a: str, b: str, template: str = SCENE, secure: bool = True,
                  cpus: tuple[int | None, int | None] = (None, None)):
-        from hilgate.netinit import init_network
+        from hilgate.commands.credentials import init_network
 
         self.dir = tempfile.mkdtemp(prefix="hilgate-multihost-bench-")
         self.links = (a, b)

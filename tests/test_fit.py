@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from hilgate.fitcmd import FitError, print_fit, run_fit
+from hilgate.commands.fitting import FitError, print_fit, run_fit
 from hilgate.report.observations import LinkInfo, observations
 from hilgate.scene import load_scene
 from hilgate.sim.simulate import simulate
@@ -259,7 +259,7 @@ def test_spreading_from_rssi():
 
 def test_plot_draws_the_fit(tmp_path):
     pytest.importorskip("matplotlib")
-    from hilgate.fitcmd import plot_fit
+    from hilgate.commands.fitting import plot_fit
 
     trace, scene = simulated_trace(tmp_path, 9)
     result = run_fit(trace, scene, "power", simulated=True)

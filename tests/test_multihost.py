@@ -37,7 +37,7 @@ CREDS = ""  # the lab's credentials for this module's daemons (hosts A-D and sol
 
 @pytest.fixture(scope="module", autouse=True)
 def credentials(tmp_path_factory):
-    from hilgate.netinit import init_network
+    from hilgate.commands.credentials import init_network
 
     global CREDS
     CREDS = str(tmp_path_factory.mktemp("creds"))

@@ -29,7 +29,7 @@ SPEED = 1500.0
 
 @pytest.fixture(scope="module")
 def creds(tmp_path_factory):
-    from hilgate.netinit import init_network
+    from hilgate.commands.credentials import init_network
 
     root = str(tmp_path_factory.mktemp("creds"))
     init_network(root, ["A", "B", "C"], 2)

@@ -11,7 +11,7 @@ import sys
 import pytest
 
 from hilgate.gli.zenoh_auth import CredentialError, acl, load_identity
-from hilgate.netinit import NetworkInitError, init_network
+from hilgate.commands.credentials import NetworkInitError, init_network
 
 
 def mode(path) -> int:

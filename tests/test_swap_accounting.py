@@ -17,7 +17,7 @@ import time
 
 from daemon_kit import unique, wait_until
 from hilgate.client import Link
-from hilgate.fitcmd import run_fit
+from hilgate.commands.fitting import run_fit
 from hilgate.report.tracedata import load_trace
 
 
@@ -209,7 +209,8 @@ links:
     assert status[b]["rx_packets"] == 2 and status[a]["since_s"] == 0.0 < status[b]["since_s"]
     table = subprocess.run([sys.executable, "-m", "hilgate", "status", "--runtime-dir", daemon.runtime],
                            capture_output=True, text=True, timeout=60)
-    assert "since s" in table.stdout.splitlines()[1]
+    header = next(line for line in table.stdout.splitlines() if line.startswith("link"))  # after t = and scheduling:
+    assert "since s" in header
     daemon.stop()
     events = daemon.trace_events()
     first, second = (e for e in events if e["ev"] == "reload")

@@ -11,8 +11,8 @@ Keys are ECDSA P-256, certificates valid ten years, signed by the CA; key files 
 0640, directories 0750 (the daemon's group may read certificates and manifests, only the owner a key).
 Run again with more names, the CA and the identities already there are kept (their keys unchanged)
 and every manifest is rewritten with the new lists: copy each host's and application's directory
-again, since a session lets in only the names its own manifest lists.  Sits above the rooms, like the
-CLI: it uses the ``cryptography`` package, which nothing else needs.
+again, since a session lets in only the names its own manifest lists.  Sits above the rooms, with the
+commands: it uses the ``cryptography`` package, which nothing else needs.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import json
 import os
 from typing import Any
 
-from .gli.zenoh_auth import MANIFEST, NAME
+from ..gli.zenoh_auth import MANIFEST, NAME
 
 __all__ = ["init_network", "NetworkInitError"]
 

@@ -1,6 +1,6 @@
 """``hilgate fit TRACE``: an ``error:`` block for the scene from what the links of a run sent and received.
 
-This module only wires the parts together (it sits above the rooms, like the CLI): the scene says
+This module only wires the parts together (it sits above the rooms, with the commands): the scene says
 which vehicle each link rides and which links are real (:mod:`hilgate.scene`), the trace gives the
 frames and poses (:mod:`hilgate.report.observations`), the fit is a binomial maximum likelihood
 (:mod:`hilgate.report.fit`), and the physical form's PER comes from :mod:`hilgate.models.physical`.
@@ -15,9 +15,9 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from .report.fit import Z95, Fit, bins, fit_function, fit_logistic, fit_power, fit_rssi, power_parameters
-from .report.observations import FitError, LinkInfo, Observations, links_of_view, observations, read_events
-from .report.tracefile import TraceError, printable
+from ..report.fit import Z95, Fit, bins, fit_function, fit_logistic, fit_power, fit_rssi, power_parameters
+from ..report.observations import FitError, LinkInfo, Observations, links_of_view, observations, read_events
+from ..report.tracefile import TraceError, printable
 
 __all__ = ["run_fit", "FitError", "FitResult"]
 
@@ -40,14 +40,14 @@ class FitResult:
 
 def _links_of_scene(scene: Any) -> dict[str, LinkInfo]:
     """A scene file's links, as the trace's ``scene_view`` would give them (one way to the fit)."""
-    from .scene.view import scene_view
+    from ..scene.view import scene_view
 
     return links_of_view(scene_view(scene), scene.path)
 
 
 def _physical_model(view: Any) -> Any:
     """The physical error model a link's error view describes (None: another kind)."""
-    from .models.physical import Acoustic, Environment, PhysicalErrorModel
+    from ..models.physical import Acoustic, Environment, PhysicalErrorModel
 
     if not isinstance(view, dict) or view.get("kind") != "physical":
         return None
@@ -71,7 +71,7 @@ def _physical_model(view: Any) -> Any:
 def _physical_fit(data: Observations) -> tuple[Fit, dict, str]:
     """The effective source level by binomial maximum likelihood, with the spreading factor k from the
     frames' RSSI when at least ``MIN_RSSI`` delivered frames carry it (else the scene's k, held)."""
-    from .models.acoustics import ber
+    from ..models.acoustics import ber
 
     receivers = sorted({o.dst for o in data.frames})
     views = [data.links[r].error for r in receivers]
@@ -117,8 +117,8 @@ def run_fit(trace: str, scene_path: str | None = None, model: str = "power", lin
     lines (the scene as it was at each moment); ``scene_path`` (``--scene``) replaces them for the
     whole trace, and is needed for a trace that carries no scene (``hilgate sim``'s, an older
     daemon's whose scene file is gone)."""
-    from .report.tracedata import ReportError, pick_run, trace_runs
-    from .scene.load import load_scene
+    from ..report.tracedata import ReportError, pick_run, trace_runs
+    from ..scene.load import load_scene
 
     if model not in MODELS:
         raise FitError(f"--model must be one of {', '.join(MODELS)}, not {model!r}")

@@ -1,6 +1,6 @@
 """``hilgate view``: the operator's page for a trace (``hilgate view TRACE``), or the address of a running
 daemon's (``hilgate view``, for ``hilgate run --web``).  Wires the trace reader, the scene loader and
-the web door together (above the rooms, as ``fitcmd.py`` is).
+the web door together (above the rooms, with the commands).
 
 The address printed carries the token in its fragment (``#token=…``): a browser never sends a
 fragment to a server, and the page keeps the token for its tab only.  A trace is served with a new
@@ -19,10 +19,10 @@ import threading
 from typing import Any, Callable
 from urllib.parse import quote
 
-from .gli.token import TokenCheck, read_token
-from .report.tracedata import load_trace, pick_run, trace_runs
-from .report.tracefile import TraceError
-from .scene.yaml_nodes import SceneError
+from ..gli.token import TokenCheck, read_token
+from ..report.tracedata import load_trace, pick_run, trace_runs
+from ..report.tracefile import TraceError
+from ..scene.yaml_nodes import SceneError
 
 __all__ = ["serve_trace", "live_address", "address_with_token"]
 
@@ -52,8 +52,8 @@ def _scenes(args: argparse.Namespace, trace: Any) -> list[tuple[float, dict]]:
     if not args.scene:
         raise SceneError(args.trace, 0, "", "this trace names no scene (hilgate sim writes none): give the scene "
                                             "it ran with, --scene FILE")
-    from .scene import load_scene
-    from .scene.view import scene_view
+    from ..scene import load_scene
+    from ..scene.view import scene_view
 
     return [(0.0, scene_view(load_scene(args.scene, args.overrides)))]
 
@@ -61,8 +61,8 @@ def _scenes(args: argparse.Namespace, trace: Any) -> list[tuple[float, dict]]:
 def serve_trace(args: argparse.Namespace, stop: threading.Event | None = None,
                 announce: Callable[[str], Any] | None = None) -> int:
     """Serve the trace's player until SIGINT/SIGTERM (or ``stop``)."""
-    from .web.replay import Replay
-    from .web.server import WebServer, parse_web
+    from ..web.replay import Replay
+    from ..web.server import WebServer, parse_web
 
     try:
         runs = trace_runs(args.trace)

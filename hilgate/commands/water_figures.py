@@ -1,5 +1,5 @@
 """``hilgate report TRACE --out DIR --water SCENE``: each water channel's transmission-loss field with the
-vehicles' tracks over it.  Above the rooms, as ``fitcmd.py``: it joins the trace (``report``), the scene
+vehicles' tracks over it.  Above the rooms, with the commands: it joins the trace (``report``), the scene
 (``scene``) and BELLHOP's fields (``channel``).
 
 The field is drawn from the first simulated link's vehicle on the channel (the source, at its depth at
@@ -25,9 +25,9 @@ def water_figures(trace_path: str, scene_path: str, out: str, formats: tuple[str
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .channel.prepare import ready_channels
-    from .report.tracedata import load_trace
-    from .scene.load import load_scene
+    from ..channel.prepare import ready_channels
+    from ..report.tracedata import load_trace
+    from ..scene.load import load_scene
 
     scene = load_scene(scene_path)
     if not any(c.water is not None for c in scene.channels.values()):
