@@ -107,7 +107,8 @@ def test_figures_are_fit_for_a_paper(runs, tmp_path):
 
 
 def test_a_dense_timeline_is_counted_per_window(tmp_path):
-    from hilgate.report.figures import DENSE, figures
+    from hilgate.report.figure_kit import DENSE
+    from hilgate.report.figures import figures
     from hilgate.report.tracedata import Packet, Trace
 
     trace = Trace()

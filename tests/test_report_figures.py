@@ -16,7 +16,8 @@ matplotlib = pytest.importorskip("matplotlib")
 from PIL import Image  # noqa: E402  (matplotlib's own dependency)
 
 from hilgate.cli import main  # noqa: E402
-from hilgate.report.figures import RESIDUE_S, figures  # noqa: E402
+from hilgate.report.figure_kit import RESIDUE_S  # noqa: E402
+from hilgate.report.figures import figures  # noqa: E402
 from hilgate.report.tracedata import Packet, Trace, load_trace  # noqa: E402
 
 

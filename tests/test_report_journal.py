@@ -150,7 +150,7 @@ def test_the_timeline_legend_and_labels_are_in_words(tmp_path):
 
 
 def test_a_dense_timeline_counts_losses_per_second_in_words(tmp_path):
-    from hilgate.report.figures import DENSE
+    from hilgate.report.figure_kit import DENSE
 
     trace = Trace()
     for i in range(DENSE + 50):
