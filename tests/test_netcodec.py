@@ -205,3 +205,15 @@ def test_the_replay_window_takes_each_number_once_per_session():
     window.resync = True
     assert window.admit("s2", 200, 10_000_000_000) == 0
     assert window.admit("s2", 200, 10_000_000_002) == 1
+
+
+def test_a_daemon_that_starts_while_another_host_runs_hears_its_numbers_without_a_gap():
+    """Its window was not there for the numbers before the first it hears: before, a restarted host
+    counted every message the other had sent since its own start as a gap (traced net_gap, n in the
+    thousands), and past MAX_JUMP (16.7 million messages: two days at 100 a second) refused them all."""
+    window = ReplayWindow()
+    assert window.admit("s1", 100, 5000) == 0
+    assert window.admit("s1", 100, 5002) == 1  # from there on, gaps are gaps
+    late = ReplayWindow()
+    assert late.admit("s1", 100, ReplayWindow.MAX_JUMP + 10) == 0
+    assert late.admit("s1", 100, ReplayWindow.MAX_JUMP + 11) == 0

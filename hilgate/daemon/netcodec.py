@@ -352,7 +352,8 @@ class ReplayWindow:
     (IPsec's anti-replay window, RFC 4303 §3.4.3): a number seen, or older than that, is a replay; a
     number ahead counts the numbers skipped as gaps (what Zenoh dropped), at most :data:`MAX_JUMP` at
     once (a larger jump is refused: numbers are not made up that far ahead).  After the host was down,
-    any jump ahead is taken without a gap (numbers went on for the hosts that still heard it)."""
+    any jump ahead is taken without a gap (numbers went on for the hosts that still heard it), and so is
+    the first number heard at all (this daemon started while that host ran)."""
 
     WINDOW = 1024
     MAX_JUMP = 1 << 24
@@ -371,7 +372,10 @@ class ReplayWindow:
         if session != self.session:
             if self.session is not None and epoch_ns <= self.epoch_ns:
                 return "replay"  # an earlier start of the host, or a second one beside it
-            self.session, self.epoch_ns, self.highest, self.seen, self.resync = session, epoch_ns, 0, 0, False
+            # (a first contact resyncs: a daemon that starts while that host runs was not there for its
+            # numbers before, and a gap of all of them would be a lie, or past MAX_JUMP a refusal of all)
+            self.session, self.epoch_ns, self.highest, self.seen, self.resync = (session, epoch_ns, 0, 0,
+                                                                                self.session is None)
         if number > self.highest:
             skipped = number - self.highest - 1
             if self.resync:

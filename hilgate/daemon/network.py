@@ -21,8 +21,8 @@ carries its sender's exact position.  Static vehicles are computed everywhere.
 
 **Faults.** A daemon holds liveliness tokens for its host and each of its links; a host that dies or
 is cut off loses them within the Zenoh lease (``lease_s``), its links show ``down`` here and frames
-addressed to them are traced and counted ``host_down``.  A second daemon with the same host name or
-link is refused at start.
+addressed to them are traced and counted ``host_down``; what was on its way when it went is settled by
+the hosts' reports (:mod:`.netledger`).  A second daemon with the same host name or link is refused at start.
 
 **Who says what.** Every key a host writes carries its name, so that Zenoh's access control (built
 from the lab's credentials, :mod:`hilgate.gli.zenoh_auth`) lets each host publish, answer and hold
@@ -51,6 +51,7 @@ from typing import Any, Callable
 from .access import AccessError
 from .netcodec import (MAX_TRANSMISSION, NetError, ReplayWindow, decode_pose, decode_transmission, encode_pose,
                        encode_transmission, to_local)
+from .netsettle import Settlement
 from ..core.inbox import Inbox
 from ..gli.zenoh_auth import Identity, session_config
 from ..gli.zenoh_door import WatchedPublisher, ZenohDoor
@@ -78,7 +79,7 @@ def zenoh_config(spec: Any, identity: Identity | None, connect: list[str] | tupl
     return session_config(listen=list(listen or spec.listen), connect=[*spec.connect, *connect],
                           identity=identity, prefix=spec.prefix, multicast_scouting=spec.multicast_scouting,
                           lease_s=spec.lease_s, config_file=spec.config,
-                          size_filter=[f"{spec.prefix}/tx/**", f"{spec.prefix}/pose/**"])
+                          size_filter=[f"{spec.prefix}/tx/**", f"{spec.prefix}/pose/**", f"{spec.prefix}/ack/**"])
 
 
 class HostView:
@@ -139,6 +140,7 @@ class Network:
         self._entities: list[Any] = []
         self._status_cache = b"{}"
         self.zid: str | None = None  # this daemon's Zenoh id, once open() joined
+        self.settlement = Settlement(self)  # what became of the frames between this host and the others
 
     # -- set-up ---------------------------------------------------------------------------------
 
@@ -222,6 +224,7 @@ class Network:
         self._entities.append(session.declare_subscriber(f"{self.prefix}/pose/**", on_pose))
         status_key = f"{self.prefix}/status/{self.host}"  # (the answer under this host's own key: the ACL's)
         self._entities.append(session.declare_queryable(status_key, lambda q: q.reply(status_key, self._status_cache)))
+        self._entities += self.settlement.start()
         world = self.router.world
         world.medium.tap = self._on_air
         self._poses_every(1.0 / self.spec.pose_rate_hz)
@@ -232,6 +235,7 @@ class Network:
         self.scene = scene
         mine = self._mine(scene)
         self.remote_links = {link.id: link.host for link in scene.links.values() if link.id not in mine}
+        self.settlement.apply(scene, mine)
         for name in scene.hosts:
             if name != self.host:
                 self.hosts.setdefault(name, HostView(name))
@@ -262,6 +266,7 @@ class Network:
             if view is None:
                 return
             (view.zids.add if kind == "PUT" else view.zids.discard)(zid)
+            self.settlement.alive(host, view.zids)
             up = bool(view.zids)
             if up != view.up:
                 view.up = up
@@ -283,9 +288,6 @@ class Network:
         host = self.remote_links.get(link_id)
         view = self.hosts.get(host) if host else None
         return "up" if view is not None and view.up and view.links.get(link_id) else "down"
-
-    def host_down(self, link_id: str) -> bool:
-        return link_id in self.remote_links and self.link_state(link_id) == "down"
 
     # -- transmissions ---------------------------------------------------------------------------
 
@@ -309,11 +311,13 @@ class Network:
                 allowed_destination=zenoh.Locality.REMOTE))
         self._remember(self.sent, (frame.src_link, frame.id), frame)
         if not publisher.matching:
+            self.settlement.on_air(sender, frame, None)
             return
         self.number += 1
         publisher.put(encode_transmission(self.host, self.epoch_ns, self.number, frame, t, duration,
                                           sender.pose.position(t), self.zid))
         self.counters["published"] += 1
+        self.settlement.on_air(sender, frame, self.number)
 
     def _drain(self, handler: Any) -> None:
         """The others' transmissions, from Zenoh's queue to the loop in batches: one wake-up (and one
@@ -376,6 +380,7 @@ class Network:
         modem = world.modems.get(frame.src_link)
         if modem is None or modem.radio.listens or self.remote_links.get(frame.src_link) != message.host:
             self.counters["foreign_sender"] += 1  # not a link the scene gives that host: ignored
+            self.settlement.refused(message)
             return
         if message.ref_key is not None:
             mine = self.sent.get(message.ref_key) if message.ref_key[0] not in self.remote_links else None
@@ -385,7 +390,10 @@ class Network:
         t = to_local(message.t, message.epoch_ns, self.epoch_ns)
         if abs(now - t) > TIME_WINDOW_S:  # a clock that far off (or a forged time) would schedule nonsense
             self.counters["out_of_time"] += 1
+            self.settlement.refused(message)
             return
+        if not self.settlement.hear(message, modem, t, now):
+            return  # (reported as never heard: its sender traced it)
         view.heard += 1
         delay = now - t
         view.delay_sum += delay
@@ -504,7 +512,7 @@ class Network:
                  for link_id, host in sorted(self.remote_links.items())]
         return {"host": self.host, "zid": self.zid, "epoch_ns": self.epoch_ns if self._entities else None,
                 "hosts": [view.status() for _, view in sorted(self.hosts.items())], "remote_links": links,
-                "counters": dict(self.counters)}
+                "counters": {**self.counters, **self.settlement.counters()}, "unsettled": self.settlement.unsettled()}
 
     def query_status(self, answer: Callable[[list[dict[str, Any]]], Any], timeout: float = 1.5) -> None:
         """Ask every daemon (this one too) for its status; ``answer`` gets the list on the loop.  The
@@ -540,6 +548,7 @@ class Network:
                                          "vehicles": local["vehicles"]}, default=str).encode()
 
     def close(self) -> None:
+        self.settlement.close(joined=self.session is not None and bool(self._entities))
         for entity in self._entities + list(self._publishers.values()) + list(self._pose_publishers.values()):
             try:
                 entity.undeclare()

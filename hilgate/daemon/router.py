@@ -280,11 +280,6 @@ class RoutedLink:
                 and self.router.addressed_to_nobody(self.spec.params.tx_channel, frame.dst)):
             # it still goes on air (and may spoil others' frames), but nobody will ever take it
             self.lost("no_receiver", len(frame.real), ev="err", src=self.id, dst=f"addr:{frame.dst}")
-        network = self.router.network
-        if network is not None and frame.dst != BROADCAST:
-            target = self.router.link_name(self.spec.params.tx_channel, frame.dst)
-            if network.host_down(target):  # it still goes on air here, but its host is gone
-                self.lost("host_down", len(frame.real), ev="err", src=self.id, dst=target)
         backend.send(frame)
         if sender is not None and sender is self._sole_assumer:
             modem = backend.sim_modem

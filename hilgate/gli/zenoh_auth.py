@@ -123,9 +123,9 @@ def _allow(rule_id: str, messages: list[str], keys: list[str], flow: str = "ingr
 def acl(prefix: str, identity: Identity) -> dict[str, Any]:
     """Zenoh's ``access_control`` for a session of ``identity``: what it lets in from each peer.
 
-    A host H may: publish under ``tx/H``, ``pose/H``, ``link/H``; answer ``status/H`` and ``link/H``
-    queries; hold liveliness tokens under ``alive/H``; subscribe to and query the others' transmissions,
-    poses, statuses and tokens.  An application A may (on daemons) only put SENDs under
+    A host H may: publish under ``tx/H``, ``pose/H``, ``link/H``, ``ack/H``; answer ``status/H`` and
+    ``link/H`` queries; hold liveliness tokens under ``alive/H``; subscribe to and query the others'
+    transmissions, poses, reports, statuses and tokens.  An application A may (on daemons) only put SENDs under
     ``link/*/*/send/A``, subscribe to links' ``recv``, ``state`` and its own ``error/A``, and query
     ``info`` and ``command/A``; on an application's session only hosts' link keys get in.  Anything
     else from anyone (another application, a certificate of a name the manifest does not list) is
@@ -138,8 +138,9 @@ def acl(prefix: str, identity: Identity) -> dict[str, Any]:
     for i, host in enumerate(identity.hosts):
         if identity.role == "host":
             granted = [
-                (["put", "delete"], [f"{p}/tx/{host}/**", f"{p}/pose/{host}/**", f"{p}/link/{host}/**"]),
-                (["declare_subscriber"], [f"{p}/tx/**", f"{p}/pose/**", f"{p}/link/{host}/**"]),
+                (["put", "delete"], [f"{p}/tx/{host}/**", f"{p}/pose/{host}/**", f"{p}/link/{host}/**",
+                                     f"{p}/ack/{host}/**"]),
+                (["declare_subscriber"], [f"{p}/tx/**", f"{p}/pose/**", f"{p}/link/{host}/**", f"{p}/ack/**"]),
                 (["declare_queryable", "reply"], [f"{p}/status/{host}", f"{p}/link/{host}/**"]),
                 (["query"], [f"{p}/status/**"]),
                 (["liveliness_token"], [f"{p}/alive/{host}/**"]),

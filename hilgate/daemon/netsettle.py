@@ -1,0 +1,228 @@
+"""The daemon's side of settling frames between hosts (:mod:`.netledger` says what and why): which of a
+frame's destinations are another host's, when a transmission heard here has ended at its destinations,
+the reports to the others (every :data:`~.netledger.REPORT_S`, and a last one when the daemon stops), and
+their reports, read on the loop.
+
+Kept apart from :mod:`.network` (which hears and publishes transmissions) so that the settling, its
+keys (``<prefix>/ack/<host>/<sender>``) and its costs stay in one place: per frame for another host, a
+dictionary entry on the sender and one on the receiver; per host pair, five small messages a second.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from typing import Any
+
+from .netcodec import MAX_TRANSMISSION, NetError
+from .netledger import REPORT_S, Ledger, Receipts, decode_report
+from ..core.inbox import Inbox
+from ..models.frame import BROADCAST, DATA
+
+log = logging.getLogger(__name__)
+
+__all__ = ["Settlement"]
+
+INBOX_DEPTH = 4096  # reports waiting for the loop (a few a second per host)
+
+
+class Settlement:
+    """Settling this daemon's frames with the other hosts, and theirs with them (``network``: the
+    daemon's :class:`~.network.Network`, whose session, hosts, scene and counters it shares)."""
+
+    def __init__(self, network: Any):
+        self.network = network
+        self.ledger = Ledger(self._lost)
+        self.receipts: dict[str, Receipts] = {}  # per other host: what was heard of its session
+        self._publishers: dict[str, Any] = {}
+        self._theirs: dict[str, dict[str, tuple[str, ...]]] = {}  # channel → other host → its links there
+        self._mine: dict[str, tuple[str, ...]] = {}  # channel → this host's links listening there
+
+    def apply(self, scene: Any, mine: set[str]) -> None:
+        theirs: dict[str, dict[str, list[str]]] = {}
+        local: dict[str, list[str]] = {}
+        for link in scene.links.values():
+            channel = link.params.rx_channel
+            if link.id in mine:
+                local.setdefault(channel, []).append(link.id)
+            else:
+                theirs.setdefault(channel, {}).setdefault(link.host, []).append(link.id)
+        self._theirs = {channel: {host: tuple(links) for host, links in hosts.items()}
+                        for channel, hosts in theirs.items()}
+        self._mine = {channel: tuple(links) for channel, links in local.items()}
+
+    def start(self) -> list[Any]:
+        """Listen to the others' reports and start reporting; returns the Zenoh entities to undeclare."""
+        network = self.network
+        reports = Inbox(network.scheduler.post, self._on_reports, INBOX_DEPTH)
+
+        def on_report(sample: Any) -> None:
+            size = len(sample.payload)
+            reports.put((str(sample.key_expr), sample.payload.to_bytes() if size <= MAX_TRANSMISSION else size))
+
+        subscriber = network.session.declare_subscriber(f"{network.prefix}/ack/*/{network.host}", on_report)
+        self._report_every(REPORT_S)
+        return [subscriber]
+
+    def alive(self, host: str, zids: set[str]) -> None:
+        self.ledger.alive(host, zids)
+
+    # -- this host's frames ----------------------------------------------------------------------
+
+    def on_air(self, sender: Any, frame: Any, number: int | None) -> None:
+        """A frame of this host went on air; ``number``: the message it went out in (None: nobody
+        subscribed, so nobody heard it)."""
+        if frame.app_frame is None or frame.kind != DATA:
+            return
+        targets = self._targets(frame, sender.tx_channel)
+        if not targets:
+            return
+        hosts = self.network.hosts
+        for host, links in targets.items():
+            view = hosts.get(host)
+            if number is not None and view is not None and view.up:
+                self.ledger.published(host, number, frame.src_link, frame.id, frame.size, links)
+            else:  # (it still went on air here, and to the hosts that are up)
+                self.ledger.down(frame.src_link, frame.id, frame.size, links, host)
+
+    def _targets(self, frame: Any, channel: str) -> dict[str, tuple[str, ...]] | None:
+        """The other hosts' links a frame is for, by host: the one it is addressed to, or every link
+        listening on its channel for a broadcast."""
+        hosts = self._theirs.get(channel)
+        if not hosts:
+            return None
+        if frame.dst_addr == BROADCAST:
+            return hosts
+        network = self.network
+        link = network.router.link_name(channel, frame.dst_addr)
+        host = network.remote_links.get(link)
+        return {host: (link,)} if host is not None else None
+
+    def _lost(self, src: str, pkt: int, size: int, dst: str, host: str, cause: str) -> None:
+        """A frame of this host's link ``src`` that never reached ``dst`` on ``host``: an ``err`` of the
+        sending link, counted among its drop causes."""
+        network = self.network
+        port = network.router.port(src)
+        if port is not None:
+            port.lost(cause, size, ev="err", src=src, dst=dst, pkt=pkt, host=host)
+            return
+        # (the link was removed meanwhile, or the daemon is stopping: its count is the network's)
+        network.recorder.event({"t": round(network.scheduler.now(), 9), "ev": "err", "link": src, "src": src,
+                                "dst": dst, "pkt": pkt, "host": host, "size": size, "cause": cause})
+
+    # -- the others' frames ----------------------------------------------------------------------
+
+    def _receipts(self, message: Any) -> Receipts:
+        receipts = self.receipts.get(message.host)
+        if receipts is None or receipts.session != message.session or receipts.epoch_ns != message.epoch_ns:
+            receipts = self.receipts[message.host] = Receipts(message.session, message.epoch_ns)  # (it started again)
+        return receipts
+
+    def refused(self, message: Any) -> None:
+        """A transmission heard and refused here (counted): settled at once."""
+        self._receipts(message).heard_one(message.number, -math.inf)
+
+    def hear(self, message: Any, sender: Any, t: float, now: float) -> bool:
+        """A transmission about to be handed to the medium at local time ``t``.  False: it was already
+        reported as never heard (its sender traced it): it must not be delivered."""
+        end = max(now, self._arrivals_end(sender, message.frame, t, message.duration))
+        if self._receipts(message).heard_one(message.number, end):
+            return True
+        self.network.counters["settled_late"] += 1
+        return False
+
+    def _arrivals_end(self, sender: Any, frame: Any, t: float, duration: float) -> float:
+        """When the last arrival of a transmission at the links it is for here has ended and been
+        delivered (the modem's receive delay included): from then on its outcome is in this trace."""
+        world = self.network.router.world
+        channel = sender.radio.tx_channel
+        if frame.dst_addr == BROADCAST:
+            links = self._mine.get(channel, ())
+        else:
+            links = (self.network.router.link_name(channel, frame.dst_addr),)
+        end = t + duration
+        for link in links:
+            receiver = world.modems.get(link)
+            if receiver is None or not receiver.radio.listens:
+                continue
+            tau = world.medium.propagation_delay(sender.radio, receiver.radio, t)
+            if tau is not None:
+                end = max(end, t + tau + duration + receiver.rx_delay + 6 * receiver.rx_jitter)
+        return end
+
+    # -- reports ---------------------------------------------------------------------------------
+
+    def _report_every(self, interval: float) -> None:
+        scheduler = self.network.scheduler
+
+        def report() -> None:
+            self._report(final=False)
+            scheduler.after_wall(interval, report)
+
+        scheduler.after_wall(interval, report)
+
+    def _report(self, final: bool) -> None:
+        network = self.network
+        now, wall = network.scheduler.now(), time.monotonic()
+        for host, receipts in self.receipts.items():
+            data = receipts.report(network.host, network.zid, now, wall, final)
+            if data is not None:
+                self._publisher(host).put(data)
+
+    def _publisher(self, host: str) -> Any:
+        publisher = self._publishers.get(host)
+        if publisher is None:
+            import zenoh
+
+            network = self.network
+            publisher = self._publishers[host] = network.session.declare_publisher(
+                f"{network.prefix}/ack/{network.host}/{host}", congestion_control=zenoh.CongestionControl.DROP,
+                allowed_destination=zenoh.Locality.REMOTE)
+        return publisher
+
+    def _on_reports(self, reports: list[tuple[str, bytes | int]], dropped: int) -> None:
+        network = self.network
+        counters = network.counters
+        if dropped:
+            counters["inbox_full"] += dropped
+        for key, data in reports:
+            if isinstance(data, int):
+                counters["bad_message"] += 1
+                continue
+            try:
+                report = decode_report(data)
+            except NetError as exc:
+                counters[exc.cause] += 1
+                continue
+            host = report["host"]
+            if host != network._key_host(key, "ack"):
+                counters["forged"] += 1
+            elif host not in network.hosts:
+                counters["foreign_sender"] += 1
+            elif report["session"] == network.zid and report["epoch_ns"] == network.epoch_ns:  # (not an earlier run's)
+                self.ledger.report(host, report)
+
+    # -- status and the end ----------------------------------------------------------------------
+
+    def counters(self) -> dict[str, int]:
+        return {cause: n for cause, n in self.ledger.counters.items() if n}
+
+    def unsettled(self) -> int:
+        return self.ledger.pending()
+
+    def close(self, joined: bool) -> None:
+        """The daemon stops (its loop has: nothing more is heard here).  ``joined``: its session is still
+        open, so the others get the last word: what was on its way here will not arrive."""
+        if joined:
+            try:
+                self._report(final=True)
+            except Exception:
+                log.debug("the last reports", exc_info=True)
+        self.ledger.close()
+        for publisher in self._publishers.values():
+            try:
+                publisher.undeclare()
+            except Exception:
+                pass
+        self._publishers = {}
