@@ -347,12 +347,12 @@ class RoutedLink:
                 kept = True
             elif outcome != ABSENT:
                 lost = True
-                self.lost(outcome, len(frame.real))
+                self.lost(outcome, len(frame.real), **_pkt(frame))
         if not taken:
             if kept:
                 self.unread_kept += 1  # waits in the queue for an application that starts late
             elif not lost:  # an application's own loss (app_full, client_slow) is counted once, as that
-                self.lost("no_reader", len(frame.real))
+                self.lost("no_reader", len(frame.real), **_pkt(frame))
         if frame.on_delivered is not None and frame.dst == self.address:
             frame.on_delivered(frame, self)
 
@@ -430,6 +430,11 @@ class RoutedLink:
         if self.lock is not None:
             self.lock.release()
             self.lock = None
+
+
+def _pkt(frame: AppFrame) -> dict[str, int]:
+    """The frame's id on air, for a loss's trace line, when a simulated modem delivered it."""
+    return {} if frame.pkt is None else {"pkt": frame.pkt}
 
 
 class Router:
