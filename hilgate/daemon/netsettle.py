@@ -25,6 +25,12 @@ log = logging.getLogger(__name__)
 __all__ = ["Settlement"]
 
 INBOX_DEPTH = 4096  # reports waiting for the loop (a few a second per host)
+REACH_S = 2.0
+"""How long (model seconds) the farthest reach of a moving sender's broadcast here is taken as known."""
+MOTION_MARGIN_S = 0.05
+"""What is added to it meanwhile: two vehicles closing or parting at 30 m/s for REACH_S change a delay
+by 40 ms at 1 500 m/s.  (Later settling costs nothing; earlier would let a daemon stopping then say it
+was done with a frame still arriving.)"""
 
 
 class Settlement:
@@ -38,6 +44,7 @@ class Settlement:
         self._publishers: dict[str, Any] = {}
         self._theirs: dict[str, dict[str, tuple[str, ...]]] = {}  # channel → other host → its links there
         self._mine: dict[str, tuple[str, ...]] = {}  # channel → this host's links listening there
+        self._reach: dict[str, tuple[float, float]] = {}  # sender link → (its broadcasts' longest τ here, until)
 
     def apply(self, scene: Any, mine: set[str]) -> None:
         theirs: dict[str, dict[str, list[str]]] = {}
@@ -51,6 +58,7 @@ class Settlement:
         self._theirs = {channel: {host: tuple(links) for host, links in hosts.items()}
                         for channel, hosts in theirs.items()}
         self._mine = {channel: tuple(links) for channel, links in local.items()}
+        self._reach = {}
 
     def start(self) -> list[Any]:
         """Listen to the others' reports and start reporting; returns the Zenoh entities to undeclare."""
@@ -134,22 +142,34 @@ class Settlement:
 
     def _arrivals_end(self, sender: Any, frame: Any, t: float, duration: float) -> float:
         """When the last arrival of a transmission at the links it is for here has ended and been
-        delivered (the modem's receive delay included): from then on its outcome is in this trace."""
-        world = self.network.router.world
+        delivered (the modem's receive delay included): from then on its outcome is in this trace.
+        Exact for a frame addressed to one link; for a broadcast, the farthest of this host's listeners
+        (worked out once per sender while everything is static, else every REACH_S, with a margin)."""
         channel = sender.radio.tx_channel
-        if frame.dst_addr == BROADCAST:
-            links = self._mine.get(channel, ())
-        else:
-            links = (self.network.router.link_name(channel, frame.dst_addr),)
-        end = t + duration
+        if frame.dst_addr != BROADCAST:
+            return t + duration + self._reach_to((self.network.router.link_name(channel, frame.dst_addr),),
+                                                 sender, t)[0]
+        reach = self._reach.get(sender.id)
+        if reach is None or t > reach[1]:
+            longest, static = self._reach_to(self._mine.get(channel, ()), sender, t)
+            reach = self._reach[sender.id] = (longest, math.inf) if static else (longest + MOTION_MARGIN_S,
+                                                                                t + REACH_S)
+        return t + duration + reach[0]
+
+    def _reach_to(self, links: tuple[str, ...], sender: Any, t: float) -> tuple[float, bool]:
+        """The longest delay from ``sender`` at ``t`` to an arrival's delivery at ``links`` (those this
+        host serves), and whether it stays so (everyone static)."""
+        world = self.network.router.world
+        longest, static = 0.0, sender.pose.static
         for link in links:
             receiver = world.modems.get(link)
             if receiver is None or not receiver.radio.listens:
                 continue
+            static = static and receiver.pose.static
             tau = world.medium.propagation_delay(sender.radio, receiver.radio, t)
             if tau is not None:
-                end = max(end, t + tau + duration + receiver.rx_delay + 6 * receiver.rx_jitter)
-        return end
+                longest = max(longest, tau + receiver.rx_delay + 6 * receiver.rx_jitter)
+        return longest, static
 
     # -- reports ---------------------------------------------------------------------------------
 
