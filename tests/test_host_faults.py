@@ -186,7 +186,7 @@ def account(sender: tuple[App, Daemon], receivers: list[tuple[App, Daemon]], lin
             assert seq_of[e["pkt"]] not in lost, f"traced twice: {e}"
             lost[seq_of[e["pkt"]]] = e["cause"]
     sent = app.sent
-    delivered = [n for receiver, _ in receivers for n in receiver.received() if n >= app.first]
+    delivered = [n for receiver, _ in receivers for n in receiver.received() if app.first <= n < app.next]
     assert delivered == sorted(set(delivered)), "a frame delivered twice, or out of order"
     overlap = set(delivered) & set(lost)
     assert all(lost[n] == "unconfirmed" for n in overlap), {n: lost[n] for n in overlap}
@@ -311,3 +311,38 @@ def test_a_daemon_killed_and_started_again_loses_no_frame_without_a_trace(hosts,
     assert a_to_b["host_down"] > 0
     assert b_to_a["overlap"] == 0
     assert old_b.process.returncode == -signal.SIGKILL
+
+
+def test_a_daemon_stopped_and_started_again_settles_every_frame_exactly(hosts, tmp_path, credentials):
+    """``systemctl restart``: SIGTERM, then the same daemon again.  Stopping, B says its last word (what of
+    A's frames will now never arrive: ``host_down`` at A, exactly) and waits for A to confirm the frames it
+    sent: none of either is left ``unconfirmed``."""
+    pair, started = hosts
+    net = Network(pair, started, tmp_path, credentials)
+    app_a = App(net.a, net.A.runtime, dst=2)
+    app_b = App(net.b, net.B.runtime, dst=1)
+    wait_until(lambda: len(app_b.got) >= 10 and len(app_a.got) >= 10, "frames both ways")
+    app_b.sending.clear()  # (a daemon does not account what its own applications write as it stops)
+    wait_until(lambda: net.B.link_status(net.b)["tx_packets"] >= len(app_b.sent), "B's frames to be on air")
+    old_b = net.B
+    assert old_b.stop() == 0  # at once: its last frames are still on their way to A
+    wait_until(lambda: app_b.error is not None, "B's application to lose its link")
+    during = len(app_a.sent)
+    wait_until(lambda: len(app_a.sent) >= during + 10, "frames sent to B while it is down")
+    net.B = net.start_b(run=1)
+    back = time.monotonic()
+    again = App(net.b, net.B.runtime, dst=1, first=app_b.next)
+    took = resumed(app_a, again, back)
+    settle(net, app_a, again)
+    assert app_a.error is None and again.error is None
+    for app in (app_a, app_b, again):
+        app.close()
+    net.A.stop()
+    net.B.stop()
+    a_to_b = account((app_a, net.A), [(app_b, old_b), (again, net.B)], net.a, net.b)
+    b_to_a = account((app_b, old_b), [(app_a, net.A)], net.b, net.a)
+    print(f"daemon B stopped and started again: delivery to B resumed {took:.2f} s after it was back (READY); "
+          f"A to B {a_to_b}, the first B to A {b_to_a}")
+    assert a_to_b["host_down"] > 0
+    assert a_to_b["unconfirmed"] == b_to_a["unconfirmed"] == 0
+    assert a_to_b["overlap"] == b_to_a["overlap"] == 0

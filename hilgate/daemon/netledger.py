@@ -263,8 +263,11 @@ class Ledger:
                 _, entry = book.popitem(last=False)
                 self._trace(entry, host, "unconfirmed")
 
-    def pending(self) -> int:
-        return sum(len(book) for book in self.books.values())
+    def pending(self, hosts: Iterable[str] | None = None) -> int:
+        """Frames not yet settled (for ``hosts`` only, if given)."""
+        if hosts is None:
+            return sum(len(book) for book in self.books.values())
+        return sum(len(self.books.get(host, ())) for host in hosts)
 
     def _trace(self, entry: _Entry, host: str, cause: str) -> None:
         for target in entry.targets:

@@ -25,6 +25,9 @@ log = logging.getLogger(__name__)
 __all__ = ["Settlement"]
 
 INBOX_DEPTH = 4096  # reports waiting for the loop (a few a second per host)
+STOP_WAIT_S = 0.5
+"""A daemon that stops waits at most this long for the others to confirm what it sent them (it is on its
+way: tracing it ``unconfirmed`` at once would call lost most of what arrives)."""
 REACH_S = 2.0
 """How long (model seconds) the farthest reach of a moving sender's broadcast here is taken as known."""
 MOTION_MARGIN_S = 0.05
@@ -45,6 +48,7 @@ class Settlement:
         self._theirs: dict[str, dict[str, tuple[str, ...]]] = {}  # channel → other host → its links there
         self._mine: dict[str, tuple[str, ...]] = {}  # channel → this host's links listening there
         self._reach: dict[str, tuple[float, float]] = {}  # sender link → (its broadcasts' longest τ here, until)
+        self._reports: Inbox | None = None
 
     def apply(self, scene: Any, mine: set[str]) -> None:
         theirs: dict[str, dict[str, list[str]]] = {}
@@ -63,7 +67,7 @@ class Settlement:
     def start(self) -> list[Any]:
         """Listen to the others' reports and start reporting; returns the Zenoh entities to undeclare."""
         network = self.network
-        reports = Inbox(network.scheduler.post, self._on_reports, INBOX_DEPTH)
+        reports = self._reports = Inbox(network.scheduler.post, self._on_reports, INBOX_DEPTH)
 
         def on_report(sample: Any) -> None:
             size = len(sample.payload)
@@ -225,6 +229,15 @@ class Settlement:
 
     # -- status and the end ----------------------------------------------------------------------
 
+    def _await_confirmations(self) -> None:
+        """Wait (at most STOP_WAIT_S) for the hosts that are up to confirm what this daemon sent them.
+        The loop has stopped, so their reports are taken here, as it would have."""
+        deadline = time.monotonic() + STOP_WAIT_S
+        up = [host for host, view in self.network.hosts.items() if view.up]
+        while self._reports is not None and self.ledger.pending(up) and time.monotonic() < deadline:
+            time.sleep(REPORT_S / 10)
+            self._reports._drain()  # (what the loop would have run for the reports that came meanwhile)
+
     def counters(self) -> dict[str, int]:
         return {cause: n for cause, n in self.ledger.counters.items() if n}
 
@@ -239,6 +252,7 @@ class Settlement:
                 self._report(final=True)
             except Exception:
                 log.debug("the last reports", exc_info=True)
+            self._await_confirmations()
         self.ledger.close()
         for publisher in self._publishers.values():
             try:
