@@ -205,11 +205,11 @@ class Settlement:
                 allowed_destination=zenoh.Locality.REMOTE)
         return publisher
 
-    def _on_reports(self, reports: list[tuple[str, bytes | int]], dropped: int) -> None:
+    def _on_reports(self, reports: list[tuple[str, bytes | int]], dropped: Any) -> None:
         network = self.network
         counters = network.counters
-        if dropped:
-            counters["inbox_full"] += dropped
+        if dropped:  # (a count, or per source, as the Inbox of branch fair says it)
+            counters["inbox_full"] += dropped if isinstance(dropped, int) else sum(dropped.values())
         for key, data in reports:
             if isinstance(data, int):
                 counters["bad_message"] += 1
