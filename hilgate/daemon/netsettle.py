@@ -208,7 +208,7 @@ class Settlement:
     def _on_reports(self, reports: list[tuple[str, bytes | int]], dropped: Any) -> None:
         network = self.network
         counters = network.counters
-        if dropped:  # (a count, or per source, as the Inbox of branch fair says it)
+        if dropped:  # (a count, or a count per source)
             counters["inbox_full"] += dropped if isinstance(dropped, int) else sum(dropped.values())
         for key, data in reports:
             if isinstance(data, int):
