@@ -91,6 +91,8 @@ class Settlement:
         if not targets:
             return
         hosts = self.network.hosts
+        if number is not None and any(view is not None and not view.up for view in map(hosts.get, targets)):
+            self.network.catch_up_liveliness()  # (someone heard it: the host may be back already)
         for host, links in targets.items():
             view = hosts.get(host)
             if number is not None and view is not None and view.up:

@@ -141,6 +141,7 @@ class Network:
         self._status_cache = b"{}"
         self.zid: str | None = None  # this daemon's Zenoh id, once open() joined
         self.settlement = Settlement(self)  # what became of the frames between this host and the others
+        self._alives: Inbox | None = None
 
     # -- set-up ---------------------------------------------------------------------------------
 
@@ -207,7 +208,7 @@ class Network:
         self.apply(scene)
         liveliness = session.liveliness()
         put = zenoh.SampleKind.PUT
-        alive = Inbox(post, self._on_alives, INBOX_DEPTH)
+        alive = self._alives = Inbox(post, self._on_alives, INBOX_DEPTH)
         self._entities.append(liveliness.declare_subscriber(
             f"{self.prefix}/alive/**", lambda s: alive.put((str(s.key_expr), "PUT" if s.kind == put else "DELETE")),
             history=True))
@@ -282,6 +283,14 @@ class Network:
                 return  # (a host's token of a link the scene does not give it says nothing)
             zids = view.links.setdefault(link, set())
             (zids.add if kind == "PUT" else zids.discard)(zid)
+
+    def catch_up_liveliness(self) -> None:
+        """Take the liveliness changes that wait for the loop now: Zenoh may already send a host that came
+        back what is published (its subscriber is matched on Zenoh's thread, its token reaches the loop
+        after), and it must not be taken for down meanwhile."""
+        alives = self._alives
+        if alives is not None and alives.posted:
+            alives._drain()
 
     def link_state(self, link_id: str) -> str:
         """``up``/``down`` of a link another host serves (its token is alive or not)."""
