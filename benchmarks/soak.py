@@ -300,6 +300,8 @@ def main() -> int:
         for host in hosts.values():
             host.stop()
         ended = os.getloadavg()
+        with open(os.path.join(base, "rss.json"), "w") as handle:  # (kept with --keep)
+            json.dump({name: host.rss for name, host in hosts.items()}, handle)
         report(layout, hosts, [json.load(open(logs[h])) for h in "AB"], restarts, reloads, refused, args, ended)
         result = account([json.load(open(logs[h])) for h in "AB"], hosts["A"].runs + hosts["B"].runs,
                          layout.host, layout.address)
@@ -333,11 +335,16 @@ def report(layout: Layout, hosts: dict[str, Host], logs: list[dict], restarts: l
           f"{load[0]:.2f}, {load[1]:.2f}, {load[2]:.2f} at the end")
     warm = args.minutes * 60 / 10
     a = hosts["A"].rss[0]
-    after = [(t, m) for t, m in a if t >= a[0][0] + warm] if a else []
     if a:
+        after = [(t, m) for t, m in a if t >= a[0][0] + warm]
+        second = [(t, m) for t, m in a if t >= (a[0][0] + a[-1][0]) / 2]
         print(f"memory of daemon A (one run, {len(a)} samples): RSS {a[0][1]:.1f} MB at the start, "
               f"{a[-1][1]:.1f} MB at the end, max {max(m for _, m in a):.1f} MB; slope "
-              f"{_mb(slope(after))} after the first {warm / 60:g} min, {_mb(slope(a))} over the whole run")
+              f"{_mb(slope(a))} over the whole run, {_mb(slope(after))} after the first {warm / 60:g} min, "
+              f"{_mb(slope(second))} over the second half")
+        step = max(60.0, args.minutes * 6)  # (a tenth of the run)
+        marks = [next(m for t, m in a if t >= a[0][0] + k * step) for k in range(int((a[-1][0] - a[0][0]) // step) + 1)]
+        print(f"  RSS of daemon A every {step / 60:g} min: " + ", ".join(f"{m:.1f}" for m in marks) + " MB")
     slopes = []
     for run, samples in enumerate(hosts["B"].rss):
         if samples:
