@@ -300,8 +300,10 @@ def main() -> int:
         for host in hosts.values():
             host.stop()
         ended = os.getloadavg()
-        with open(os.path.join(base, "rss.json"), "w") as handle:  # (kept with --keep)
-            json.dump({name: host.rss for name, host in hosts.items()}, handle)
+        with open(os.path.join(base, "rss.json"), "w") as handle:  # (kept with --keep: the account again, offline)
+            json.dump({"rss": {name: host.rss for name, host in hosts.items()},
+                       "runs": [vars(run) for run in hosts["A"].runs + hosts["B"].runs],
+                       "host": layout.host, "address": layout.address}, handle)
         report(layout, hosts, [json.load(open(logs[h])) for h in "AB"], restarts, reloads, refused, args, ended)
         result = account([json.load(open(logs[h])) for h in "AB"], hosts["A"].runs + hosts["B"].runs,
                          layout.host, layout.address)

@@ -9,7 +9,9 @@ where to, when, and what every application received; the daemons' traces say wha
   and ``src`` its link: the FIFO, and what another host did not get: ``host_down``, ``net_lost``,
   ``unconfirmed``) or on the receiving host's (``link`` its destination: the channel's losses, with
   ``src`` its link, and the GLI's on delivery, ``src`` "medium"), matched by destination, ``pkt`` and
-  time (the nearest frame sent to that link with that ``pkt``, within :data:`MATCH_S`);
+  time (the frame sent to that link with that ``pkt`` whose ``enq`` is nearest, within :data:`MATCH_S`:
+  model times compare across hosts through their epochs; the sender's ``enq``, not the application's
+  send, since a daemon that fell behind reads a frame late);
 - delivered: its destination's application received its number from its address.
 
 Then sent = delivered + lost by each cause, and what is neither (``unexplained``), traced yet delivered
@@ -24,7 +26,9 @@ from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 from typing import Any, Iterable
 
-MATCH_S = 30.0
+MATCH_S = 300.0
+"""(A daemon far behind hears a frame long after it went on air; a daemon started again numbers its frames
+from 1 again, so the same ``pkt`` comes back one restart later: the nearest in time is the frame.)"""
 
 
 @dataclass
@@ -99,7 +103,7 @@ def account(logs: list[dict[str, Any]], runs: list[Run], host_of: dict[str, str]
         for event in _events(run.trace):
             kind = event.get("ev")
             if kind == "enq":
-                enq[event["link"]].append(event["pkt"])
+                enq[event["link"]].append((event["pkt"], event["t"]))
             elif kind == "network" and epoch is None:
                 epoch = event["epoch_ns"] * 1e-9
             elif kind in ("err", "drop") and "cause" in event:
@@ -108,12 +112,12 @@ def account(logs: list[dict[str, Any]], runs: list[Run], host_of: dict[str, str]
                 elif "pkt" in event:
                     losses.append((index, event))
         result.by_run[index] = {"host": run.host, "epoch": epoch}
-        for link, pkts in enq.items():
+        for link, taken in enq.items():
             frames = sent_by.get((index, link), [])
-            result.not_taken += max(0, len(frames) - len(pkts))
-            for pkt, (name, number, destination, wall) in zip(pkts, frames):
+            result.not_taken += max(0, len(frames) - len(taken))
+            for (pkt, t), (name, number, destination, _) in zip(taken, frames):
                 frame_of[(index, link, pkt)] = (name, number)
-                to_link[(destination, pkt)].append((wall, (name, number), index))
+                to_link[(destination, pkt)].append(((epoch or 0.0) + t, (name, number), index))
     causes: dict[tuple[str, int], list[str]] = defaultdict(list)
     for index, event in losses:
         link, src, pkt = event["link"], event.get("src"), event["pkt"]

@@ -27,6 +27,7 @@ import time
 from hilgate.client import Link
 
 REOPEN_S = 0.2
+SEND_TIMEOUT_S = 60.0  # (a daemon that fell far behind reads late; a send that times out costs the connection)
 
 
 class Sender:
@@ -66,10 +67,22 @@ def main() -> int:
     selector = selectors.DefaultSelector()
     errors = 0
 
+    def take(sender: Sender, connection: Link) -> None:
+        """What the daemon wrote to this connection and is there to read."""
+        while True:
+            message = connection.recv(timeout=1e-6)
+            if message is None:
+                return
+            got.append((sender.link, message.src, int(message.data), time.time()))
+
     def drop(sender: Sender) -> None:
         nonlocal errors
         errors += 1
         if sender.connection is not None:
+            try:
+                take(sender, sender.connection)  # (before it goes: frames the daemon delivered are received)
+            except Exception:
+                pass
             try:
                 selector.unregister(sender.connection.sock)
             except (KeyError, ValueError):
@@ -95,7 +108,7 @@ def main() -> int:
                 destination = sender.destinations[sender.number % len(sender.destinations)]
                 payload = str(sender.number).encode().ljust(args.size, b" ")
                 try:
-                    sender.connection.send(payload, dst=destination, timeout=5.0)
+                    sender.connection.send(payload, dst=destination, timeout=SEND_TIMEOUT_S)
                 except Exception:
                     drop(sender)
                     continue
@@ -110,11 +123,7 @@ def main() -> int:
         for key, _ in selector.select(timeout=max(0.0, min(wake - time.monotonic(), REOPEN_S))):
             sender = key.data
             try:
-                while True:
-                    message = sender.connection.recv(timeout=1e-6)
-                    if message is None:
-                        break
-                    got.append((sender.link, message.src, int(message.data), time.time()))
+                take(sender, sender.connection)
             except Exception:
                 drop(sender)
     for sender in senders:
