@@ -29,12 +29,24 @@ def daemon_of(tmp_path):
         daemon.close()
 
 
+@pytest.fixture
+def busy_host(tmp_path):
+    """The topside PC as labs have it (tests/loadkit.py): for the test's duration, neighbours at its own
+    priority, twice as many CPU-bound ones and as many that wake every 6 ms as the host has cores, and a
+    writer that syncs 256 MiB at a time.  A test that takes it asserts what the modems do exactly as
+    without it: host load must change none of it."""
+    from loadkit import Neighbours
+
+    cores = os.cpu_count() or 1
+    with Neighbours(hogs=2 * cores, wakers=2 * cores, writers=1, mib=256, directory=str(tmp_path)) as neighbours:
+        yield neighbours
+
+
 # Tests that must not share the machine with the rest of the suite: they time a serial line or a
 # preemption in real time, or run daemons the kit does not start (so nothing waits for the user's
 # POSIX-queue budget, which every test run on the machine shares) with many links.  `make test` runs
 # them after the parallel part, alone (-m serial); a plain `pytest` runs everything as before.
 SERIAL = {
-    "test_s100_emulator.py": "an S100 over ptys: pieces joined by the line's idle time",
     "test_field_realtime.py": "a preemption, provoked and measured",
     "test_realtime.py": "the real-time scheduler's own timing",
     "test_readme.py::test_every_quick_start_command_prints_what_the_readme_shows":

@@ -53,7 +53,7 @@ def test_ready_only_once_every_endpoint_is_up(pair):
     assert any(line == f"MAINPID={daemon.process.pid}" for line in ready.split("\n"))
 
 
-def test_dccomms_peers_exchange_frames_through_the_queues(pair):
+def test_dccomms_peers_exchange_frames_through_the_queues(pair, busy_host):
     daemon, a, b = pair
     receiver = daemon.peer(b, "--receive", "5", "--timeout", "60")
     time.sleep(0.3)
@@ -129,7 +129,7 @@ def test_a_frame_that_leaves_at_once_still_gets_its_ready(daemon_of):
                 queue.close()
 
 
-def test_socket_clients_over_unix_and_tcp(daemon_of):
+def test_socket_clients_over_unix_and_tcp(daemon_of, busy_host):
     a, b = unique("a"), unique("b")
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
@@ -260,13 +260,16 @@ def test_status_command_prints_the_documented_json(pair):
                             capture_output=True, text=True, timeout=20)
     assert result.returncode == 0, result.stderr
     status = json.loads(result.stdout)
-    assert list(status) == ["links", "vehicles"]
+    assert list(status) == ["links", "vehicles", "scheduling"]
     assert [list(link) for link in status["links"]] == [
         ["id", "backend", "state", "tx_packets", "rx_packets", "drops", "fifo_bytes", "unread", "drop_causes",
          "clients", "ready", "app_dst", "since_s", "since"]] * 2
     assert all(link["since_s"] == 0.0 and link["since"].endswith("+00:00") for link in status["links"])
     assert all(link["ready"] is True for link in status["links"])  # idle links
-    assert status["vehicles"][1] == {"name": "vb", "source": "static", "position": [150.0, 0.0, 0.0], "age_s": 0.0}
+    assert status["vehicles"][1] == {"name": "vb", "source": "static", "position": [150.0, 0.0, 0.0], "age_s": 0.0,
+                                     "stale": None, "heading": None}
+    assert list(status["scheduling"]) == ["kind", "policy", "priority", "nice", "memory_locked", "asked_priority",
+                                          "notes", "text"]
     table = subprocess.run([sys.executable, "-m", "hilgate", "status", "--runtime-dir", daemon.runtime],
                            capture_output=True, text=True, timeout=20)
     assert a in table.stdout and "vehicle" in table.stdout

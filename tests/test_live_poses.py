@@ -120,7 +120,7 @@ vehicles:
 """
 
 
-def test_fake_bluerov_over_mavlink_moves_the_modem_and_goes_stale(daemon_of):
+def test_fake_bluerov_over_mavlink_moves_the_modem_and_goes_stale(daemon_of, busy_host):
     port = free_port(socket.SOCK_DGRAM)
     topside, bluerov = unique("top"), unique("rov")
     daemon = daemon_of(live_scene(port, bluerov, topside), [topside, bluerov])

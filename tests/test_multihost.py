@@ -192,7 +192,7 @@ def network(tmp_path):
             host.daemon.close()
 
 
-def test_three_hosts_share_one_channel_with_exact_model_times(network):
+def test_three_hosts_share_one_channel_with_exact_model_times(network, busy_host):
     A, B, C = (network["hosts"][h] for h in "ABC")
     a, b, c = network["links"]
     at = AtClient(network["pty"])
@@ -290,7 +290,7 @@ def test_a_host_that_dies_is_down_on_the_others_and_rejoins_without_restarting_t
     assert not [e for e in A.events() if e.get("cause") in ("net_gap", "replay")]
 
 
-def test_an_application_reaches_a_link_over_zenoh_from_anywhere(network):
+def test_an_application_reaches_a_link_over_zenoh_from_anywhere(network, busy_host):
     a = network["links"][0]
     at = AtClient(network["pty"])
     try:

@@ -116,3 +116,50 @@ def test_a_report_out_of_range_is_refused_before_anything_of_it_is_used(mangle):
         decode_report(json.dumps(mangle(good)).encode())
     with pytest.raises(NetError):
         decode_report(b"{" * 20000)
+
+
+def test_a_number_far_ahead_settles_nothing_below_it_while_the_hosts_own_go_on():
+    """Issue 37 with issue 36's reports: one message numbered far ahead in the host's session (its stolen
+    key) must not make the receiver report every number below it as never heard (and refuse them)."""
+    from hilgate.daemon.netcodec import ReplayWindow
+
+    receipts = Receipts("zA", 100)
+    for number in (1, 2, 3):
+        assert receipts.heard_one(number, 1.0)
+    far = 3 + ReplayWindow.MAX_JUMP - 1
+    assert receipts.heard_one(far, 1.0)                              # (taken: the replay window took it)
+    for number in (4, 5, 6):
+        assert receipts.heard_one(number, 1.0)                       # the host's next frames: delivered
+    assert report_of(receipts, now=2.0)["upto"] == 6 and receipts.missed == []
+
+
+def test_a_run_far_ahead_that_goes_on_while_the_others_stand_still_is_the_hosts_jump():
+    """Numbers did jump (a cut seen by the other hosts, the hand-over's drops): the run that goes on is
+    the host's, and what it skipped is reported never heard."""
+    from hilgate.daemon.netcodec import ReplayWindow
+
+    receipts = Receipts("zA", 100)
+    for number in (1, 2, 3):
+        assert receipts.heard_one(number, 1.0)
+    jump = 3 + ReplayWindow.WINDOW + 50
+    for number in (jump, jump + 1, jump + 2):
+        assert receipts.heard_one(number, 1.0)
+    report = report_of(receipts, now=2.0)
+    assert (report["upto"], report["missed"]) == (jump + 2, [[4, jump - 1]])
+    assert not receipts.heard_one(10, 2.0)                           # reported never heard: not delivered
+
+
+def test_the_hosts_numbers_reaching_a_number_kept_aside_take_it_along():
+    from hilgate.daemon.netcodec import ReplayWindow
+
+    receipts = Receipts("zA", 100)
+    assert receipts.heard_one(1, 1.0)
+    ahead = 1 + ReplayWindow.WINDOW + 10
+    assert receipts.heard_one(ahead, 1.0)
+    for number in range(2, ahead - 1):                               # ahead - 1 lost on the way
+        assert receipts.heard_one(number, 1.0)
+    assert len(receipts.aside) == 1                                  # not reached yet
+    assert receipts.heard_one(ahead + 1, 1.0)
+    assert receipts.aside == []
+    report = report_of(receipts, now=2.0)
+    assert (report["upto"], report["missed"]) == (ahead + 1, [[ahead - 1, ahead - 1]])

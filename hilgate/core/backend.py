@@ -40,6 +40,9 @@ class AppFrame:
     pkt: int | None = None
     """The id of the frame on air that brought it (the trace's ``pkt``), once a simulated modem delivered
     it: the GLI's losses on delivery name it, as the medium's do."""
+    on_dropped: Callable[["AppFrame", str], Any] | None = field(default=None, repr=False)
+    """``(frame, cause)`` when the backend drops it before the air (a full FIFO, a modem down): a sender
+    that promised its application a fate (a UnetStack door's ``DatagramFailureNtf``) keeps the promise."""
 
 
 @dataclass(frozen=True)
@@ -159,6 +162,8 @@ class QueuedBackend(Backend):
     def drop(self, frame: AppFrame, cause: str) -> None:
         self.drops += 1
         self.event("drop", dst=frame.dst, size=len(frame.real), cause=cause)
+        if frame.on_dropped is not None:
+            frame.on_dropped(frame, cause)
 
     def set_state(self, state: str, reason: str | None = None) -> None:
         """``reason``: why the link is down (kept until the next state), None otherwise."""

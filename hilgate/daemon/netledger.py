@@ -40,7 +40,7 @@ import logging
 from collections import OrderedDict
 from typing import Any, Callable, Iterable
 
-from .netcodec import NetError, _integer, _loads, _text
+from .netcodec import NetError, ReplayWindow, _integer, _loads, _text
 
 log = logging.getLogger(__name__)
 
@@ -111,7 +111,7 @@ class Receipts:
     reports it owes that host."""
 
     __slots__ = ("session", "epoch_ns", "low", "upto", "heard", "ends", "missed", "stopped", "sent_upto",
-                 "sent_at", "started")
+                 "sent_at", "started", "aside")
 
     def __init__(self, session: str, epoch_ns: int):
         self.session = session
@@ -125,10 +125,19 @@ class Receipts:
         self.sent_upto = -1
         self.sent_at = float("-inf")
         self.started = False
+        # runs of numbers heard far ahead of the others (more than the replay window's WINDOW): each
+        # [its numbers → their ends, the highest number heard below them when it began], kept aside
+        self.aside: list[list[Any]] = []
 
     def heard_one(self, number: int, end: float) -> bool:
         """A transmission numbered ``number`` is handed to the medium; its arrivals here end at ``end``.
-        False: it was already reported as never heard (the sender has traced it): do not deliver it."""
+        False: it was already reported as never heard (the sender has traced it): do not deliver it.
+
+        A number far ahead is kept aside, as the replay window keeps it in a run of its own (issue 37):
+        settled, it would say every number below it was never heard, and the host's next frames would be
+        refused here (one forged message with the host's key silenced it).  It joins the others when they
+        reach it, or when its run goes on while they stand still (the host's numbers did jump: a cut,
+        messages Zenoh or the hand-over dropped)."""
         if not self.started:
             self.started = True
             if number > 1:  # this daemon was not there for the numbers before
@@ -138,12 +147,41 @@ class Receipts:
             return False
         if number in self.ends:
             return True  # (the replay window refuses a number twice; this is only belt and braces)
+        top = self.heard[-1] if self.heard else self.upto
+        if number > top + ReplayWindow.WINDOW:
+            self._aside(number, end, top)
+            return True
+        self._record(number, end)
+        for run in [run for run in self.aside if min(run[0]) <= number + 1]:  # reached from below
+            self.aside.remove(run)
+            for n, e in run[0].items():
+                self._record(n, e)
+        return True
+
+    def _record(self, number: int, end: float) -> None:
+        if number <= self.upto or number in self.ends:
+            return
         if not self.heard or number > self.heard[-1]:
             self.heard.append(number)
         else:
             bisect.insort(self.heard, number)
         self.ends[number] = end
-        return True
+
+    def _aside(self, number: int, end: float, top: int) -> None:
+        for run in self.aside:
+            ends = run[0]
+            if abs(number - max(ends)) <= ReplayWindow.WINDOW:  # (this run's)
+                ends.setdefault(number, end)
+                if len(ends) > ReplayWindow.WINDOW:
+                    del ends[min(ends)]
+                if run[1] == top:  # the others stood still meanwhile: the host's numbers jumped
+                    self.aside.remove(run)
+                    for n in sorted(ends):
+                        self._record(n, ends[n])
+                return
+        if len(self.aside) >= ReplayWindow.RUNS:
+            del self.aside[0]  # (forgotten: a number of it is reported never heard once the others pass it)
+        self.aside.append([{number: end}, top])
 
     def settle(self, now: float, final: bool = False) -> None:
         """Move ``upto`` over every number settled by ``now`` (model time: arrivals that ended before

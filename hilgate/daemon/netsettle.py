@@ -15,7 +15,7 @@ import math
 import time
 from typing import Any
 
-from .netcodec import MAX_TRANSMISSION, NetError
+from .netcodec import MAX_TRANSMISSION, NetError, ReplayWindow
 from .netledger import REPORT_S, Ledger, Receipts, decode_report
 from ..core.inbox import Inbox
 from ..models.frame import BROADCAST, DATA
@@ -43,7 +43,9 @@ class Settlement:
     def __init__(self, network: Any):
         self.network = network
         self.ledger = Ledger(self._lost)
-        self.receipts: dict[str, Receipts] = {}  # per other host: what was heard of its session
+        # per other host, per session heard (side by side, as the replay window keeps them: a forged session
+        # beside the host's own resets nothing of it; the one heard least lately is forgotten first)
+        self.receipts: dict[str, dict[str, Receipts]] = {}
         self._publishers: dict[str, Any] = {}
         self._theirs: dict[str, dict[str, tuple[str, ...]]] = {}  # channel → other host → its links there
         self._mine: dict[str, tuple[str, ...]] = {}  # channel → this host's links listening there
@@ -128,18 +130,27 @@ class Settlement:
     # -- the others' frames ----------------------------------------------------------------------
 
     def _receipts(self, message: Any) -> Receipts:
-        receipts = self.receipts.get(message.host)
-        if receipts is None or receipts.session != message.session or receipts.epoch_ns != message.epoch_ns:
-            receipts = self.receipts[message.host] = Receipts(message.session, message.epoch_ns)  # (it started again)
+        """The receipts of a message's session (one the replay window took: only such a message may
+        start or move them), the session now the last one heard."""
+        sessions = self.receipts.setdefault(message.host, {})
+        receipts = sessions.pop(message.session, None)
+        if receipts is None or receipts.epoch_ns != message.epoch_ns:
+            receipts = Receipts(message.session, message.epoch_ns)
+            if len(sessions) >= ReplayWindow.SESSIONS:
+                del sessions[next(iter(sessions))]
+        sessions[message.session] = receipts
         return receipts
 
     def refused(self, message: Any) -> None:
-        """A transmission heard and refused here (counted): settled at once."""
-        self._receipts(message).heard_one(message.number, -math.inf)
+        """A transmission heard and refused here (counted): settled at once, if its session was heard
+        already (a refused message starts nothing and pushes no session out, issue 37)."""
+        receipts = self.receipts.get(message.host, {}).get(message.session)
+        if receipts is not None and receipts.epoch_ns == message.epoch_ns:
+            receipts.heard_one(message.number, -math.inf)
 
     def hear(self, message: Any, sender: Any, t: float, now: float) -> bool:
-        """A transmission about to be handed to the medium at local time ``t``.  False: it was already
-        reported as never heard (its sender traced it): it must not be delivered."""
+        """A transmission the replay window took, about to be handed to the medium at local time ``t``.
+        False: it was already reported as never heard (its sender traced it): it must not be delivered."""
         end = max(now, self._arrivals_end(sender, message.frame, t, message.duration))
         if self._receipts(message).heard_one(message.number, end):
             return True
@@ -191,10 +202,11 @@ class Settlement:
     def _report(self, final: bool) -> None:
         network = self.network
         now, wall = network.scheduler.now(), time.monotonic()
-        for host, receipts in self.receipts.items():
-            data = receipts.report(network.host, network.zid, now, wall, final)
-            if data is not None:
-                self._publisher(host).put(data)
+        for host, sessions in self.receipts.items():
+            for receipts in sessions.values():
+                data = receipts.report(network.host, network.zid, now, wall, final)
+                if data is not None:
+                    self._publisher(host).put(data)
 
     def _publisher(self, host: str) -> Any:
         publisher = self._publishers.get(host)
