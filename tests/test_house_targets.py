@@ -39,6 +39,7 @@ ALLOWED_COMPLEXITY = {
     "hilgate/core/realtime.py:RealtimeScheduler._handle_inputs",  # 28
     "hilgate/core/unet_node.py:UnetNode._parameters",  # 21
     "hilgate/daemon/netcodec.py:decode_transmission",  # 24
+    "hilgate/daemon/network.py:Network._on_transmission",  # 21 (grew with branch soak's merge)
     "hilgate/commands/fitting.py:run_fit",  # 27
     "hilgate/gli/socket_client.py:Link.open",  # 22
     "hilgate/gli/zenoh_auth.py:load_identity",  # 21
@@ -59,6 +60,7 @@ ALLOWED_COMPLEXITY = {
 }
 ALLOWED_MODULE_LINES = {
     # issue 39 items 2 and 3 (branch rooms): not yet split
+    "hilgate/daemon/network.py",  # 607 (grew with branch soak's merge)
     "hilgate/daemon/router.py",  # 707
 }
 ALLOWED_CLASS_LINES = {

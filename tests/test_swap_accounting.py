@@ -209,7 +209,7 @@ links:
     assert status[b]["rx_packets"] == 2 and status[a]["since_s"] == 0.0 < status[b]["since_s"]
     table = subprocess.run([sys.executable, "-m", "hilgate", "status", "--runtime-dir", daemon.runtime],
                            capture_output=True, text=True, timeout=60)
-    header = next(line for line in table.stdout.splitlines() if line.startswith("link"))  # after t = and scheduling:
+    header = next(line for line in table.stdout.splitlines() if line.startswith("link "))
     assert "since s" in header
     daemon.stop()
     events = daemon.trace_events()

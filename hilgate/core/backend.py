@@ -37,6 +37,9 @@ class AppFrame:
     """``(frame, delivered, one_way_tau_s)`` when its acknowledgement came back or the last retry failed."""
     airtime_s: float | None = None
     """Seconds on air when the sending modem decides it (a Micro-Modem's rate), not the link's bit rate."""
+    pkt: int | None = None
+    """The id of the frame on air that brought it (the trace's ``pkt``), once a simulated modem delivered
+    it: the GLI's losses on delivery name it, as the medium's do."""
     on_dropped: Callable[["AppFrame", str], Any] | None = field(default=None, repr=False)
     """``(frame, cause)`` when the backend drops it before the air (a full FIFO, a modem down): a sender
     that promised its application a fate (a UnetStack door's ``DatagramFailureNtf``) keeps the promise."""
