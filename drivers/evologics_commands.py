@@ -168,7 +168,7 @@ class EvologicsCommands:
         return "\n".join(paths)
 
     def _bitrate(self) -> int:
-        airtime = self.port.airtime(1)
+        airtime = self.port.measure.airtime(1)
         return round(8 / airtime) if airtime else 0
 
     def _pooled(self) -> int:

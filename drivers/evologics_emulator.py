@@ -200,7 +200,7 @@ class EvologicsEmulator(EvologicsCommands, EmulatedModem):
 
     def _signal(self, src: int, t: float) -> tuple[int, int]:
         """RSSI (dB) and integrity of a frame from ``src`` heard at ``t`` (hilgate.models.link_budget)."""
-        heard = self.port.reception_from(src, t)
+        heard = self.port.measure.reception_from(src, t)
         if heard is None:  # a sender the model does not know (or out of range): nothing measured
             return self.last_rssi, 0
         return heard.rssi_db, heard.integrity
@@ -211,14 +211,14 @@ class EvologicsEmulator(EvologicsCommands, EmulatedModem):
         meta = frame.meta or {}
         kind = meta.get("kind", "im")
         payload = frame.real
-        heard = self.port.reception_from(frame.src, t)
+        heard = self.port.measure.reception_from(frame.src, t)
         d = heard.distance_m if heard is not None else 0.0
         if heard is not None:  # the model's measurements (hilgate.models.link_budget), not constants
             self.last_rssi, self.last_integrity, self.last_velocity = heard.rssi_db, heard.integrity, heard.velocity_mps
         velocity = self.last_velocity
-        airtime = self.port.airtime(len(frame.real)) or 0.0  # the whole frame on air
+        airtime = self.port.measure.airtime(len(frame.real)) or 0.0  # the whole frame on air
         duration_us = round(airtime * 1e6)
-        ptime_us = round((self.port.delay_from(frame.src, t) or 0.0) * 1e6)  # the channel's: BELLHOP's in water
+        ptime_us = round((self.port.measure.delay_from(frame.src, t) or 0.0) * 1e6)  # the channel's: BELLHOP's in water
         self.received = True
         if kind == "burst":
             self._extended(f"BITRATE,remote,{self._bitrate()}")
@@ -227,7 +227,7 @@ class EvologicsEmulator(EvologicsCommands, EmulatedModem):
                 if codec.data_mode:
                     host.write(payload)
                     continue
-                bit_time = self.port.airtime(1)
+                bit_time = self.port.measure.airtime(1)
                 bitrate = round(8 / bit_time) if bit_time else 0
                 text, body = ModemCodec.recv_burst(frame.src, frame.dst, payload, bitrate,
                                                    self.last_rssi, self.last_integrity, ptime_us, velocity)
@@ -250,7 +250,7 @@ class EvologicsEmulator(EvologicsCommands, EmulatedModem):
         """After an exchange with ``address``: a USBL link with ``AT@ZU1`` prints its fix of that modem."""
         if not self.settings["ZU"]:
             return
-        found = self.port.usbl_fix(address, t)
+        found = self.port.measure.usbl_fix(address, t)
         if found is None:
             return
         heard, fix = found

@@ -473,7 +473,7 @@ class MicromodemEmulator(EmulatedModem):
 
     def _figures(self, src: int, t: float, psk: bool) -> dict:
         """The link budget's reception of ``src`` at ``t`` on the modem's scales (:mod:`.micromodem_figures`)."""
-        return figures(self.port.reception_from(src, t), self.config["AGN"], psk)
+        return figures(self.port.measure.reception_from(src, t), self.config["AGN"], psk)
 
     def state(self, ready: bool) -> None:
         pass

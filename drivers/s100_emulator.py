@@ -115,7 +115,7 @@ class S100Emulator(EmulatedModem):
         """The bytes of one read that the 45-byte input buffer holds (without flow control), and when each
         arrives; the others are lost, counted and traced."""
         if state.buffer is None and not self.rtscts:
-            airtime = self.port.airtime(1)
+            airtime = self.port.measure.airtime(1)
             if airtime:
                 state.buffer = InputBuffer(1.0 / airtime, self.piece)  # drained at the air bitrate
         if state.buffer is not None:

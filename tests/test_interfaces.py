@@ -13,7 +13,7 @@ import pytest
 
 import hilgate
 from hilgate.core.backend import Backend
-from hilgate.core.endpoint import Door, Endpoint, LinkPort
+from hilgate.core.endpoint import Door, Endpoint, LinkPort, Measurements
 from hilgate.core.unet_node import NodeHost
 from hilgate.core.scheduler import Loop, Scheduler
 from hilgate.daemon.live_sources import PoseFeed
@@ -37,7 +37,8 @@ SEAMS = {
            "hilgate.gli.unet_door:UnetDoor"],
     NodeHost: ["hilgate.core.unet_server:NodeServer", "hilgate.gli.unet_door:UnetEndpoint",
                "hilgate.drivers.unet_emulator:UnetEmulator"],
-    LinkPort: ["hilgate.daemon.router:RoutedLink"],
+    LinkPort: ["hilgate.daemon.routed_link:RoutedLink"],
+    Measurements: ["hilgate.sim.measurements:ModemMeasurements"],
     RadioHost: ["hilgate.models.modem:SimModem"],
     MacHost: ["hilgate.models.modem:SimModem"],
     PoseSource: ["hilgate.models.trajectories:Static", "hilgate.models.trajectories:Piecewise",

@@ -278,6 +278,7 @@ class _Link:
         self.id, self.packet, self.address, self.clock = name, packet_class("simple:20"), 1, clock
         self.limits = None  # the S100's own (45-byte pieces)
         self.free, self.peer, self.lost_bytes = 0.0, None, 0
+        self.measure = self  # (what the emulator reads off the simulation: only the air time here)
 
     def airtime(self, size):
         return size * 8 / 1000

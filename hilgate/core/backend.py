@@ -106,6 +106,19 @@ class Backend(ABC):
     """The simulated modem behind the link (``models.modem.SimModem``), None for a real modem: air time,
     propagation and receptions that an emulated modem reports come from it."""
 
+    everyone_in_range = False
+    """A frame from an application reaches every modem in range whatever its destination (a simulated link
+    whose packet class carries no address on air and that has no MAC: ``addressing: auto``)."""
+
+    addressed_only = False
+    """A frame reaches only the address it carries, and the scene says who has which (a simulated link not
+    ``everyone_in_range``): the link traces a frame to an address nobody has as lost (``no_receiver``)."""
+
+    def rebind(self, modem: Any, everyone_in_range: bool, limits: Any) -> bool:
+        """A reload changed the link in place: go on with the scene's new simulated ``modem``, addressing and
+        ``limits``; False: this backend has no simulated modem to change."""
+        return False
+
     def set_address(self, address: int) -> bool:
         """Answer to ``address`` from now on (an emulated modem's ``AT!AL``); False: this backend cannot."""
         return False

@@ -1,6 +1,6 @@
 """The narrow interface between a link and the doors applications reach it through.
 
-A *link* (one DCComms id, :class:`hilgate.daemon.router.RoutedLink`) has a backend (a simulated modem or a
+A *link* (one DCComms id, :class:`hilgate.daemon.routed_link.RoutedLink`) has a backend (a simulated modem or a
 real one) and endpoints in front: the dccomms POSIX queues, socket clients, an emulated modem, later
 Zenoh.  The two sides know each other only through this module:
 
@@ -29,6 +29,24 @@ KEPT = "kept"
 ABSENT = "absent"
 """Nobody was there to take it (and it was not kept)."""
 # anything else an endpoint's deliver() returns is the cause of a loss: app_full, client_slow, size…
+
+
+class Measurements(Protocol):
+    """What an emulated modem on a simulated link reads off the simulation (``LinkPort.measure``); every
+    answer is None on a link a real modem carries."""
+
+    def airtime(self, size: int) -> float | None:
+        """Model seconds a frame of ``size`` bytes is on air (None when a real modem carries the link)."""
+
+    def delay_from(self, address: int, t: float) -> float | None:
+        """Propagation delay from the modem at ``address`` to this link's, as an arrival between them
+        now would take (None: unknown, or either position is)."""
+
+    def reception_from(self, address: int, t: float) -> Any:
+        """The receiving modem's measurements of a frame from ``address`` (a ``models.link_budget.Reception``)."""
+
+    def usbl_fix(self, address: int, t: float) -> Any:
+        """``(Reception, UsblFix)`` of the modem at ``address`` when the link is a USBL, else None."""
 
 
 class LinkPort(Protocol):
@@ -94,18 +112,8 @@ class LinkPort(Protocol):
 
     def detach(self, endpoint: "Endpoint") -> None: ...
 
-    def airtime(self, size: int) -> float | None:
-        """Model seconds a frame of ``size`` bytes is on air (None when a real modem carries the link)."""
-
-    def delay_from(self, address: int, t: float) -> float | None:
-        """Propagation delay from the modem at ``address`` to this link's, as an arrival between them
-        now would take (None: unknown, or either position is)."""
-
-    def reception_from(self, address: int, t: float) -> Any:
-        """The receiving modem's measurements of a frame from ``address`` (a ``models.link_budget.Reception``)."""
-
-    def usbl_fix(self, address: int, t: float) -> Any:
-        """``(Reception, UsblFix)`` of the modem at ``address`` when the link is a USBL, else None."""
+    measure: "Measurements"
+    """What an emulated modem reads off the simulation behind the link (air time, delay, reception, USBL)."""
 
     def set_address(self, address: int) -> None:
         """Answer to ``address`` in the simulation from now on (an emulated modem's ``AT!AL``)."""
@@ -128,7 +136,7 @@ class Endpoint(Protocol):
     they send a frame, and the endpoint knows it was told so (dccomms' WritePacket; the queue protocol
     notes it as it reads the frame).  When such an endpoint is the link's only one, the link need not
     announce BUSY after that endpoint's frame while its modem is on air: nobody would be told anything
-    (issue 31, :meth:`hilgate.daemon.router.RoutedLink.send`)."""
+    (issue 31, :meth:`hilgate.daemon.routed_link.RoutedLink.send`)."""
     phy: Callable[[PhyEvent], Any] | None
     """An optional capability: where the link reports its simulated modem's transmissions and arrivals
     (an emulated modem's extended notifications); None for an endpoint that does not want them, and

@@ -171,7 +171,7 @@ class NodeServer(ABC):
     @property
     def simulated(self) -> bool:
         """The link is a simulated modem, whose PHY reports each transmission's time."""
-        return self.port.airtime(1) is not None
+        return self.port.measure.airtime(1) is not None
 
     def transmit(self, datagram: Datagram) -> str | None:
         if datagram.reliable and not self.simulated:
@@ -233,11 +233,11 @@ class NodeServer(ABC):
         start = self.arrivals.pop(id(frame), None)
         if start is not None:
             return start
-        airtime = frame.airtime_s if frame.airtime_s is not None else self.port.airtime(len(frame.real))
+        airtime = frame.airtime_s if frame.airtime_s is not None else self.port.measure.airtime(len(frame.real))
         return t - (airtime or 0.0)
 
     def publish(self, agent: str, frame: AppFrame, t: float, data: bytes, protocol: int) -> str:
-        heard = self.port.reception_from(frame.src, t)
+        heard = self.port.measure.reception_from(frame.src, t)
         given = self.node.received(agent, frame.src, frame.dst, protocol, data, self.arrival_start(frame, t),
                                    heard.rssi_db if heard is not None else None)
         return TAKEN if given else ABSENT

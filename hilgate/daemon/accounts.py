@@ -22,7 +22,7 @@ COUNTS = ("tx_packets", "rx_packets", "drops", "unread_kept")
 """Counters that add up (a segment has the difference between its end and its start)."""
 
 Counters = dict[str, Any]
-"""What :meth:`hilgate.daemon.router.RoutedLink.counters` reads: ``COUNTS``, ``drop_causes`` (the
+"""What :meth:`hilgate.daemon.routed_link.RoutedLink.counters` reads: ``COUNTS``, ``drop_causes`` (the
 link's GLI losses by cause) and ``fifo_peak_bytes`` (a simulated modem's, else None)."""
 
 

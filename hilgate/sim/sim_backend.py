@@ -22,6 +22,7 @@ class SimBackend(Backend):
         super().__init__()
         self._link_names = link_names
         self.everyone_in_range = everyone_in_range  # see LinkSpec.everyone_in_range
+        self.addressed_only = not everyone_in_range  # (an attribute: the link's send reads it for every frame)
         self.limits = limits  # LinkSpec.limits: what the real modem would accept (None: anything)
         self.on_phy: Callable[[PhyEvent], Any] | None = None
         modem.on_deliver = self._deliver
@@ -35,13 +36,15 @@ class SimBackend(Backend):
     def on_idle(self, callback: Callable[[], Any] | None) -> None:
         self.modem.on_idle = callback  # the modem tells the link itself: READY follows one call sooner
 
-    def rebind(self, modem: SimModem) -> None:
+    def rebind(self, modem: SimModem, everyone_in_range: bool, limits: Any) -> bool:
+        self.everyone_in_range, self.addressed_only, self.limits = everyone_in_range, not everyone_in_range, limits
         callback, self.modem = self.modem.on_idle, modem
         self.sim_modem = modem
         modem.on_deliver = self._deliver
         modem.on_idle = callback
         modem.acks.on_outcome = self._acknowledged
         modem.on_phy = self._phy if self.on_phy is not None else None
+        return True
 
     def watch_phy(self, listener: Callable[[PhyEvent], Any] | None) -> None:
         """Report the modem's transmissions and arrivals to ``listener`` (None: stop; nothing is then
