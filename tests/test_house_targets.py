@@ -40,17 +40,11 @@ ALLOWED_COMPLEXITY = {
     "hilgate/core/unet_node.py:UnetNode._parameters",  # 21
     "hilgate/daemon/netcodec.py:decode_transmission",  # 24
     "hilgate/daemon/network.py:Network._on_transmission",  # 21 (grew with branch soak's merge)
-    "hilgate/commands/fitting.py:run_fit",  # 27
     "hilgate/gli/socket_client.py:Link.open",  # 22
     "hilgate/gli/zenoh_auth.py:load_identity",  # 21
     "hilgate/report/observations.py:_Real.event",  # 22
-    "hilgate/report/observations.py:observations",  # 26
-    "hilgate/report/tracedata.py:load_trace",  # 35
     "hilgate/scene/backends.py:emulated_device",  # 21
-    "hilgate/scene/links.py:link_spec",  # 30
-    "hilgate/scene/load.py:_validate",  # 27
     "hilgate/scene/vehicles.py:vehicle_spec",  # 22
-    "hilgate/sim/budget.py:link_budget",  # 32
     "hilgate/sim/water_budget.py:water_tables",  # 22
     "hilgate/commands/water_figures.py:water_figures",  # 23
     "hilgate/web/picture.py:scene_message",  # 25

@@ -118,7 +118,6 @@ def run_fit(trace: str, scene_path: str | None = None, model: str = "power", lin
     whole trace, and is needed for a trace that carries no scene (``hilgate sim``'s, an older
     daemon's whose scene file is gone)."""
     from ..report.tracedata import ReportError, pick_run, trace_runs
-    from ..scene.load import load_scene
 
     if model not in MODELS:
         raise FitError(f"--model must be one of {', '.join(MODELS)}, not {model!r}")
@@ -128,16 +127,7 @@ def run_fit(trace: str, scene_path: str | None = None, model: str = "power", lin
         chosen = pick_run(trace_runs(trace), run)
     except ReportError as exc:
         raise FitError(str(exc)) from None
-    start: dict[str, LinkInfo] | None = None
-    follow = scene_path is None
-    if scene_path is not None:
-        start = _links_of_scene(load_scene(scene_path, list(overrides)))
-    elif not chosen.has_view:
-        if not chosen.path:
-            raise FitError(f"{trace} does not carry its scene (a hilgate sim trace): give it with --scene SCENE")
-        if not os.path.exists(chosen.path):
-            raise FitError(f"the trace's scene {chosen.path} is not there any more; give it with --scene")
-        start, follow = _links_of_scene(load_scene(chosen.path, list(overrides))), False  # an older daemon's trace
+    start, follow = _starting_links(trace, chosen, scene_path, overrides)
     receivers = set(links) if links else None
     try:
         data = observations(read_events(trace, chosen.first_line, chosen.last_line), start, simulated=simulated,
@@ -149,10 +139,36 @@ def run_fit(trace: str, scene_path: str | None = None, model: str = "power", lin
         kept = sum(1 for o in data.frames if o.delivered)
         raise FitError(f"nothing to fit: {len(data.frames)} frames ({kept} delivered) after leaving out "
                        f"{_excluded(data) or 'none'}; a fit needs both losses and deliveries")
+    size = int(median(o.size for o in data.frames))
+    fit, params, block = _fitted(model, data)
+    return FitResult(model, fit, block, params, data, size)
+
+
+
+def _starting_links(trace: str, chosen: Any, scene_path: str | None,
+                    overrides: tuple[str, ...]) -> tuple[dict[str, LinkInfo] | None, bool]:
+    """The links at the run's start and whether to follow the trace's scene lines: ``--scene`` for the whole
+    trace, else the trace's own scene (an older daemon's trace: its scene file, if still there)."""
+    from ..scene.load import load_scene
+
+    start: dict[str, LinkInfo] | None = None
+    follow = scene_path is None
+    if scene_path is not None:
+        start = _links_of_scene(load_scene(scene_path, list(overrides)))
+    elif not chosen.has_view:
+        if not chosen.path:
+            raise FitError(f"{trace} does not carry its scene (a hilgate sim trace): give it with --scene SCENE")
+        if not os.path.exists(chosen.path):
+            raise FitError(f"the trace's scene {chosen.path} is not there any more; give it with --scene")
+        start, follow = _links_of_scene(load_scene(chosen.path, list(overrides))), False  # an older daemon's trace
+    return start, follow
+
+
+def _fitted(model: str, data: Observations) -> tuple[Any, dict, str]:
+    """``model`` fitted to ``data``'s frames: the fit, its parameters and the ``error:`` block they make."""
     d = [o.d for o in data.frames]
     sizes = [o.size for o in data.frames]
     delivered = [o.delivered for o in data.frames]
-    size = int(median(sizes))
     if model == "power":
         fit, d0 = fit_power(d, sizes, delivered)
         params = power_parameters(fit, d0)
@@ -166,7 +182,7 @@ def run_fit(trace: str, scene_path: str | None = None, model: str = "power", lin
         block = f'error: {{unit: packet, expr: "1 / (1 + exp(-({b0:.6g} + {b1:.6g} * d)))"}}'
     else:
         fit, params, block = _physical_fit(data)
-    return FitResult(model, fit, block, params, data, size)
+    return fit, params, block
 
 
 def _excluded(data: Observations) -> str:

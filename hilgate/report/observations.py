@@ -209,6 +209,22 @@ def observations(events: Iterable[Any], links: dict[str, LinkInfo] | None = None
             real_seen = real_seen or ev == "tx"
         matcher.event(ev, link, event, where, current, receivers, out)
     poses.done()
+    _check_enough(out, receivers, poses, simulated, real_seen)
+    for frame in matcher.frames:
+        a = poses.position(frame.src_vehicle, frame.t, pose_gap_s)
+        b = poses.position(frame.dst_vehicle, frame.t, pose_gap_s)
+        if a is None or b is None:
+            out.excluded["no pose"] += 1
+            continue
+        rx = frame.rx
+        out.frames.append(Observation(frame.t, frame.src, frame.dst, math.dist(a, b), frame.size, frame.delivered,
+                                      _measure(rx, "rssi"), _measure(rx, "integrity")))
+    return out
+
+
+def _check_enough(out: Observations, receivers: set[str] | None, poses: "_Poses", simulated: bool,
+                  real_seen: bool) -> None:
+    """A fit needs the receivers asked for, pose samples, and (of a real run) frames sent by real links."""
     if receivers is not None:
         unknown = sorted(name for name in receivers if name not in out.links)
         if unknown:
@@ -220,16 +236,6 @@ def observations(events: Iterable[Any], links: dict[str, LinkInfo] | None = None
     if not simulated and not real_seen:
         raise FitError("the trace has no frames sent by real links (backend evologics or s100); "
                        "to fit a simulated run's trace, say so with --simulated")
-    for frame in matcher.frames:
-        a = poses.position(frame.src_vehicle, frame.t, pose_gap_s)
-        b = poses.position(frame.dst_vehicle, frame.t, pose_gap_s)
-        if a is None or b is None:
-            out.excluded["no pose"] += 1
-            continue
-        rx = frame.rx
-        out.frames.append(Observation(frame.t, frame.src, frame.dst, math.dist(a, b), frame.size, frame.delivered,
-                                      _measure(rx, "rssi"), _measure(rx, "integrity")))
-    return out
 
 
 def _measure(rx: dict | None, name: str) -> float | None:

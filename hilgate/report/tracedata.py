@@ -167,69 +167,85 @@ def load_trace(path: str, window: tuple[float, float] | None = None, run: Run | 
             where = f"{path}:{line}"
             ev = event.get("ev")
             if ev in ("run", "reload"):
-                t = number(event, "t", where, 0.0)
-                if ev == "run":
-                    for periods in trace.backends.values():  # (a headless start: a new run begins)
-                        if periods and periods[-1][1] is None:
-                            periods[-1][1] = t
-                    current = {}
-                else:
-                    trace.reloads.append(t)
-                if "scene_view" in event:
-                    current = _periods(trace, current, _backends_of(event["scene_view"], where), t)
-                    trace.scenes.append((t, event["scene_view"]))
-                continue
-            if ev == "host":
-                t = number(event, "t", where)
-                state = text(event, "state", where)
-                if state not in ("up", "down"):
-                    raise ReportError(f"{where}: 'state' must be \"up\" or \"down\", not {describe(state)}")
-                if window is None or window[0] <= t <= window[1]:
-                    trace.hosts.append((t, text(event, "host", where), state))
-                continue
-            if ev == "pose":
-                t = number(event, "t", where)
-                vehicle = text(event, "vehicle", where)
-                spot = position(event, "position", where)
-                if window is None or window[0] <= t <= window[1]:
-                    trace.poses[vehicle].append((t, spot))
-                    trace.end = max(trace.end, t)
-                continue
-            if ev not in FLOW_EVENTS or "pkt" not in event:
-                continue  # driver and GLI events: not part of a flow's story
-            kind = event.get("kind")
-            if kind is not None and not isinstance(kind, str):
-                raise ReportError(f"{where}: 'kind' must be a text, not {describe(kind)}")
-            packets = trace.control if kind else trace.packets  # control frames: not a flow's either
-            t = number(event, "t", where)
-            if window is not None and not window[0] <= t <= window[1]:
-                continue
-            trace.end = max(trace.end, t)
-            pkt = _hashable(event["pkt"], "pkt", where)
-            link = text(event, "link", where)
-            packet = packets.get(pkt)
-            if packet is None:
-                packet = packets[pkt] = Packet(pkt, text(event, "src", where), text(event, "dst", where),
-                                               count(event, "size", where), kind=kind or "data")
-            if "fifo_bytes" in event and ev in ("enq", "drop", "tx") and not kind:
-                trace.fifo[link].append((t, count(event, "fifo_bytes", where)))
-            cause = event.get("cause")
-            if cause is not None and not isinstance(cause, str):
-                raise ReportError(f"{where}: 'cause' must be a text, not {describe(cause)}")
-            if ev == "enq":
-                packet.t_enq = t
-            elif ev == "drop":
-                packet.t_enq = t
-                packet.outcomes.append((t, link, "drop", cause))
-            elif ev == "tx":
-                packet.t_tx.append(t)
-            else:
-                packet.outcomes.append((t, link, ev, cause))
+                current = _scene_line(trace, current, event, ev, where)
+            elif ev == "host":
+                _host_line(trace, event, window, where)
+            elif ev == "pose":
+                _pose_line(trace, event, window, where)
+            elif ev in FLOW_EVENTS and "pkt" in event:  # (driver and GLI events: not part of a flow's story)
+                _packet_line(trace, event, ev, window, where)
     except ReportError:
         raise
     except TraceError as exc:
         raise ReportError(str(exc)) from None
     return trace
+
+
+def _scene_line(trace: Trace, current: dict[str, str], event: dict, ev: str, where: str) -> dict[str, str]:
+    """A ``run`` or ``reload`` line: a run ends the backend periods still open; the scene it carries starts
+    new ones.  Returns each link's backend from here on."""
+    t = number(event, "t", where, 0.0)
+    if ev == "run":
+        for periods in trace.backends.values():  # (a headless start: a new run begins)
+            if periods and periods[-1][1] is None:
+                periods[-1][1] = t
+        current = {}
+    else:
+        trace.reloads.append(t)
+    if "scene_view" in event:
+        current = _periods(trace, current, _backends_of(event["scene_view"], where), t)
+        trace.scenes.append((t, event["scene_view"]))
+    return current
+
+
+def _host_line(trace: Trace, event: dict, window: tuple[float, float] | None, where: str) -> None:
+    t = number(event, "t", where)
+    state = text(event, "state", where)
+    if state not in ("up", "down"):
+        raise ReportError(f"{where}: 'state' must be \"up\" or \"down\", not {describe(state)}")
+    if window is None or window[0] <= t <= window[1]:
+        trace.hosts.append((t, text(event, "host", where), state))
+
+
+def _pose_line(trace: Trace, event: dict, window: tuple[float, float] | None, where: str) -> None:
+    t = number(event, "t", where)
+    vehicle = text(event, "vehicle", where)
+    spot = position(event, "position", where)
+    if window is None or window[0] <= t <= window[1]:
+        trace.poses[vehicle].append((t, spot))
+        trace.end = max(trace.end, t)
+
+
+def _packet_line(trace: Trace, event: dict, ev: str, window: tuple[float, float] | None, where: str) -> None:
+    """A line of a packet's story (``enq``, ``tx``, ``rx``, ``drop``…): its packet, its FIFO, its outcome."""
+    kind = event.get("kind")
+    if kind is not None and not isinstance(kind, str):
+        raise ReportError(f"{where}: 'kind' must be a text, not {describe(kind)}")
+    packets = trace.control if kind else trace.packets  # control frames: not a flow's either
+    t = number(event, "t", where)
+    if window is not None and not window[0] <= t <= window[1]:
+        return
+    trace.end = max(trace.end, t)
+    pkt = _hashable(event["pkt"], "pkt", where)
+    link = text(event, "link", where)
+    packet = packets.get(pkt)
+    if packet is None:
+        packet = packets[pkt] = Packet(pkt, text(event, "src", where), text(event, "dst", where),
+                                       count(event, "size", where), kind=kind or "data")
+    if "fifo_bytes" in event and ev in ("enq", "drop", "tx") and not kind:
+        trace.fifo[link].append((t, count(event, "fifo_bytes", where)))
+    cause = event.get("cause")
+    if cause is not None and not isinstance(cause, str):
+        raise ReportError(f"{where}: 'cause' must be a text, not {describe(cause)}")
+    if ev == "enq":
+        packet.t_enq = t
+    elif ev == "drop":
+        packet.t_enq = t
+        packet.outcomes.append((t, link, "drop", cause))
+    elif ev == "tx":
+        packet.t_tx.append(t)
+    else:
+        packet.outcomes.append((t, link, ev, cause))
 
 
 def _periods(trace: Trace, before: dict[str, str], after: dict[str, str], t: float) -> dict[str, str]:

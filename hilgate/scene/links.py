@@ -74,21 +74,7 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
     if vehicle not in scene["vehicles"]:
         raise f.child("vehicle").error(f.sub("vehicle"), f"no vehicle {vehicle!r} in the scene")
     backend = f.get("backend", choice(*backend_names()), SIM)
-    channels = scene["channels"]
-    if "channel" in f:
-        if "tx_channel" in f or "rx_channel" in f:
-            raise f.error("give either channel or tx_channel + rx_channel, not both")
-        tx_channel = rx_channel = f.get("channel", text)
-    elif "tx_channel" in f or "rx_channel" in f:
-        tx_channel = f.get("tx_channel", text)
-        rx_channel = f.get("rx_channel", text)
-    elif len(channels) == 1:
-        tx_channel = rx_channel = next(iter(channels))
-    else:
-        raise f.error(f"missing 'channel' (the scene has several: {', '.join(channels)})")
-    for key, value in (("channel", tx_channel), ("tx_channel", tx_channel), ("rx_channel", rx_channel)):
-        if value not in channels and key in f:
-            raise f.child(key).error(f.sub(key), f"no channel {value!r} in the scene; channels: {', '.join(channels)}")
+    tx_channel, rx_channel = _channels(f, scene["channels"])
     acoustic_node = f.child("acoustic")
     acoustic = None if acoustic_node is None else acoustic_params(acoustic_node, f.sub("acoustic"))
     params = ModemParams(
@@ -109,26 +95,11 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
         ack_turnaround_s=f.get("ack_turnaround_s", number(0), 0.0),
         acoustic=acoustic,
     )
-    mac = f.get("mac", lambda n, p: mac_spec(n, p, ctx.plugins), MacSpec("none"))
-    try:
-        problem = mac.mac_class.check(params, dict(mac.params))
-    except Exception as exc:  # a plugin's own check() failed
-        problem = f"the MAC's check failed: {type(exc).__name__}: {exc}"
-    if problem:
-        raise (f.child("mac") or f.node).error(f.sub("mac"), problem)
+    mac = _mac(f, params, ctx)
     packet = f.get("packet", _packet_class, "vl2b")
     model = None if model_node is None else str(model_node.value)
     options = driver_options(f, backend)
-    emulate = ()
-    if "emulate" in f:
-        if backend != SIM:
-            raise f.child("emulate").error(f.sub("emulate"), "only a backend: sim link can emulate a modem")
-        emulate = f.get("emulate", emulated_device)
-        firmware = f.get("firmware", _firmware, ())
-        if firmware:
-            emulate += (("firmware", firmware),)
-    elif "firmware" in f:
-        f.get("firmware", _firmware)  # checked (a preset gives it to every link), used only when emulating
+    emulate = _emulate(f, backend)
     protocol = dict(emulate).get("protocol")
     limits = f.get("limits", lambda n, p: modem_limits(n, p, backend, protocol), None)
     addressing = f.get("addressing", choice(*ADDRESSING), "auto")
@@ -137,13 +108,7 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
         raise f.child("usbl").error(f.sub("usbl"), "only an emulated EvoLogics modem reports USBL fixes "
                                                    "(give the link emulate: {protocol: evologics, pty: …} or tcp)")
     host = f.get("host", host_name, None)
-    address_line = 0
-    if params.address > NARROW_MAX:
-        child = f.child("address")
-        address_line = child.line
-        problem = _wide_problem(backend, emulate, packet)
-        if problem:
-            raise child.error(f.sub("address"), f"{params.address} is wider than 8 bits (0..{NARROW_MAX}): {problem}")
+    address_line = _address_line(f, params, backend, emulate, packet)
     gli = f.get("gli", _gli_endpoints, GLI_DEFAULT)
     unet = f.get("unet", unet_door, ())
     if ("unet" in gli) != bool(unet):
@@ -161,6 +126,66 @@ NARROW_MAX = BROADCAST - 1
 WIDE_MAX = 0xFFFE
 """The widest address of a simulated-only link (16 bits; 0xFFFF is kept back).  255 stays the
 broadcast address on every channel, wide or not, so it is never a modem's address."""
+
+
+
+def _channels(f: Fields, channels: dict[str, Any]) -> tuple[str, str]:
+    """The link's transmit and receive channels: ``channel``, or ``tx_channel`` and ``rx_channel``, or the
+    scene's only channel."""
+    if "channel" in f:
+        if "tx_channel" in f or "rx_channel" in f:
+            raise f.error("give either channel or tx_channel + rx_channel, not both")
+        tx_channel = rx_channel = f.get("channel", text)
+    elif "tx_channel" in f or "rx_channel" in f:
+        tx_channel = f.get("tx_channel", text)
+        rx_channel = f.get("rx_channel", text)
+    elif len(channels) == 1:
+        tx_channel = rx_channel = next(iter(channels))
+    else:
+        raise f.error(f"missing 'channel' (the scene has several: {', '.join(channels)})")
+    for key, value in (("channel", tx_channel), ("tx_channel", tx_channel), ("rx_channel", rx_channel)):
+        if value not in channels and key in f:
+            raise f.child(key).error(f.sub(key), f"no channel {value!r} in the scene; channels: {', '.join(channels)}")
+    return tx_channel, rx_channel
+
+
+def _mac(f: Fields, params: ModemParams, ctx: Context) -> MacSpec:
+    """The link's MAC, which checks the modem it runs on (a plugin's check that fails says so)."""
+    mac = f.get("mac", lambda n, p: mac_spec(n, p, ctx.plugins), MacSpec("none"))
+    try:
+        problem = mac.mac_class.check(params, dict(mac.params))
+    except Exception as exc:  # a plugin's own check() failed
+        problem = f"the MAC's check failed: {type(exc).__name__}: {exc}"
+    if problem:
+        raise (f.child("mac") or f.node).error(f.sub("mac"), problem)
+    return mac
+
+
+def _emulate(f: Fields, backend: str) -> tuple:
+    """The modem a ``backend: sim`` link shows (``emulate:``, with the preset's ``firmware:``); () for none."""
+    emulate = ()
+    if "emulate" in f:
+        if backend != SIM:
+            raise f.child("emulate").error(f.sub("emulate"), "only a backend: sim link can emulate a modem")
+        emulate = f.get("emulate", emulated_device)
+        firmware = f.get("firmware", _firmware, ())
+        if firmware:
+            emulate += (("firmware", firmware),)
+    elif "firmware" in f:
+        f.get("firmware", _firmware)  # checked (a preset gives it to every link), used only when emulating
+    return emulate
+
+
+def _address_line(f: Fields, params: ModemParams, backend: str, emulate: tuple, packet: Any) -> int:
+    """The line of an address wider than 8 bits (0: it is not), refused where it cannot travel."""
+    address_line = 0
+    if params.address > NARROW_MAX:
+        child = f.child("address")
+        address_line = child.line
+        problem = _wide_problem(backend, emulate, packet)
+        if problem:
+            raise child.error(f.sub("address"), f"{params.address} is wider than 8 bits (0..{NARROW_MAX}): {problem}")
+    return address_line
 
 
 def _address(node: Node, path: str) -> int:

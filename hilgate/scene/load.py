@@ -72,31 +72,9 @@ def _validate(root: Node | None, file: str, plugins: Sequence[str] = (), preset_
     seed = f.get("seed", integer(0, 2**63 - 1), 1)
     duration = f.get("duration_s", number(above=0), 60.0)
 
-    channels: dict[str, Channel] = {}
-    channels_node = f.child("channels")
-    if channels_node is None:
-        raise f.error("missing required key 'channels' (e.g. acoustic: {speed_mps: 1500})")
-    for cname, cnode in mapping(channels_node, "channels").items():
-        cf = Fields(cnode, join_path("channels", cname), CHANNEL_KEYS)
-        water = cf.get("water", water_spec, None)
-        channels[cname] = Channel(cname, cf.get("speed_mps", number(above=0)), cf.get("min_delay_s", number(0), 0.0),
-                                  water)
-    if not channels:
-        raise channels_node.error("channels", "define at least one channel")
+    channels = _channels(f)
 
-    vehicles: dict[str, VehicleSpec] = {}
-    vehicles_node = f.child("vehicles")
-    if vehicles_node is None:
-        raise f.error("missing required key 'vehicles'")
-    for vname, vnode in mapping(vehicles_node, "vehicles").items():
-        vehicles[vname] = vehicle_spec(vname, vnode, join_path("vehicles", vname))
-
-    cameras: dict[str, CameraSpec] = {}
-    cameras_node = f.child("cameras")
-    if cameras_node is not None:
-        for cname, cnode in mapping(cameras_node, "cameras").items():
-            cameras[cname] = camera_spec(cname, cnode, join_path("cameras", cname), vehicles)
-    check_camera_references(vehicles, cameras, vehicles_node)
+    vehicles, cameras = _vehicles_and_cameras(f)
 
     links_node = f.child("links")
     if links_node is None:
@@ -129,6 +107,41 @@ def _validate(root: Node | None, file: str, plugins: Sequence[str] = (), preset_
         trace_poses = tf.get("poses_s", number(0), 1.0) or None
     return Scene(name, seed, duration, channels, vehicles, links, flows, trace_file, file, cameras, trace_poses,
                  hosts, zenoh, apps, ros2)
+
+
+
+def _channels(f: Fields) -> dict[str, Channel]:
+    """The scene's ``channels:`` (at least one)."""
+    channels: dict[str, Channel] = {}
+    channels_node = f.child("channels")
+    if channels_node is None:
+        raise f.error("missing required key 'channels' (e.g. acoustic: {speed_mps: 1500})")
+    for cname, cnode in mapping(channels_node, "channels").items():
+        cf = Fields(cnode, join_path("channels", cname), CHANNEL_KEYS)
+        water = cf.get("water", water_spec, None)
+        channels[cname] = Channel(cname, cf.get("speed_mps", number(above=0)), cf.get("min_delay_s", number(0), 0.0),
+                                  water)
+    if not channels:
+        raise channels_node.error("channels", "define at least one channel")
+    return channels
+
+
+def _vehicles_and_cameras(f: Fields) -> tuple[dict[str, VehicleSpec], dict[str, CameraSpec]]:
+    """The scene's ``vehicles:`` and ``cameras:``, each camera's vehicles checked."""
+    vehicles: dict[str, VehicleSpec] = {}
+    vehicles_node = f.child("vehicles")
+    if vehicles_node is None:
+        raise f.error("missing required key 'vehicles'")
+    for vname, vnode in mapping(vehicles_node, "vehicles").items():
+        vehicles[vname] = vehicle_spec(vname, vnode, join_path("vehicles", vname))
+
+    cameras: dict[str, CameraSpec] = {}
+    cameras_node = f.child("cameras")
+    if cameras_node is not None:
+        for cname, cnode in mapping(cameras_node, "cameras").items():
+            cameras[cname] = camera_spec(cname, cnode, join_path("cameras", cname), vehicles)
+    check_camera_references(vehicles, cameras, vehicles_node)
+    return vehicles, cameras
 
 
 def load_scene(path: str, overrides: Sequence[str] = (), *, plugins: Sequence[str] = (),

@@ -83,38 +83,44 @@ def link_budget(scene: Scene, frame_bytes: int | None = None, limit: int | None 
     crossings: dict[tuple, tuple[float | None, float | None]] = {}  # same model, size, range: same answer
     for sender in sims:
         size = frame_bytes or _frame_size(scene, sender.id, DEFAULT_FRAME_BYTES)
-        rmin, rmax = sender.params.range_m
         for receiver in sims:
             if receiver is sender or receiver.params.rx_channel != sender.params.tx_channel:
                 continue
             propagation = None if channels is None else channels[sender.params.tx_channel].propagation
-            model, refused, _ = (bind_path if propagation is None else propagation.bind)(sender.params, receiver.params)
-            a = poses[sender.vehicle].position(0.0)
-            b = poses[receiver.vehicle].position(0.0)
-            d = None if a is None or b is None else math.dist(a, b)
-            here = model.at(a, b) if isinstance(model, BellhopPath) and a is not None and b is not None else None
-            if refused is not None:
-                per = None if d is None else 1.0
-                rows.append(PairBudget(sender.id, receiver.id, size, d, None, per, None, None, (rmin, rmax), refused))
-                if limit is not None and len(rows) > limit:
-                    return rows
+            row = _pair(sender, receiver, size, propagation, poses, crossings)
+            if row is None:
                 continue
-            if model.constant_zero:
-                continue
-            snr_of = getattr(model, "snr_db", None)  # (a column of the table: only physical models have an SNR)
-            snr = snr_of(d) if snr_of is not None and d is not None else None
-            if here is not None:
-                snr = here.snr_db() if isinstance(model.model, PhysicalErrorModel) else None
-            per = None if d is None else ((here or model).per(d, size) if rmin <= d <= rmax else 1.0)
-            high = rmax if math.isfinite(rmax) else FAR_M
-            key = (model, size, rmin, high)
-            if key not in crossings:
-                crossings[key] = (crossing(lambda x: model.per(x, size), 0.1, rmin, high),
-                                  crossing(lambda x: model.per(x, size), 0.9, rmin, high))
-            rows.append(PairBudget(sender.id, receiver.id, size, d, snr, per, *crossings[key], (rmin, rmax)))
+            rows.append(row)
             if limit is not None and len(rows) > limit:
                 return rows
     return rows
+
+
+def _pair(sender: Any, receiver: Any, size: int, propagation: Any, poses: dict[str, Any],
+          crossings: dict[tuple, tuple[float | None, float | None]]) -> PairBudget | None:
+    """One pair's row (None: an error-free path); ``crossings`` keeps the PER crossings already found."""
+    rmin, rmax = sender.params.range_m
+    model, refused, _ = (bind_path if propagation is None else propagation.bind)(sender.params, receiver.params)
+    a = poses[sender.vehicle].position(0.0)
+    b = poses[receiver.vehicle].position(0.0)
+    d = None if a is None or b is None else math.dist(a, b)
+    here = model.at(a, b) if isinstance(model, BellhopPath) and a is not None and b is not None else None
+    if refused is not None:
+        per = None if d is None else 1.0
+        return PairBudget(sender.id, receiver.id, size, d, None, per, None, None, (rmin, rmax), refused)
+    if model.constant_zero:
+        return None
+    snr_of = getattr(model, "snr_db", None)  # (a column of the table: only physical models have an SNR)
+    snr = snr_of(d) if snr_of is not None and d is not None else None
+    if here is not None:
+        snr = here.snr_db() if isinstance(model.model, PhysicalErrorModel) else None
+    per = None if d is None else ((here or model).per(d, size) if rmin <= d <= rmax else 1.0)
+    high = rmax if math.isfinite(rmax) else FAR_M
+    key = (model, size, rmin, high)
+    if key not in crossings:
+        crossings[key] = (crossing(lambda x: model.per(x, size), 0.1, rmin, high),
+                          crossing(lambda x: model.per(x, size), 0.9, rmin, high))
+    return PairBudget(sender.id, receiver.id, size, d, snr, per, *crossings[key], (rmin, rmax))
 
 
 def _metres(d: float | None, beyond: float) -> str:
