@@ -8,10 +8,12 @@ Acoustics Toolbox's ``bellhop.exe`` on the PATH, or this checkout's ``.venv-bell
 .venv-bellhop``) running ``tools/bellhop_run.py``.
 
 What a run gives is reduced at once to the grids a lookup needs (TL; first-arrival delay and delay
-spread) and cached as ``HASH.npz`` under ``$HILGATE_CACHE`` (default ``~/.cache/hilgate/bellhop``),
-where HASH is the SHA-256 of everything the fields depend on: the environment and bathymetry files
-exactly as BELLHOP reads them, the arrival threshold and this reduction's version.  A changed profile,
-bottom, grid or frequency is a new hash; an old file is never reused for it.
+spread) and cached as ``HASH.fields`` (``fieldcache.py``: checksummed) under ``$HILGATE_CACHE`` (default
+``~/.cache/hilgate/bellhop``), where HASH is the SHA-256 of everything the fields depend on: the
+environment and bathymetry files exactly as BELLHOP reads them, the arrival threshold and this
+reduction's version.  A changed profile, bottom, grid or frequency is a new hash; an old file is never
+reused for it.  A damaged file (truncated, a bit flipped) is one warning, and the fields are computed
+again and the file replaced.
 """
 
 from __future__ import annotations
@@ -33,13 +35,15 @@ from ..models.bellhop_fields import TL_CAP, Fields
 from ..models.environment import Water
 from .arrfile import first_and_spread, read_arr
 from .envfile import ARRIVALS_RUN, TL_RUN, bty_text, env_text
+from .fieldcache import CacheFileError, decode, encode
 from .shdfile import FieldFileError, read_shd
 
-__all__ = ["BellhopError", "Program", "find_program", "cache_dir", "field_key", "prepare_fields", "Progress"]
+__all__ = ["BellhopError", "Program", "find_program", "cache_dir", "field_key", "cache_file", "prepare_fields",
+           "Progress"]
 
 log = logging.getLogger(__name__)
 
-REDUCTION = 2
+REDUCTION = 3
 """The version of what the cache holds (bump it when the reduction changes)."""
 RUN_TIMEOUT_S = 3600.0
 MAX_OUTPUT_BYTES = 2 * 1024 ** 3
@@ -179,13 +183,34 @@ def to_fields(arrays: dict[str, np.ndarray], water: Water) -> Fields:
                   arrays["arrival_depths"], arrays["arrival_ranges"])
 
 
+def cache_file(cache: str, water: Water, frequency_hz: float) -> str:
+    """Where the fields of ``water`` at ``frequency_hz`` are cached in the directory ``cache``."""
+    return os.path.join(cache, field_key(water, frequency_hz) + ".fields")
+
+
 def _load(path: str) -> dict[str, np.ndarray] | None:
+    """The cached arrays, or None (and one warning) when the file cannot be believed."""
     try:
-        with np.load(path, allow_pickle=False) as data:
-            return {name: data[name] for name in data.files}
-    except (OSError, ValueError, KeyError, EOFError) as exc:
+        with open(path, "rb") as fh:
+            data = fh.read(MAX_OUTPUT_BYTES + 1)
+        if len(data) > MAX_OUTPUT_BYTES:
+            raise CacheFileError(f"larger than {MAX_OUTPUT_BYTES} bytes")
+        return decode(data)
+    except (OSError, CacheFileError) as exc:
         log.warning("cached BELLHOP fields %s unreadable (%s): computing them again", path, exc)
         return None
+
+
+def _store(path: str, arrays: dict[str, np.ndarray]) -> None:
+    """Write the cache file whole or not at all (a reader never sees half of it)."""
+    fd, tmp = tempfile.mkstemp(dir=os.path.dirname(path), suffix=".fields.tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(encode(arrays))
+        os.replace(tmp, path)
+    except BaseException:
+        os.unlink(tmp)
+        raise
 
 
 def prepare_fields(water: Water, frequencies: Iterable[float], *, program: Program | None = None,
@@ -196,7 +221,7 @@ def prepare_fields(water: Water, frequencies: Iterable[float], *, program: Progr
     found: dict[float, Fields] = {}
     missing = []
     for hz in wanted:
-        path = os.path.join(cache, field_key(water, hz) + ".npz")
+        path = cache_file(cache, water, hz)
         arrays = _load(path) if os.path.exists(path) else None
         fields = None
         if arrays is not None:
@@ -222,11 +247,8 @@ def prepare_fields(water: Water, frequencies: Iterable[float], *, program: Progr
         for hz in missing:
             with tempfile.TemporaryDirectory(prefix="hilgate-bellhop-") as workdir:
                 arrays = compute(water, hz, program, workdir, step)
-            path = os.path.join(cache, field_key(water, hz) + ".npz")
-            fd, tmp = tempfile.mkstemp(dir=cache, suffix=".npz.tmp")
-            with os.fdopen(fd, "wb") as fh:
-                np.savez(fh, **arrays)
-            os.replace(tmp, path)
+            path = cache_file(cache, water, hz)
+            _store(path, arrays)
             log.info("BELLHOP fields at %g Hz cached in %s", hz, path)
             found[hz] = to_fields(arrays, water)
         if progress is not None:
