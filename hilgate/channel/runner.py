@@ -7,8 +7,8 @@ program is, in this order: ``--bellhop``/``HILGATE_BELLHOP`` (a command; the fil
 Acoustics Toolbox's ``bellhop.exe`` on the PATH, or this checkout's ``.venv-bellhop`` (pelagic, ``make
 .venv-bellhop``) running ``tools/bellhop_run.py``.
 
-What a run gives is reduced at once to the grids a lookup needs (TL; first-arrival delay and delay
-spread) and cached as ``HASH.fields`` (``fieldcache.py``: checksummed) under ``$HILGATE_CACHE`` (default
+What a run gives is reduced at once to the grids a lookup needs (TL; the first arrival's delay and its
+slopes, ``delays.py``; the delay spread) and cached as ``HASH.fields`` (``fieldcache.py``: checksummed) under ``$HILGATE_CACHE`` (default
 ``~/.cache/hilgate/bellhop``), where HASH is the SHA-256 of everything the fields depend on: the
 environment and bathymetry files exactly as BELLHOP reads them, the arrival threshold and this
 reduction's version.  A changed profile, bottom, grid or frequency is a new hash; an old file is never
@@ -33,7 +33,8 @@ import numpy as np
 
 from ..models.bellhop_fields import TL_CAP, Fields
 from ..models.environment import Water
-from .arrfile import first_and_spread, read_arr
+from .arrfile import read_arr
+from .delays import DelayReduction
 from .envfile import ARRIVALS_RUN, TL_RUN, bty_text, env_text
 from .fieldcache import CacheFileError, decode, encode
 from .shdfile import FieldFileError, read_shd
@@ -149,8 +150,8 @@ def compute(water: Water, frequency_hz: float, program: Program, workdir: str,
         if step is not None:
             step(f"{khz}: transmission loss")
         shade = read_shd(_run(program, workdir, "tl", env_text(water, frequency_hz, TL_RUN), bty, ".shd"))
-        firsts, spreads = [], []
         sources = water.source_grid()
+        delays = DelayReduction(sources, water.threshold_db, water.mean_speed_mps)
         for n, zs in enumerate(sources):
             if step is not None:
                 step(f"{khz}: arrivals from {zs:g} m ({n + 1}/{len(sources)})")
@@ -158,29 +159,21 @@ def compute(water: Water, frequency_hz: float, program: Program, workdir: str,
                         ".arr").decode("latin-1")
             arrivals = read_arr(text)
             del text
-            first, spread = first_and_spread(arrivals, water.threshold_db)
-            firsts.append(first[0])
-            spreads.append(spread[0])
+            delays.add(arrivals)
     except FieldFileError as exc:
         raise BellhopError(f"BELLHOP ({program}) wrote a file hilgate cannot read: {exc}") from None
     tl = shade.transmission_loss_db()
     tl[~np.isfinite(tl) | (tl > TL_CAP)] = TL_CAP
-    first, spread = np.stack(firsts), np.stack(spreads)
-    zs = np.asarray(sources)[:, None, None]
-    zr = arrivals.receiver_depths[None, :, None]
-    r = arrivals.ranges[None, None, :]
-    straight = np.hypot(r, zr - zs) / water.mean_speed_mps
-    first = np.where(np.isfinite(first), first, np.broadcast_to(straight, first.shape))
-    spread = np.where(np.isfinite(spread), spread, 0.0)
     return {"frequency_hz": np.array(frequency_hz), "sources": shade.source_depths, "depths": shade.receiver_depths,
-            "ranges": shade.ranges, "tl": tl, "arrival_depths": arrivals.receiver_depths,
-            "arrival_ranges": arrivals.ranges, "first": first, "spread": spread}
+            "ranges": shade.ranges, "tl": tl, "arrival_depths": delays.depths, "arrival_ranges": delays.ranges,
+            **delays.result()}
 
 
 def to_fields(arrays: dict[str, np.ndarray], water: Water) -> Fields:
     return Fields(float(arrays["frequency_hz"]), arrays["sources"], arrays["depths"], arrays["ranges"],
                   arrays["tl"], arrays["first"], arrays["spread"], water.mean_speed_mps,
-                  arrays["arrival_depths"], arrays["arrival_ranges"])
+                  arrays["arrival_depths"], arrays["arrival_ranges"],
+                  (arrays["first_dz"], arrays["first_dr"], arrays["first_ds"]))
 
 
 def cache_file(cache: str, water: Water, frequency_hz: float) -> str:
