@@ -87,17 +87,20 @@ class Fields:
     are nested sequences [source][depth][range] (numpy arrays are fine: they are flattened here);
     ``first`` and ``spread`` may be on a coarser grid of their own (``arrival_depths``,
     ``arrival_ranges``); ``first_slopes`` are the slopes of the first arrival's residual delay along
-    receiver depth, range and source depth on that grid (s/m; none: the nearest point's delay, flat)."""
+    receiver depth, range and source depth on that grid (s/m; none: the nearest point's delay, flat).
+    ``fan``: the beams BELLHOP traced and how much doubling to them moved the TL at 99.9 % of the grid
+    and at most (dB, NaN when the fan was given), as the preparation reports them."""
 
     __slots__ = ("frequency_hz", "sources", "depths", "ranges", "a_depths", "a_ranges", "tl", "first", "spread",
-                 "first_dz", "first_dr", "first_ds",
+                 "first_dz", "first_dr", "first_ds", "fan",
                  "mean_speed", "alpha_db_per_m", "_tl_strides", "_a_strides")
 
     def __init__(self, frequency_hz: float, sources: Sequence[float], depths: Sequence[float],
                  ranges: Sequence[float], tl: Any, first: Any, spread: Any, mean_speed_mps: float,
                  arrival_depths: Sequence[float] | None = None, arrival_ranges: Sequence[float] | None = None,
-                 first_slopes: tuple[Any, Any, Any] | None = None):
+                 first_slopes: tuple[Any, Any, Any] | None = None, fan: tuple[int, float, float] | None = None):
         self.frequency_hz = float(frequency_hz)
+        self.fan = fan
         self.sources = _Axis(sources)
         self.depths = _Axis(depths)
         self.ranges = _Axis(ranges)

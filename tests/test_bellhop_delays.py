@@ -4,12 +4,12 @@ The delay a frame takes is that of the first arrival within ``threshold_db`` of 
 that is jumps from one grid point to the next (the direct path at one, a surface echo 5 ms later at the
 other), and interpolating between the two gave delays no path has (the issue: 4.9 ms off BELLHOP's own
 ``.arr`` between grid points at the 90th percentile, 19 ms at worst), and the delay an arrival took (the
-delay resampled onto the TL grid) and ``delay_s`` differed (0.9 ms in the issue, 2.7 ms here).  Now the delay between grid points is
-that of the nearest grid point's first arrival, followed to the query along that same arrival (its slope
-from the same path found at the neighbouring grid points).
+delay resampled onto the TL grid) and ``delay_s`` differed (0.9 ms in the issue, 2.7 ms here).  Now the
+delay between grid points is that of the nearest grid point's first arrival, followed to the query along
+that same arrival (its slope from the same path found at the neighbouring grid points).
 
-Checked against BELLHOP run at places between the grid points (midway in range, depth and source depth)
-in shallow summer water, where the first arrival jumps often.
+Checked against BELLHOP run at places between the grid points (0.45 of the way in range, depth and source
+depth) in shallow summer water, where the first arrival jumps often.
 """
 
 from __future__ import annotations

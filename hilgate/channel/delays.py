@@ -13,9 +13,10 @@ and received in the same directions (up or down), whose residual delay is neares
 eigenray's residual changes little from one point to the next, and BELLHOP lists a grazing eigenray as a
 cluster of neighbouring beams (delays within a millisecond, launch angles shifting with the source's
 depth), so the nearest launch angle picked a cluster's faint edge, 1 to 2 ms off.  A slope is taken
-across both neighbours where the arrival is found at both, from one side where at one, and is zero where at neither.  What is followed
-is the residual, delay − R/c̄ (R the slant distance, c̄ the mean sound speed), as the lookup adds R/c̄
-back.  Sans-I/O: arrays in, arrays out; a source depth's arrivals at a time, with its neighbours'.
+across both neighbours where the arrival is found at both, from one side where at one, and is zero where
+at neither.  What is followed is the residual, delay − R/c̄ (R the slant distance, c̄ the mean sound
+speed), as the lookup adds R/c̄ back.  Sans-I/O: arrays in, arrays out; a source depth's arrivals at a
+time, with its neighbours'.
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ Whether the modems are in the water is :mod:`.in_water`'s (it needs the vehicles
 
 from __future__ import annotations
 
-from ..models.environment import RUNS, SEDIMENTS, SURFACES, Bottom, Water, mackenzie_speed, munk_profile
+from ..models.environment import AUTO_BEAMS, RUNS, SEDIMENTS, SURFACES, Bottom, Water, mackenzie_speed, munk_profile
 from .checks import Fields, choice, describe, integer, items, join_path, number
 from .yaml_nodes import Node
 
@@ -73,8 +73,8 @@ def _profile(f: Fields, key: str, bottom: float, note: str, what: str,
 
         close = difflib.get_close_matches(value, NAMED_PROFILES, n=1, cutoff=0.6)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
-        raise node.error(path, f"must be {' or '.join(NAMED_PROFILES)}, one speed in m/s or [[depth_m, speed_mps], …] "
-                               f"rows, not {describe(node)}{hint}")
+        raise node.error(path, f"must be {' or '.join(NAMED_PROFILES)}, one speed in m/s or [[depth_m, "
+                               f"speed_mps], …] rows, not {describe(node)}{hint}")
     rows = _pairs(node, path, (0, 11_000), limits, what)
     if rows[0][0] != 0.0:
         raise node.error(path, f"must start at the surface (depth 0), not {rows[0][0]:g} m")
@@ -85,6 +85,15 @@ def _profile(f: Fields, key: str, bottom: float, note: str, what: str,
         raise node.error(path, f"stops at {rows[-1][0]:g} m, above the bottom at {bottom:g} m{note}: list it down "
                                f"to {bottom:g} m (or give one value for every depth, {one})")
     return rows
+
+
+def _beams(node: Node, path: str) -> int | str:
+    """``auto`` (the fan found by convergence) or a number of beams (0: the program chooses)."""
+    if node.value == AUTO_BEAMS:
+        return AUTO_BEAMS
+    if isinstance(node.value, str):
+        raise node.error(path, f"must be {AUTO_BEAMS} or a number of beams (0: BELLHOP chooses), not {describe(node)}")
+    return integer(0, 100_000)(node, path)
 
 
 def water_spec(node: Node, path: str) -> Water:
@@ -139,7 +148,7 @@ def water_spec(node: Node, path: str) -> Water:
         source_depths=grid_value("source_depths", integer(1, 1_000), default.source_depths),
         arrival_ranges=grid_value("arrival_ranges", integer(2, 100_000), default.arrival_ranges),
         arrival_depths=grid_value("arrival_depths", integer(2, 10_000), default.arrival_depths),
-        beams=f.get("beams", integer(0, 100_000), default.beams),
+        beams=f.get("beams", _beams, AUTO_BEAMS),
         run=f.get("run", choice(*RUNS), "incoherent"),
         threshold_db=f.get("threshold_db", number(above=0, maximum=200), 20.0),
         frequency_khz=f.get("frequency_khz", number(above=0, maximum=1000), 10.0),
