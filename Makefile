@@ -15,6 +15,7 @@ PELAGIC      := 0.5.0
 # `sudo make install` / `sudo make uninstall`: hilgate as a systemd service (systemd/install.sh;
 # docs/operations.md). DESTDIR=DIR writes every file under DIR instead and skips the root-only steps (the
 # hilgate user, systemctl); PURGE=1 also removes changed configuration, the user, state and traces.
+# EXTRAS=web,report,ros2 installs those optional extras into the service's venv (default: web, the live view).
 DESTDIR      ?=
 PREFIX       ?= /opt/hilgate
 SYSCONFDIR   ?= /etc
@@ -23,6 +24,7 @@ LOGROTATEDIR ?= /etc/logrotate.d
 BINDIR       ?= /usr/local/bin
 PIP_ARGS     ?=
 PURGE        ?=
+EXTRAS       ?= web
 
 .PHONY: run test sim bench fuzz paper install uninstall clean
 
@@ -30,11 +32,13 @@ $(BIN)/python:
 	@echo "make: creating $(VENV), a Python environment of this checkout's own"
 	$(PYTHON) -m venv $(VENV)
 
-# pip says what it fetches and installs (the first run takes about a minute); later runs skip it.
+# pip says what it fetches and installs (the first run takes about a minute); later runs skip it.  With the
+# extras the README's commands use: the live view (--web, hilgate view: tornado) and the report's figures
+# (hilgate report: matplotlib).
 $(VENV)/.installed: pyproject.toml | $(BIN)/python
 	@echo "make: installing hilgate and its dependencies into $(VENV) (the first time only; about a minute)"
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check --upgrade pip
-	$(BIN)/python -m pip install --disable-pip-version-check -e .
+	$(BIN)/python -m pip install --disable-pip-version-check -e '.[web,report]'
 	@echo "make: installed; the commands are $(BIN)/hilgate, or run 'source $(BIN)/activate' once"
 	touch $@
 
@@ -75,9 +79,11 @@ $(BELLHOP_VENV)/.installed:
 	$(BELLHOP_VENV)/bin/python -m pip install --quiet --disable-pip-version-check 'pelagic==$(PELAGIC)'
 	touch $@
 
-# The fuzz tests (test_fuzz_*) for minutes instead of seconds: HILGATE_FUZZ multiplies their examples.
+# The fuzz tests (test_fuzz_*) for minutes instead of seconds: HILGATE_FUZZ multiplies their examples; and the
+# red team at the doors (tests/test_redteam_doors.py: every stranger at once, the honest clients' tries, -s
+# prints the figures) with more tries.
 fuzz: $(VENV)/.installed-test
-	HILGATE_FUZZ=$(FUZZ) $(BIN)/python -m pytest -q -k fuzz
+	HILGATE_FUZZ=$(FUZZ) $(BIN)/python -m pytest -q -k "fuzz or redteam"
 
 # The paper comparison (docs/paper-comparison.md, docs/paper-exp2.md) and the formation figure
 # (docs/figures/exp3-formation.png, from the virtual-time run): virtual time only. 42 s on this project's
@@ -95,6 +101,7 @@ paper: $(VENV)/.installed-test
 install uninstall:
 	DESTDIR='$(DESTDIR)' PREFIX='$(PREFIX)' SYSCONFDIR='$(SYSCONFDIR)' UNITDIR='$(UNITDIR)' \
 	LOGROTATEDIR='$(LOGROTATEDIR)' BINDIR='$(BINDIR)' PYTHON='$(PYTHON)' PIP_ARGS='$(PIP_ARGS)' PURGE='$(PURGE)' \
+	EXTRAS='$(EXTRAS)' \
 	sh systemd/install.sh $@
 
 # Every benchmark once (a few minutes each on a loaded 2-core machine); their output goes to bench.out

@@ -41,11 +41,13 @@ class Daemon:
     ``args``, in ``directory`` (a new temporary one if None, removed on close) under ``name``: its scene ``NAME.yaml``,
     runtime directory ``NAME``, log ``NAME.log`` (its output stays out of the benchmark's).  ``cpu``:
     the one CPU it runs on (None: the kernel's choice).  ``launch``: the Python arguments before
-    ``run`` (default ``-m hilgate``)."""
+    ``run`` (default ``-m hilgate``).  ``within``: a command it runs under that ``exec``s it in place
+    (``ip netns exec NAME``: the process id stays the daemon's)."""
 
     def __init__(self, scene_text: str, links: tuple[str, ...] = (), args: tuple[str, ...] = (),
                  cpu: int | None = None, directory: str | None = None, name: str = "daemon",
-                 launch: tuple[str, ...] = ("-m", "hilgate"), ready_timeout: float = 60.0):
+                 launch: tuple[str, ...] = ("-m", "hilgate"), ready_timeout: float = 60.0,
+                 within: tuple[str, ...] = ()):
         self.made_dir = directory is None  # (removed on close, with the log)
         self.dir = directory or tempfile.mkdtemp(prefix="hilgate-bench-")
         self.links = links
@@ -57,7 +59,7 @@ class Daemon:
         self.notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
         self.notify.bind(notify_path)
         self.log_path = os.path.join(self.dir, f"{name}.log")
-        self.command = pinned_command([sys.executable, *launch, "run", scene, "--runtime-dir", self.runtime,
+        self.command = pinned_command([*within, sys.executable, *launch, "run", scene, "--runtime-dir", self.runtime,
                                        "--no-status-line", *args], cpu)
         self.env = dict(os.environ, NOTIFY_SOCKET=notify_path)
         self.process: subprocess.Popen | None = None

@@ -16,10 +16,15 @@ another process, here with ns-3's scheduler and UAN model in front.  The descrip
 (the reader sees end of file), then one JSON line is printed: deliveries written, sends, and the
 scheduler's own lateness at the delivery events (before the hop) mean and max.
 
-``--realtime-priority P`` runs it under SCHED_FIFO P, as ``hilgate run --realtime-priority`` does the daemon.
+``--realtime-priority P`` runs its simulation thread as ``hilgate run --realtime-priority P`` runs the
+daemon's loop (``hilgate.core.priority``): SCHED_RR at P for that thread alone (``SCHED_RESET_ON_FORK``),
+memory locked as it is touched, taken once the scene is built (cling's compiling at start-up, seconds of
+CPU, is not run at real-time priority, as the daemon's start-up is not).  Where it is refused, ns-3
+runs at normal priority and says so on stderr.
 """
 
 import argparse
+import ctypes
 import json
 import math
 import os
@@ -97,10 +102,20 @@ namespace hilrt {
 """
 
 
+def take_priority(priority):
+    """What hilgate.core.priority gives the daemon's loop where allowed (this Python has no hilgate)."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_RR | os.SCHED_RESET_ON_FORK, os.sched_param(priority))
+    except OSError as exc:
+        print(f"ns3_realtime: SCHED_RR {priority} refused ({exc}): normal priority", file=sys.stderr)
+        return
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.mlockall(1 | 2 | 4) != 0:  # MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT
+        print(f"ns3_realtime: memory not locked ({os.strerror(ctypes.get_errno())})", file=sys.stderr)
+
+
 def main():
     a = parse_args()
-    if a.realtime_priority:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(a.realtime_priority))
     from ns import ns  # slow: cppyy/cling JIT, seconds
     import cppyy
 
@@ -132,6 +147,8 @@ def main():
         print("ns3_realtime: could not hook the PHY's RxOk", file=sys.stderr)
         return 1
     ns.Simulator.Stop(ns.Seconds(a.sim_time + 1.0))
+    if a.realtime_priority:
+        take_priority(a.realtime_priority)
     hp.MarkStart(a.fd)
     t0 = time.perf_counter()
     ns.Simulator.Run()

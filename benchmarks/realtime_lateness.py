@@ -40,6 +40,7 @@ max <= 1 ms on a quiet host, within 1.2 x the bare loop's p99 on a loaded one).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import multiprocessing as mp
@@ -53,6 +54,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from daemon_harness import Daemon, cpu_seconds  # noqa: E402
@@ -83,6 +85,22 @@ def scene_text(nodes: int, prefix: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+@contextlib.contextmanager
+def instrument(priority: int) -> Iterator[None]:
+    """The calling thread (an application or a reader: the measuring end) at SCHED_RR ``priority`` for the
+    block (0: as it is), so that on a busy host the measurement waits for no neighbour: what the
+    daemon's scheduling changes is then the daemon's share (``realtime_load.py``)."""
+    if not priority:
+        yield
+        return
+    before = os.sched_getscheduler(0), os.sched_getparam(0)
+    os.sched_setscheduler(0, os.SCHED_RR | os.SCHED_RESET_ON_FORK, os.sched_param(priority))
+    try:
+        yield
+    finally:
+        os.sched_setscheduler(0, before[0] | os.SCHED_RESET_ON_FORK, before[1])  # (clearing the flag needs privilege)
+
+
 def percentile(values: list[float], q: float) -> float:
     ordered = sorted(values)
     return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
@@ -92,14 +110,24 @@ def percentile(values: list[float], q: float) -> float:
 
 
 def _application(runtime_dir: str, links: list[tuple[int, str]], nodes: int, rate: float, seconds: float,
-                 seed: int, start_at: float, result, cpu: int | None = None) -> None:
+                 seed: int, start_at: float, result, cpu: int | None = None, priority: int = 0) -> None:
     """Send from and read every link in ``links`` for ``seconds`` from ``start_at`` (perf_counter), then
-    one more second for the frames on their way; put (lateness list, frames sent, deliveries) on ``result``."""
+    one more second for the frames on their way; put (lateness list, frames sent, deliveries) on ``result``.
+    ``priority``: the instrument's (:func:`instrument`)."""
     pin(cpu)
-    from hilgate.client import Link
-
     where = positions(nodes)
     delay = [[TX_DELAY + ON_AIR * 8 / BITRATE + math.dist(a, b) / SPEED for b in where] for a in where]
+    with instrument(priority):
+        send_and_read(runtime_dir, links, delay, rate, seconds, seed, start_at, result)
+
+
+def send_and_read(runtime_dir: str, links: list[tuple[int, str]], delay: list[list[float]], rate: float,
+                  seconds: float, seed: int, start_at: float, result, min_gap: float = MIN_GAP) -> None:
+    """The applications' loop: ``delay[sender][receiver]``, the model's delay from a frame's send to
+    its delivery, between the scene's nodes by index; frames of ``ON_AIR`` bytes on air, sent by each
+    link in ``links`` as a Poisson process of ``rate`` with gaps of at least ``min_gap``."""
+    from hilgate.client import Link
+
     opened = {index: Link.open(link_id, runtime_dir=runtime_dir) for index, link_id in links}
     selector = selectors.DefaultSelector()
     for index, link in opened.items():
@@ -119,7 +147,7 @@ def _application(runtime_dir: str, links: list[tuple[int, str]], nodes: int, rat
                 if due[index] < stop:
                     opened[index].send(PAYLOAD.pack(index, time.perf_counter()).ljust(ON_AIR - 3, b"\0"))
                     sent += 1
-                    due[index] += max(MIN_GAP, rng.expovariate(rate))
+                    due[index] += max(min_gap, rng.expovariate(rate))
                 else:
                     due[index] = math.inf
                 continue
@@ -139,8 +167,10 @@ def _application(runtime_dir: str, links: list[tuple[int, str]], nodes: int, rat
 
 
 def through_hilgate(nodes: int, rate: float, seconds: float, apps: int, seed: int, daemon_args: tuple[str, ...],
-                    placement: Placement):
-    """The applications on the placement's step 0, the daemon on step 1."""
+                    placement: Placement, priority: int = 0):
+    """The applications on the placement's step 0 (at the instrument's ``priority``), the daemon on step 1.
+    Returns the lateness, the frame-receiver pairs sent, the daemon's CPU per wall second, and what the
+    daemon counted (delivered, drops) and said it runs at (``scheduling``)."""
     prefix = f"rt{os.getpid()}x{seed}{placement.name[0]}_"
     names = [f"{prefix}{i}" for i in range(nodes)]
     daemon = Daemon(scene_text(nodes, prefix), tuple(names), daemon_args, cpu=placement.cpu(1))
@@ -149,7 +179,7 @@ def through_hilgate(nodes: int, rate: float, seconds: float, apps: int, seed: in
         start_at = time.perf_counter() + 2.0  # every application has opened its links by then
         workers = [mp.Process(target=_application, args=(
             daemon.runtime, [(i, names[i]) for i in range(k, nodes, apps)], nodes, rate, seconds,
-            seed, start_at, result, placement.cpu(0))) for k in range(apps)]
+            seed, start_at, result, placement.cpu(0), priority)) for k in range(apps)]
         for worker in workers:
             worker.start()
         cpu0, wall0 = cpu_seconds(daemon.process.pid), time.perf_counter()
@@ -157,12 +187,14 @@ def through_hilgate(nodes: int, rate: float, seconds: float, apps: int, seed: in
         cpu, wall = cpu_seconds(daemon.process.pid) - cpu0, time.perf_counter() - wall0
         for worker in workers:
             worker.join()
-        links = daemon.status()["links"]
+        status = daemon.status()
+        links = status["links"]
     finally:
         daemon.close()
     late = [x for lateness, _ in outcomes for x in lateness]
     sent = sum(n for _, n in outcomes)
-    counted = {"delivered": sum(link["rx_packets"] for link in links), "drops": sum(link["drops"] for link in links)}
+    counted = {"delivered": sum(link["rx_packets"] for link in links), "drops": sum(link["drops"] for link in links),
+               "scheduling": status.get("scheduling", {}).get("text", "not said")}
     return late, sent * (nodes - 1), cpu / wall, counted
 
 
@@ -214,13 +246,15 @@ def _read_due_times(here: socket.socket, timeout: float) -> list[float]:
         late.append(received - unpack(message)[0])
 
 
-def bare(rate: float, seconds: float, seed: int, realtime_priority: int, placement: Placement) -> list[float]:
-    """The reader (this thread) on the placement's step 0, the timer loop on step 1."""
+def bare(rate: float, seconds: float, seed: int, realtime_priority: int, placement: Placement,
+         priority: int = 0) -> list[float]:
+    """The reader (this thread, at the instrument's ``priority``) on the placement's step 0, the timer
+    loop on step 1 (at ``realtime_priority``, as the daemon's ``--realtime-priority``)."""
     here, there = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
     loop = mp.Process(target=_timer_loop, args=(there, rate, seconds, seed, realtime_priority, placement.cpu(1)))
     loop.start()
     there.close()
-    with pinned(placement.cpu(0)):
+    with pinned(placement.cpu(0)), instrument(priority):
         late = _read_due_times(here, seconds + 60)
     loop.join()
     here.close()
@@ -228,9 +262,10 @@ def bare(rate: float, seconds: float, seed: int, realtime_priority: int, placeme
 
 
 def ns3_realtime(python: str, nodes: int, rate: float, seconds: float, seed: int, realtime_priority: int,
-                 placement: Placement) -> tuple[list[float], dict]:
-    """ns3_realtime.py under ``python`` on the placement's step 1, its reader (this thread) on step 0: the
-    lateness of each delivery on receipt, and the script's JSON summary."""
+                 placement: Placement, priority: int = 0) -> tuple[list[float], dict]:
+    """ns3_realtime.py under ``python`` on the placement's step 1, its reader (this thread, at the
+    instrument's ``priority``) on step 0: the lateness of each delivery on receipt, and the script's JSON
+    summary."""
     here, there = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
     argv = [python, NS3_SCRIPT, "--fd", str(there.fileno()), "--nodes", str(nodes), "--sim-time", repr(seconds),
             "--rate", repr(rate), "--min-gap", repr(MIN_GAP), "--size", str(ON_AIR - 3), "--bitrate", str(BITRATE),
@@ -240,7 +275,7 @@ def ns3_realtime(python: str, nodes: int, rate: float, seconds: float, seed: int
                                    pass_fds=(there.fileno(),))
         there.close()
         try:
-            with pinned(placement.cpu(0)):
+            with pinned(placement.cpu(0)), instrument(priority):
                 late = _read_due_times(here, seconds + 300)  # (importing ns-3 takes seconds)
         finally:
             here.close()
@@ -263,12 +298,13 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3, help="runs of each side per placement, alternating")
     parser.add_argument("--placement", choices=("same", "across", "both"), default="both")
     parser.add_argument("--realtime-priority", type=int, default=0,
-                        help="SCHED_FIFO priority for the daemon, the bare loop and ns-3, as `hilgate run --realtime-priority`")
+                        help="real-time priority for the daemon, the bare loop and ns-3, as `hilgate run --realtime-priority` "
+                             "(SCHED_RR for the loop's thread; realtime_load.py compares with and without, on a busy host)")
     parser.add_argument("--ns3-python", help="a Python with the ns3 wheel: run ns-3's real-time scheduler alongside")
     args = parser.parse_args()
     why_not = check_python(args.ns3_python, "ns")
     daemon_args = ("--realtime-priority", str(args.realtime_priority)) if args.realtime_priority else ()
-    setup = f"SCHED_FIFO {args.realtime_priority}" if args.realtime_priority else "normal scheduling"
+    setup = f"SCHED_RR {args.realtime_priority}" if args.realtime_priority else "normal scheduling"
     deliveries_per_s = args.nodes * args.rate * (args.nodes - 1)
     chosen, across_not_run = choose(args.placement)
     print(f"{args.nodes} nodes, {args.rate:g} frames/s each, {args.apps} application processes on the socket GLI, "

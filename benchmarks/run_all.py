@@ -28,9 +28,11 @@ def benchmarks(ns3_python: str | None) -> list[list[str]]:
     return [
         ["benchmarks/ring_aloha.py", "--drop-when-busy", *ns3],
         ["benchmarks/realtime_lateness.py", *ns3],
+        ["benchmarks/realtime_load.py", *ns3],
         ["benchmarks/gli_roundtrip.py"],
         ["benchmarks/pass_cost.py", "20000"],
         ["benchmarks/multihost.py"],
+        ["benchmarks/hosts_scale.py"],
         ["benchmarks/many_links.py"],
         ["benchmarks/ring_scale.py", "--nodes", "50", "200", "1000"],
         # the dense ring (every modem hears every other): the cost per offered frame as N grows tenfold
@@ -40,6 +42,8 @@ def benchmarks(ns3_python: str | None) -> list[list[str]]:
         ["benchmarks/ring_aloha.py", "--nodes", "1000", "--sim-time", "3600", "--repeats", "1"],
         ["benchmarks/aruco.py"],
         ["benchmarks/web_cost.py"],
+        ["benchmarks/floods.py"],
+        ["benchmarks/web_redraws.py"],
         ["benchmarks/bellhop_lookup.py"],
     ]
 

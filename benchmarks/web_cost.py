@@ -1,12 +1,13 @@
 #!/usr/bin/env python3
 """What the web view costs the daemon: its CPU at 100 frames/s without ``--web``, with ``--web`` and no page,
-and with a page connected.
+and with one and with three pages connected.
 
 The daemon runs a scene whose flows put 100 frames a second on air (four vehicles 100-600 m apart, four
 links, 32-byte frames at 25 a second each), in real time.  Three configurations alternate, ``--repeats``
 times, each a fresh daemon: (1) no web door, the anchor; (2) ``--web`` with no page; (3) ``--web`` with a
 page, here a WebSocket client in this process that proves the token and reads every picture as a browser
-would (a browser's own drawing costs the browser, not the daemon).  Each is measured over ``--seconds``
+would (a browser's own drawing costs the browser, not the daemon); (4) three such pages (an operator, a
+colleague, a projector: the picture is built once and encoded once, then written three times).  Each is measured over ``--seconds``
 of wall clock after a warm-up: the daemon's CPU time (every thread, from /proc) over that time, as a
 percentage of one core, the frames it put on air, and for (3) the pictures and bytes the page got.
 Target: a page costs under 5 % of a core.
@@ -33,6 +34,7 @@ from daemon_harness import Daemon, cpu_seconds  # noqa: E402
 from hilgate.gli.token import proof, read_token  # noqa: E402
 
 TICKS = os.sysconf("SC_CLK_TCK")
+PAGES = {"a page connected": 1, "3 pages connected": 3}
 
 
 def scene(prefix: str) -> str:
@@ -92,25 +94,27 @@ def measure(config: str, seconds: float, warm_up: float) -> dict:
     prefix = f"wc{uuid.uuid4().hex[:6]}"
     with tempfile.TemporaryDirectory() as tmp:
         daemon = Daemon(scene(prefix), args=() if config == "no web door" else ("--web", "0"), directory=tmp)
-        page = None
+        pages: list[Page] = []
         try:
             status = daemon.status()
-            if config == "a page connected":
+            for _ in range(PAGES.get(config, 0)):
                 web = status["web"]
                 page = Page(web["url"], read_token(web["token_file"]))
                 page.start()
+                pages.append(page)
                 if not page.welcome.wait(60):
                     raise RuntimeError("the page was not welcomed")
             time.sleep(warm_up)
             tx0 = sum(link["tx_packets"] for link in daemon.status()["links"])
             cpu0, wall0 = cpu_seconds(daemon.process.pid), time.monotonic()
+            page = pages[0] if pages else None
             pictures0, bytes0 = (page.pictures, page.bytes) if page else (0, 0)
             time.sleep(seconds)
             cpu1, wall1 = cpu_seconds(daemon.process.pid), time.monotonic()
             pictures1, bytes1 = (page.pictures, page.bytes) if page else (0, 0)
             tx1 = sum(link["tx_packets"] for link in daemon.status()["links"])
         finally:
-            if page is not None:
+            for page in pages:
                 page.stop = True
             daemon.close()
         wall = wall1 - wall0
@@ -128,7 +132,7 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--warm-up", type=float, default=3.0, help="seconds of a fresh daemon not measured")
     args = parser.parse_args()
-    configs = ["no web door", "--web, no page", "a page connected"]
+    configs = ["no web door", "--web, no page", "a page connected", "3 pages connected"]
     results: dict[str, list[dict]] = {config: [] for config in configs}
     for _ in range(args.repeats):
         for config in configs:
@@ -141,7 +145,7 @@ def main() -> int:
         rows = results[config]
         line = (f"  {config:<18} CPU {spread([r['cpu'] for r in rows])} %   "
                 f"frames on air {statistics.median(r['frames_s'] for r in rows):.0f}/s")
-        if config == "a page connected":
+        if config in PAGES:
             line += (f"   pictures {statistics.median(r['pictures_s'] for r in rows):.1f}/s, "
                      f"{statistics.median(r['kb_s'] for r in rows):.1f} kB/s")
         print(line)

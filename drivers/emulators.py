@@ -22,16 +22,19 @@ pass through as they are (:class:`S100Emulator`).
 
 from __future__ import annotations
 
+import itertools
 import logging
 import os
 import socket
+import stat
 import tty
 from abc import ABC, abstractmethod
 from typing import Any, Callable
 
 from hilgate.core.backend import AppFrame, PhyEvent
 from hilgate.core.endpoint import TAKEN, LinkPort
-from hilgate.core.outputs import OutputError, pty_link_problem
+from hilgate.core.outputs import OutputError, pty_link_problem_at
+from hilgate.core.safepath import PathError, open_parent
 from hilgate.core.packets import BROADCAST, Decoded, Raw
 from hilgate.core.streams import Connection, Listener
 
@@ -86,17 +89,30 @@ class PtyHost:
     def _link(self, path: str) -> None:
         """Link the pty at ``path``: where nothing is, or over a pty link a previous run left (the scene
         loader checked it too; the file system may have changed since).  symlink(2) never replaces, so
-        something that appears meanwhile is refused, not removed."""
-        problem = pty_link_problem(path)
-        if problem is not None:
-            raise OutputError(problem)
-        if os.path.islink(path):
-            os.unlink(path)
+        something that appears meanwhile is refused, not removed.  The directory is reached once, without
+        another user's links (:mod:`hilgate.core.safepath`), and kept open: the link is made, read and
+        removed by name in it, so nobody can point the removal at stop at another directory."""
         try:
-            os.symlink(self.target, path)
-        except FileExistsError:
-            raise OutputError(f"{path} appeared while the emulated modem's pty link was being made: "
-                              f"not replacing it") from None
+            self.directory, self.name = open_parent(path)
+        except PathError as exc:
+            raise OutputError(str(exc) if not exc.missing else f"cannot make the pty link {path}: {exc}") from None
+        try:
+            problem = pty_link_problem_at(self.directory, self.name, path)
+            if problem is not None:
+                raise OutputError(problem)
+            try:  # a previous run's pty link (the look above): made anew
+                if stat.S_ISLNK(os.stat(self.name, dir_fd=self.directory, follow_symlinks=False).st_mode):
+                    os.unlink(self.name, dir_fd=self.directory)
+            except FileNotFoundError:
+                pass
+            try:
+                os.symlink(self.target, self.name, dir_fd=self.directory)
+            except FileExistsError:
+                raise OutputError(f"{path} appeared while the emulated modem's pty link was being made: "
+                                  f"not replacing it") from None
+        except BaseException:
+            os.close(self.directory)
+            raise
 
     def pause(self) -> None:
         """Stop reading: what the application writes waits in the kernel's pty buffer, and once that is
@@ -135,8 +151,12 @@ class PtyHost:
             except OSError:
                 pass
         try:
-            if os.readlink(self.path) == self.target:  # only our own link: not one that replaced it since
-                os.unlink(self.path)
+            if os.readlink(self.name, dir_fd=self.directory) == self.target:  # only our own: not one put there since
+                os.unlink(self.name, dir_fd=self.directory)
+        except OSError:
+            pass
+        try:
+            os.close(self.directory)
         except OSError:
             pass
 
@@ -145,8 +165,12 @@ class TcpHosts:
     """A loopback listener; each client is a host with its own protocol state.
 
     At most :data:`MAX_TCP_CLIENTS` at once (each holds a codec and up to :data:`TCP_OUTPUT_CAP` bytes of
-    answers it has not read): the next one is closed at once, as a modem's ``listen-single`` port does
-    with a second client, and counted in :attr:`refused`."""
+    answers it has not read).  When a host connects to a full port, the host that has been quiet longest
+    (connected or last heard from earliest) is closed to make room, and counted in :attr:`evicted`:
+    refusing the newcomer instead let eight connections that never said anything keep the lab's own
+    software out for as long as they stayed (issue 37).  A host that talks keeps its place; a stranger
+    can still close one that only listens, by connecting eight times, as it could unplug a real modem's
+    Ethernet cable: the port is as open as a real modem's (docs/security.md says how to restrict it)."""
 
     def __init__(self, port: int, scheduler: Any, on_data, on_connect, name: str, host: str = "127.0.0.1",
                  on_disconnect=None):
@@ -156,7 +180,8 @@ class TcpHosts:
         self.on_disconnect = on_disconnect
         self.name = name
         self.clients: set[_TcpClient] = set()
-        self.refused = 0
+        self.evicted = 0
+        self.heard = itertools.count()  # an order of who was heard from last (no clock needed)
         sock = socket.create_server((host, port))
         sock.setblocking(False)
         self.listener = Listener(sock, scheduler, self._accept)
@@ -165,16 +190,16 @@ class TcpHosts:
     def _accept(self, sock: socket.socket) -> None:
         if len(self.clients) >= MAX_TCP_CLIENTS:
             # hosts that left but whose end of file the loop has not read yet hold no place: a host that
-            # reconnects at once is not refused for its own old connection (seen on a loaded host)
+            # reconnects at once does not push out another for its own old connection (seen on a loaded host)
             for client in [c for c in self.clients if c.connection.hung_up()]:
                 client.connection.close()
         if len(self.clients) >= MAX_TCP_CLIENTS:
-            self.refused += 1
-            if self.refused & (self.refused - 1) == 0:  # the 1st, 2nd, 4th, 8th…: a flood costs a few lines
-                log.warning("%s: emulated modem refused a TCP client: %d connected already (%d refused so far)",
-                            self.name, len(self.clients), self.refused)
-            sock.close()
-            return
+            quiet = min(self.clients, key=lambda c: c.last_heard)
+            self.evicted += 1
+            if self.evicted & (self.evicted - 1) == 0:  # the 1st, 2nd, 4th, 8th…: a flood costs a few lines
+                log.warning("%s: emulated modem closed the TCP host quiet longest to serve a new one: %d "
+                            "connected already (%d closed so far)", self.name, len(self.clients), self.evicted)
+            quiet.close()
         client = _TcpClient(self, sock)
         self.clients.add(client)
         self.on_connect(client)
@@ -188,8 +213,12 @@ class TcpHosts:
 class _TcpClient:
     def __init__(self, hosts: TcpHosts, sock: socket.socket):
         self.hosts = hosts
-        self.connection = Connection(sock, hosts.scheduler, lambda data: hosts.on_data(self, data),
-                                     self._closed, max_buffer=TCP_OUTPUT_CAP)
+        self.last_heard = next(hosts.heard)
+        self.connection = Connection(sock, hosts.scheduler, self._data, self._closed, max_buffer=TCP_OUTPUT_CAP)
+
+    def _data(self, data: bytes) -> None:
+        self.last_heard = next(self.hosts.heard)
+        self.hosts.on_data(self, data)
 
     def _closed(self) -> None:
         self.hosts.clients.discard(self)
@@ -724,6 +753,7 @@ class _S100Host:
         self.buffer: InputBuffer | None = None  # made with the first bytes (the link's modem may come later)
         self.other = bytearray()  # bytes that are no frame of the link's class: passed on as they are
         self.waiting: tuple[Decoded, bytes] | None = None  # a frame and the part of its CR LF still to come
+        self.after_frame = False  # the last thing sent was a frame: a CR LF now is its own (the far S100 adds one)
         self.judged_until = float("-inf")  # the latest arrival the input buffer was judged with (its own line)
         self.read_at = float("-inf")  # when bytes were last read from this host, and the host's stall then
         self.stall_then: float | None = None
@@ -885,20 +915,25 @@ class S100Emulator(EmulatedModem):
             # S100 frames carry no address of their own (a DataLinkFrame's header does): broadcast
             self.port.send(AppFrame(real, event.payload, packet, 0, self.port.address, event.dst,
                                     self.scheduler.now()))
-        elif isinstance(event, Skipped):
-            if event.reason == TERMINATOR and not state.other:
-                return  # the CR LF after a frame
+            state.after_frame = True
+            return
+        after_frame, state.after_frame = state.after_frame, False
+        if isinstance(event, Skipped):
+            if event.reason == TERMINATOR and not state.other and after_frame:
+                state.after_frame = True  # (its CR and LF may come in two reads)
+                return  # the CR LF after a frame (not a CR or LF of a long frame's payload, sent in pieces)
             state.other += event.data
             if state.other.endswith(CRLF):
                 self._send_other(state)
             elif state.buffer is not None and len(state.other) >= self.piece:
                 self._piece(state, b"")
         elif isinstance(event, Notice):
-            state.other += event.text + CRLF
-            self._send_other(state)  # its CR LF ended it
+            state.other += event.data  # as it came: a notice cut short by a frame has no CR LF of its own
+            self._send_other(state)
 
     def _piece(self, state: _S100Host, data: bytes) -> None:
         """45 bytes without flow control: what is pending goes as packets of 45 bytes (the rest waits)."""
+        state.after_frame = False
         state.other += data
         piece = self.piece
         while len(state.other) >= piece:

@@ -186,7 +186,9 @@ class _Splitter:
             return None
         line = bytes(buffer[:end])
         del buffer[:end + 1]
-        if line.endswith(b"\r"):
+        if line.endswith(b"\r") and (size_end is None or len(line) > size_end):
+            # the CR of a CR LF line end; a payload's own last byte may be CR (wlmodem sends no checksum
+            # after it), and the payload was framed by its length: that CR is the payload's
             line = line[:-1]
         if len(line) > MAX_SENTENCE + (MAX_PAYLOAD if size_end is not None else 0):
             return Malformed("too long", line)

@@ -9,8 +9,17 @@ modem's own timing:
   packet when the queue is empty: it always transmits); role B answers each packet it hears from an A
   once it is in sync, :data:`TURNAROUND_S` after that packet's end, with its own head of queue or a
   sync packet.  So each direction carries about one packet a second (64 bit/s net), as published.
-  B is in sync after a good packet from A and falls out of it after :data:`SYNC_LOSSES` lost ones in a
-  row, as the modem "goes back to listen mode".
+- **Sync.** Water Linked: "The modem with role B will go back to listen mode if several consecutive
+  packets from the modem with role A cannot be decoded (i.e. signal is lost)", and a packet that cannot
+  be decoded counts in ``pkt_loss_cnt``, "regardless of the packet being … data or a sync packet".  So a
+  modem is in sync after a good packet from the other role; while in sync it expects the next one a slot
+  after the last one ended, and a slot in which none ended (nothing arrived: out of range, another
+  channel, the other modem gone; :data:`MISS_GRACE_S` of slack) is a missed packet, counted in
+  ``pkt_loss_cnt`` and traced (``err``, cause ``missed``) like a packet the model lost.
+  :data:`SYNC_LOSSES` undecodable packets in a row, missed or lost, and the modem is out of sync
+  (traced on the last one: ``sync: lost``): B stops answering and listens until a good packet from an A,
+  A goes on transmitting (it always does); neither counts slots any more until it is in sync again.
+  ``wcd``'s link flag is the sync.
 - **Channels are bands.** Channel 1–7 is Water Linked's band for it (:data:`CHANNEL_BANDS_KHZ`, from
   its channel table); ``wcs`` moves the link to that band in the simulation, and bands that do not
   overlap never meet (no arrival, no collision), so pairs on different channels never disturb each other.
@@ -19,7 +28,7 @@ modem's own timing:
   the sync packet, counted but never printed (the modem filters it, whoever queued it).
 - **``wcd``.** ``pkt_cnt`` counts the packets received from the other role (sync included),
   ``pkt_loss_cnt`` those the model lost at this modem (collision, error model: each traced ``err`` by the
-  model with its cause), the link flag says whether a packet came within :data:`LINK_SLOTS` slots; the
+  model with its cause) and the missed ones (above), the link flag says whether the modem is in sync; the
   bit error rate is 0.0 (the model loses packets whole, it draws no bit errors).
 
 Not emulated: the modem's serial line timing (115200 baud: 1.2 ms for a ``wcq``), an A hearing another
@@ -45,8 +54,8 @@ PAYLOAD = 8
 VERSION = ("1", "0", "1")  # the protocol version the public document describes (wrv,1,0,1)
 SLOT_S = 1.0         # role A's transmit period: "about one packet a second each way"
 TURNAROUND_S = 0.05  # role B's answer starts this long after A's packet has ended (hilgate's choice)
-SYNC_LOSSES = 3      # B goes back to listening after this many lost packets from A in a row
-LINK_SLOTS = 3       # wcd says the link is up while a packet came within this many slots
+SYNC_LOSSES = 3      # out of sync after this many undecodable packets in a row ("several": hilgate's figure)
+MISS_GRACE_S = 0.5   # a packet is missed when none ended within a slot and this much after the last one
 QUEUE_MAX = 1024     # packets the emulated modem queues (the real bound is not published)
 SYNC = bytes(PAYLOAD)
 CHANNEL_BANDS_KHZ = {1: (31.25, 62.25), 2: (62.25, 93.75), 3: (93.75, 125.0), 4: (125.0, 156.0),
@@ -68,20 +77,20 @@ class M64Emulator(EmulatedModem):
         self.queue: list[bytes] = []
         self.received = 0      # wcd pkt_cnt
         self.lost_packets = 0  # wcd pkt_loss_cnt
-        self.last_heard: float | None = None
-        self.in_sync = False   # role B: answering A
+        self.in_sync = False   # heard the other role lately (B answers A only then)
         self.losses_in_row = 0
         self.answer_timer = None
         self.slot_timer = None
+        self.miss_timer = None  # while in sync: when the next packet from the other role is missed
         self.started = scheduler.now()
         self._tune()
         self._schedule_slot()
         self._serve_hosts()
 
     def close(self) -> None:
-        self.scheduler.cancel(self.slot_timer)
-        self.scheduler.cancel(self.answer_timer)
-        self.slot_timer = self.answer_timer = None
+        for timer in (self.slot_timer, self.answer_timer, self.miss_timer):
+            self.scheduler.cancel(timer)
+        self.slot_timer = self.answer_timer = self.miss_timer = None
         super().close()
 
     # -- host → modem ----------------------------------------------------------------------------------
@@ -124,9 +133,9 @@ class M64Emulator(EmulatedModem):
         if changed:  # a new pairing: the link starts again
             self.in_sync = False
             self.losses_in_row = 0
-            self.last_heard = None
-            self.scheduler.cancel(self.answer_timer)
-            self.answer_timer = None
+            for timer in (self.answer_timer, self.miss_timer):
+                self.scheduler.cancel(timer)
+            self.answer_timer = self.miss_timer = None
             self._tune()
             self._schedule_slot()
         return ("a",)
@@ -145,7 +154,7 @@ class M64Emulator(EmulatedModem):
     def _diagnostic(self, command: Command) -> tuple[str, ...] | None:
         if command.options:
             return None
-        return ("y" if self.link_up else "n", str(self.received), str(self.lost_packets), "0.0")
+        return ("y" if self.in_sync else "n", str(self.received), str(self.lost_packets), "0.0")
 
     def _queue_packet(self, command: Command) -> tuple[str, ...] | None:
         payload = command.payload
@@ -161,10 +170,6 @@ class M64Emulator(EmulatedModem):
 
     COMMANDS = {"v": _version, "n": _payload_size, "c": _get_settings, "s": _set_settings, "l": _queue_length,
                 "f": _flush, "d": _diagnostic, "q": _queue_packet}
-
-    @property
-    def link_up(self) -> bool:
-        return self.last_heard is not None and self.scheduler.now() - self.last_heard <= LINK_SLOTS * SLOT_S
 
     # -- the slots -------------------------------------------------------------------------------------
 
@@ -202,20 +207,39 @@ class M64Emulator(EmulatedModem):
     # -- what the simulated PHY does --------------------------------------------------------------------
 
     def phy(self, event: PhyEvent) -> None:
-        """Arrivals from the other role: their end times B's answer, their losses count in ``wcd``."""
+        """Arrivals from the other role: their end times B's answer and the next expected packet, their
+        losses count in ``wcd``."""
         if event.kind != "rx_end" or not self._from_partner(event.frame):
             return
+        self.scheduler.cancel(self.miss_timer)
+        self.miss_timer = None
         if event.cause is not None:
             self.lost_packets += 1
-            self.losses_in_row += 1
-            if self.losses_in_row >= SYNC_LOSSES:
-                self.in_sync = False
+            self._undecodable()
         else:
             self.losses_in_row = 0
-            if self.role == "b":
-                self.in_sync = True
+            self.in_sync = True
+        if self.in_sync:
+            self.miss_timer = self.scheduler.at(event.end + SLOT_S + MISS_GRACE_S, self._missed)
         if self.role == "b" and self.in_sync and self.answer_timer is None:
             self.answer_timer = self.scheduler.at(event.end + TURNAROUND_S, self._answer)
+
+    def _missed(self) -> None:
+        """No packet from the other role ended in its slot: the modem lost it (the signal is gone)."""
+        self.miss_timer = None
+        self.lost_packets += 1
+        in_sync = self._undecodable()
+        self.port.lost("missed", PAYLOAD, ev="err", role=self.role, channel=self.channel,
+                       **({} if in_sync else {"sync": "lost"}))
+        if in_sync:
+            self.miss_timer = self.scheduler.at(self.scheduler.now() + SLOT_S, self._missed)
+
+    def _undecodable(self) -> bool:
+        """One more packet in a row that could not be decoded; whether the modem is still in sync."""
+        self.losses_in_row += 1
+        if self.losses_in_row >= SYNC_LOSSES:
+            self.in_sync = False  # B back to listen mode; A keeps transmitting, as it always does
+        return self.in_sync
 
     # -- medium → host -----------------------------------------------------------------------------------
 
@@ -223,7 +247,6 @@ class M64Emulator(EmulatedModem):
         if not self._from_partner(frame):
             return TAKEN  # not a packet this modem decodes (another A, another modem's traffic)
         self.received += 1
-        self.last_heard = t
         payload = frame.payload
         if payload == SYNC or len(payload) != PAYLOAD:
             return TAKEN  # the sync packet: filtered out by the receiving modem

@@ -14,10 +14,16 @@
   Rate 0 (FH-FSK) sends its cycle-init minipacket first (``$CATXF`` after it, then the ``$CADRQ``).  A
   packet is one frame of the model with the rate's own air time (:data:`~.micromodem_codec.RATES`), so
   the model loses or keeps it whole.
-- **The receiver** prints ``$CACYC``, a ``$CARXD`` per frame and ``$CACST`` (statistics from the link
-  budget: the RSSI of :mod:`hilgate.models.link_budget`, SNR against :data:`NOISE_DB`, integrity as the
-  data quality factor, the closing speed as Doppler) when the model delivers it; a packet for it that
-  the model lost (collision, error model) gives a ``$CACST`` whose frames are all bad (mode 1).
+- **The sender** prints ``$CATXP,<bytes>`` when the model puts the packet on air and ``$CATXF,<bytes>``
+  when it is off the air (``TXP``/``TXF`` 0: not).
+- **The receiver** prints ``$CARXP,<0 FSK|1 PSK>`` when a packet begins to arrive (any packet it hears,
+  before it can know for whom: ``RXP`` 0, not), and when the model delivers one for it ``$CACYC``, a
+  ``$CARXD`` per frame and ``$CACST`` (:func:`~.micromodem_codec.cst`, version 8, padded as a Micro-Modem 2
+  prints it; ``CST`` 0: not) with the link budget's figures on the modem's scales
+  (:mod:`.micromodem_figures`); a packet for it that the model lost (collision, error model) gives a
+  ``$CACST`` whose frames are all bad (mode 1).  At rate 0 the cycle-init minipacket is a packet of its own: ``$CARXP,0``, ``$CACYC`` and
+  its ``$CACST`` (an FSK minipacket), then the data packet's ``$CARXP``, ``$CARXD`` and ``$CACST`` (what
+  ``acomms``' ``wait_for_data_packet(fsk=True)`` waits for).
 - **Acknowledgements.** With ``ack`` 1 to an address (in ``$CCCYC`` or a frame's ``$CCTXD``), the receiving modem answers on the channel
   (:mod:`hilgate.models.acoustic_ack`: an ACK frame after the link's ``ack_turnaround_s``); when it
   comes back the sender prints ``$CAACK,src,dest,<frame>,1`` for each frame that asked, and nothing when it does
@@ -26,9 +32,16 @@
   ``$CAMPR,dest,src,<owtt>`` back at the sender with the one-way travel time the model measured from
   the round trip (the geometry's, as ``AT?T`` is for the EvoLogics emulator), in seconds.
 
+- **The rest of what a host library asks.**  The modem's clock (``$CCTMS``/``$CATMS``, ``$CCTMQ``/``$CATMQ``,
+  the Micro-Modem 1's ``$CCCLK``/``$CCCLQ`` → ``$CACLK``; the times the modem prints follow it), user
+  minipackets (``$CCMUC`` → ``$CAMUC``, ``$CAMUA`` at the far modem) and the local hardware lines
+  (``$CCMEC`` → ``$CAMEC``, no line modelled).  Received minipackets (a ping, its reply, a user
+  minipacket) have their ``$CACST`` too.
+
 Not emulated: uplink requests (a ``$CCCYC`` whose source is another modem: ``$CAERR``), FDP/JANUS
-packets (``$CCTFP``, ``$CCTDP``, ``$CCTJN``), navigation pings, the modem's clock, hibernation, ``$CAXST``;
-they answer ``$CAERR``.  Micro-Modem address 0 is broadcast (hilgate's 255 on the channel).
+packets (``$CCTFP``, ``$CCTDP``, ``$CCTJN``, ``$CCCMD``), navigation pings (``$CCPDT``, ``$CCPNT``),
+hibernation, sweeps, ``$CAXST``; they answer ``$CAERR`` (docs/modems.md lists each).  Micro-Modem address 0
+is broadcast (hilgate's 255 on the channel).
 """
 
 from __future__ import annotations
@@ -43,18 +56,20 @@ from hilgate.core.endpoint import TAKEN, LinkPort
 from hilgate.core.packets import BROADCAST, PacketError, Raw
 
 from .emulators import EmulatedModem
-from .micromodem_codec import (CI_AIRTIME_S, MINIPACKET_S, RATES, BadSentence, ModemCodec, Sentence, hhmmss,
-                               sentence)
+from .micromodem_codec import (CI_AIRTIME_S, MINIPACKET_S, PACKET_TYPES, RATES, RXP_TYPES, BadSentence, CycleStats,
+                               ModemCodec, Sentence, cst, hhmmss, sentence)
+from .micromodem_figures import figures
 
 log = logging.getLogger(__name__)
 
 FIRMWARE = "2.0.0"
-NOISE_DB = -100  # the noise level $CACST reports (dB, the scale of the link budget's RSSI): hilgate's constant
-CARRIER_HZ, BANDWIDTH_HZ = 25000, 5000  # the preset's band (22.5-27.5 kHz)
 MM_BROADCAST = 0
-CONFIG = {"SRC": 0, "ASD": 0, "BND": 3, "CTO": 10, "DTO": 5, "PCM": 0, "REV": 0, "TAT": 50, "XST": 0}
+CONFIG = {"SRC": 0, "AGN": 250, "ASD": 0, "BND": 3, "CST": 1, "CTO": 10, "DTO": 5, "PCM": 0, "REV": 0,
+          "RXD": 1, "RXP": 1, "TAT": 50, "TXF": 1, "TXP": 1, "XST": 0}
 """The configuration parameters the emulator keeps (``DTO``: seconds the modem waits for a frame;
-``CTO``: seconds a cycle may take in all)."""
+``CTO``: seconds a cycle may take in all; ``RXP``, ``TXP``, ``TXF``, ``CST``, ``RXD``: whether it prints
+``$CARXP``, ``$CATXP``, ``$CATXF``, ``$CACST``, ``$CARXD``; ``AGN``: the analog gain, 250 is 30 dB).
+``$CCCFG,ALL,0`` sets them back to these (the link's address stays)."""
 
 
 @dataclass
@@ -70,6 +85,16 @@ class _Cycle:
     timer: Any = None
 
 
+def _iso_time(text: str) -> datetime.datetime | None:
+    """An ISO 8601 time as ``$CCTMS`` carries it (``2025-06-06T23:01:23Z``, fractions allowed), in UTC;
+    ``acomms`` writes ``…ZZ`` (its time already ends in Z before it adds one), which the modem takes."""
+    try:
+        when = datetime.datetime.fromisoformat(text.strip().rstrip("Zz") + "+00:00")
+    except ValueError:
+        return None
+    return when if when.tzinfo is not None else when.replace(tzinfo=datetime.timezone.utc)
+
+
 class MicromodemEmulator(EmulatedModem):
     """A WHOI Micro-Modem (the module's docstring)."""
 
@@ -81,6 +106,8 @@ class MicromodemEmulator(EmulatedModem):
         self.config = dict(CONFIG, SRC=port.address)
         self.cycle: _Cycle | None = None
         self.pings: set[int] = set()  # ids of ping frames awaiting their reply
+        self.statistics = 0  # $CACST printed (version 8's sequence number)
+        self.clock_offset = 0.0  # what $CCTMS / $CCCLK moved the modem's clock by (s)
         self._serve_hosts()
 
     def close(self) -> None:
@@ -95,7 +122,11 @@ class MicromodemEmulator(EmulatedModem):
         return hhmmss(self._epoch() + self.scheduler.now())
 
     def _epoch(self) -> float:
-        return self.scheduler.epoch_ns / 1e9
+        """The modem's clock at model time 0 (UNIX seconds): the daemon's, moved by ``$CCTMS``/``$CCCLK``."""
+        return self.scheduler.epoch_ns / 1e9 + self.clock_offset
+
+    def _now(self) -> datetime.datetime:
+        return datetime.datetime.fromtimestamp(self._epoch() + self.scheduler.now(), datetime.timezone.utc)
 
     def _error(self, module: str, number: int, text: str) -> None:
         self._say("CAERR", self._clock(), module, number, text)
@@ -130,6 +161,10 @@ class MicromodemEmulator(EmulatedModem):
     def _configure(self, s: Sentence) -> None:
         name = (s.field(0) or "").upper()
         value = s.number(1)
+        if name == "ALL" and value == 0:  # factory settings (the link keeps its address)
+            self.config = dict(CONFIG, SRC=self.config["SRC"])
+            self._say("CACFG", name, value)
+            return
         if name not in self.config or value is None:
             self._error("CCCFG", 3, f"Bad parameter {name}")
             return
@@ -164,7 +199,7 @@ class MicromodemEmulator(EmulatedModem):
         cycle.timer = self.scheduler.after_wall(self.config["CTO"] + 60.0, self._give_up, cycle)
         if rate == 0:
             ci = AppFrame(b"\x00" * 4, b"", Raw(), 0, self.port.address, self._dst(dest), self.scheduler.now())
-            ci.meta = {"mm": "ci", "src": src, "dest": dest}
+            ci.meta = {"mm": "ci", "src": src, "dest": dest, "ack": bool(ack), "count": count}
             ci.airtime_s = CI_AIRTIME_S
             self._send(ci, cycle)
         else:
@@ -262,8 +297,72 @@ class MicromodemEmulator(EmulatedModem):
             self.pings.add(id(frame))
         self._send(frame, None)
 
+    def _set_time(self, s: Sentence) -> None:
+        """``$CCTMS,<ISO 8601 time>,<mode>``: the modem's clock reads that time now; ``$CATMS,0,<time>``."""
+        when = _iso_time(s.field(0) or "")
+        if when is None:
+            self._error("CCTMS", 1, "Bad time")
+            return
+        self._move_clock(when)
+        self._say("CATMS", 0, self._iso(self._now()))
+
+    def _query_time(self, s: Sentence) -> None:
+        """``$CCTMQ`` → ``$CATMQ,<ISO 8601 time>,<clock source>,<PPS source>`` (the emulator's own clock, no PPS)."""
+        self._say("CATMQ", self._iso(self._now()), "RTC", "NONE")
+
+    def _set_clock(self, s: Sentence) -> None:
+        """``$CCCLK,yyyy,MM,dd,HH,mm,ss`` (the Micro-Modem 1's clock command) → ``$CACLK`` with the time set."""
+        numbers = [s.number(i) for i in range(6)]
+        try:
+            when = datetime.datetime(*numbers, tzinfo=datetime.timezone.utc)  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            self._error("CCCLK", 1, "Bad time")
+            return
+        self._move_clock(when)
+        self._clock_query(s)
+
+    def _clock_query(self, s: Sentence) -> None:
+        """``$CCCLQ`` → ``$CACLK,yyyy,MM,dd,HH,mm,ss`` (``libumutil.h``'s answer to the clock query)."""
+        now = self._now()
+        self._say("CACLK", now.year, now.month, now.day, now.hour, now.minute, now.second)
+
+    def _move_clock(self, when: datetime.datetime) -> None:
+        self.clock_offset += when.timestamp() - (self._epoch() + self.scheduler.now())
+
+    @staticmethod
+    def _iso(when: datetime.datetime) -> str:
+        return when.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+
+    def _hardware_line(self, s: Sentence) -> None:
+        """``$CCMEC,src,dest,line,mode,arg``: this modem's own lines only; echoed ``$CAMEC`` (no line is
+        modelled: the echo is all a host sees of it)."""
+        numbers = [s.number(i) for i in range(5)]
+        if None in numbers or numbers[1] != self.config["SRC"]:
+            self._error("CCMEC", 1, "Only the local modem's lines are emulated")
+            return
+        self._say("CAMEC", *numbers)
+
+    def _minipacket(self, s: Sentence) -> None:
+        """``$CCMUC,src,dest,<13 bits in hex>``: a user minipacket (FSK, :data:`MINIPACKET_S` on the
+        channel), echoed ``$CAMUC``; the far modem prints ``$CAMUA,src,dest,<hex>``."""
+        src, dest, data = s.number(0), s.number(1), (s.field(2) or "").upper()
+        try:
+            value = int(data, 16)
+        except ValueError:
+            value = -1
+        if src is None or dest is None or dest > 254 or not 0 <= value <= 0x1FFF or len(data) > 4:
+            self._error("CCMUC", 1, "Bad minipacket")
+            return
+        self._say("CAMUC", src, dest, data)
+        frame = AppFrame(value.to_bytes(2, "big"), b"", Raw(), 0, self.port.address, self._dst(dest),
+                         self.scheduler.now())
+        frame.meta = {"mm": "mini", "src": self.config["SRC"], "dest": dest, "data": data}
+        frame.airtime_s = MINIPACKET_S
+        self._send(frame, None)
+
     COMMANDS = {"CCCFQ": _query, "CCCFG": _configure, "CCALQ": _api_level, "CCCYC": _cycle_init, "CCTXD": _data,
-                "CCMPC": _ping}
+                "CCMPC": _ping, "CCTMS": _set_time, "CCTMQ": _query_time, "CCCLK": _set_clock, "CCCLQ": _clock_query,
+                "CCMEC": _hardware_line, "CCMUC": _minipacket}
 
     @staticmethod
     def _dst(dest: int) -> int:
@@ -286,6 +385,9 @@ class MicromodemEmulator(EmulatedModem):
         if delivered and tau is not None:
             meta = frame.meta or {}
             self._say("CAMPR", meta["dest"], meta["src"], f"{tau:.4f}")
+            # the reply is a minipacket this modem received: its statistics (from the replying modem)
+            self._statistics({"src": meta["dest"], "dest": meta["src"]}, self.scheduler.now(), bad=False,
+                             minipacket=True)
 
     def phy(self, event: PhyEvent) -> None:
         frame = event.frame
@@ -295,19 +397,32 @@ class MicromodemEmulator(EmulatedModem):
         cycle = self.cycle
         if event.kind == "tx":
             if cycle is not None and (frame is cycle.frame or (meta["mm"] == "ci" and cycle.frame is None)):
+                if self.config["TXP"]:
+                    self._say("CATXP", self._bytes_on_air(frame))
                 self.scheduler.at(event.end, self._transmitted, cycle, frame)
+            return
+        if event.kind == "rx_start":
+            # detected before it is decoded: any packet this modem hears, whoever it is for
+            if self.config["RXP"]:
+                psk = meta["mm"] == "data" and RATES[meta["rate"]].psk
+                self._say("CARXP", RXP_TYPES["psk" if psk else "fsk"])
             return
         if event.kind == "rx_end" and event.cause is not None and meta["mm"] == "data" and self._for_me(meta):
             self._statistics(meta, event.end, bad=True)
 
+    @staticmethod
+    def _bytes_on_air(frame: AppFrame) -> int:
+        """What ``$CATXP``/``$CATXF`` count: the packet's whole frames (0 for a cycle-init minipacket)."""
+        return 0 if (frame.meta or {}).get("mm") == "ci" else len(frame.real)
+
     def _transmitted(self, cycle: _Cycle, frame: AppFrame) -> None:
         meta = frame.meta or {}
+        if self.config["TXF"]:
+            self._say("CATXF", self._bytes_on_air(frame))
         if meta.get("mm") == "ci":
-            self._say("CATXF", 0)
             if cycle is self.cycle:
                 self._request(cycle)
             return
-        self._say("CATXF", len(frame.real))
         self._end(cycle)
 
     def _for_me(self, meta: dict) -> bool:
@@ -318,32 +433,47 @@ class MicromodemEmulator(EmulatedModem):
     def deliver(self, frame: AppFrame, t: float) -> str:
         meta = frame.meta or {}
         kind = meta.get("mm")
-        if kind == "ping" and self._for_me(meta):
+        if not self._for_me(meta):
+            return TAKEN
+        if kind == "ping":
             self._say("CAMPA", meta["src"], meta["dest"])
-        elif kind == "data" and self._for_me(meta):
+            self._statistics(meta, t, bad=False, minipacket=True)
+        elif kind == "mini":
+            self._say("CAMUA", meta["src"], meta["dest"], meta["data"])
+            self._statistics(meta, t, bad=False, minipacket=True)
+        elif kind == "ci":  # rate 0's cycle init, an FSK minipacket of its own
+            self._say("CACYC", 0, meta["src"], meta["dest"], 0, int(meta.get("ack", False)), meta.get("count", 1))
+            self._statistics(meta, t, bad=False, minipacket=True)
+        elif kind == "data":
             frames, acks = meta["frames"], meta["acks"]
-            self._say("CACYC", 0, meta["src"], meta["dest"], meta["rate"], int(meta["ack"]), len(frames))
-            for number, (data, ack) in enumerate(zip(frames, acks), 1):
-                self._say("CARXD", meta["src"], meta["dest"], int(ack), number, data.hex().upper())
+            if meta["rate"] != 0:  # (at rate 0 the cycle init said it)
+                self._say("CACYC", 0, meta["src"], meta["dest"], meta["rate"], int(meta["ack"]), len(frames))
+            if self.config["RXD"]:
+                for number, (data, ack) in enumerate(zip(frames, acks), 1):
+                    self._say("CARXD", meta["src"], meta["dest"], int(ack), number, data.hex().upper())
             self._statistics(meta, t, bad=False)
-            if any(acks) and meta["dest"] != MM_BROADCAST:
+            if any(acks) and meta["dest"] != MM_BROADCAST and self.config["TXF"]:
                 self._say("CATXF", 0)  # its acknowledgement went out (the model sent it on the channel)
         return TAKEN
 
-    def _statistics(self, meta: dict, t: float, bad: bool) -> None:
-        """``$CACST`` (version 6) of a packet heard at ``t``: the link budget's figures."""
-        heard = self.port.reception_from(meta["src"], t)
-        rssi = heard.rssi_db if heard is not None else NOISE_DB
-        integrity = heard.integrity if heard is not None else 0
-        velocity = heard.velocity_mps if heard is not None else 0.0
-        snr = rssi - NOISE_DB
-        count = len(meta.get("frames", ())) or 1
+    def _statistics(self, meta: dict, t: float, bad: bool, minipacket: bool = False) -> None:
+        """``$CACST`` (version 8) of a packet heard at ``t``, from the link budget (:meth:`_figures`)."""
+        if not self.config["CST"]:
+            return
+        rate = 0 if minipacket else meta["rate"]
+        psk = RATES[rate].psk and not minipacket
+        count = 1 if minipacket else (len(meta.get("frames", ())) or 1)
         toa = datetime.datetime.fromtimestamp(self._epoch() + t, datetime.timezone.utc)
-        rate = meta["rate"]
-        self._say("CACST", 6, 1 if bad else 0, toa.strftime("%Y%m%d%H%M%S.%f"), 0, 0, rssi, 0, rssi, 250,
-                  0, 0, 0, 0, rate, meta["src"], meta["dest"], 0, 3 if RATES[rate].psk else 1, count,
-                  count if bad else 0, snr, f"{snr:.1f}", f"{snr:.1f}", f"{snr:.1f}", f"{-snr / 2:.1f}",
-                  min(255, max(0, integrity)), f"{velocity:.1f}", NOISE_DB, CARRIER_HZ, BANDWIDTH_HZ)
+        self._to_hosts(cst(CycleStats(
+            mode=1 if bad else 0, toa=toa.strftime("%Y%m%d%H%M%S.%f"), rate=rate, src=meta["src"],
+            dest=meta["dest"], packet_type=PACKET_TYPES["fsk_mini" if minipacket else "psk" if psk else "fsk"],
+            num_frames=count, bad_frames=count if bad else 0, psk_error=3 if bad and psk else 0,
+            sequence=self.statistics, **self._figures(meta["src"], t, psk))))
+        self.statistics += 1
+
+    def _figures(self, src: int, t: float, psk: bool) -> dict:
+        """The link budget's reception of ``src`` at ``t`` on the modem's scales (:mod:`.micromodem_figures`)."""
+        return figures(self.port.reception_from(src, t), self.config["AGN"], psk)
 
     def state(self, ready: bool) -> None:
         pass

@@ -99,9 +99,16 @@ def pieces(real: bytes, rtscts: bool, piece: int = PIECE) -> list[bytes]:
 
 @dataclass(frozen=True)
 class Notice:
-    """A ``+++…`` line from the modem itself (content undocumented): skipped, logged."""
+    """A ``+++…`` line from the modem itself (content undocumented): skipped, logged.  ``ended``: it ended
+    at its CR LF (taken with it), not where a frame starts."""
 
     text: bytes
+    ended: bool = True
+
+    @property
+    def data(self) -> bytes:
+        """The bytes it took from the stream (a transparent pipe passes them on as they were)."""
+        return self.text + CRLF if self.ended else self.text
 
 
 @dataclass(frozen=True)
@@ -217,7 +224,7 @@ class FrameHunter:
                 if found == "frame":
                     text = bytes(buffer[:position])
                     del buffer[:position]
-                    return Notice(text)
+                    return Notice(text, ended=False)
                 arriving = arriving or found == "more"
                 position = buffer.find(preamble, position + 1, limit)
             if end >= 0 and arriving and not self._frame_after(end + 2):

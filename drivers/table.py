@@ -8,8 +8,9 @@ One :class:`Driver` row per modem type says
   field made with :func:`from_link` is filled from the link's own modem keys instead;
 - how to **open** it: ``"module:Class"`` of its backend, built as
   ``Class(link_id, address, packet, options, scheduler, trace)`` by :func:`open_backend`;
-- its **emulator**: ``"module:Class"`` of the emulated device that a simulated link can show on a pty
-  (and, if ``emulator_tcp``, on a loopback TCP port), found by :func:`emulator_for`;
+- its **emulator**: ``"module:Class"`` of the emulated device that a simulated link can show, found by
+  :func:`emulator_for`, and how the row's driver **reaches** it (:class:`Reach`: on a pty, on a loopback
+  TCP port, and the driver's options that name it), which also says where the emulated device can be;
 - its **limits**: what the modem accepts (:class:`ModemLimits`) when the link's preset says nothing:
   the driver and the emulator refuse beyond them, and so does a simulated link whose preset states them.
 
@@ -34,18 +35,18 @@ from dataclasses import MISSING, Field, dataclass, field, fields
 from typing import Any, Callable, Iterator
 
 __all__ = [
-    "Option", "Driver", "DRIVERS", "ModemLimits", "MODES", "SEND_AS", "limits_for", "EvologicsOptions", "S100Options", "S100EmulatorOptions", "option", "from_link", "scene_options", "emulator_options",
-    "M64Options", "M64EmulatorOptions", "MicromodemOptions", "driver_names", "emulated_protocols", "open_backend", "emulator_for",
+    "Option", "Driver", "Reach", "BY_PTY", "DRIVERS", "ModemLimits", "MODES", "SEND_AS", "limits_for", "EvologicsOptions", "S100Options", "S100EmulatorOptions", "option", "from_link", "scene_options", "emulator_options",
+    "M64Options", "M64EmulatorOptions", "MicromodemOptions", "UnetOptions", "UnetEmulatorOptions", "driver_names", "emulated_protocols", "open_backend", "emulator_for",
 ]
 
-KINDS = ("port", "integer", "number", "boolean", "choice")
+KINDS = ("port", "integer", "number", "boolean", "choice", "host")
 
 
 @dataclass(frozen=True)
 class Option:
     """How a scene gives one driver option: ``kind`` is port (a device path relative to the scene, or a
-    URL hilgate can open), integer, number, boolean or choice, with its bounds; ``hint`` says what to
-    give when a required option is missing."""
+    URL hilgate can open), integer, number, boolean, choice or host (a host name or IP address), with
+    its bounds; ``hint`` says what to give when a required option is missing."""
 
     kind: str
     minimum: float | None = None
@@ -251,6 +252,60 @@ class MicromodemOptions:
 
 
 @dataclass(frozen=True)
+class UnetOptions:
+    """``backend: unet`` (:mod:`hilgate.drivers.unet`): a UnetStack modem (Subnero's) reached through its fjåge
+    API at ``modem_host``:``port`` (1100 by default, fjåge's; ``host`` is the scene's key for the daemon
+    that serves the link); the link's frames go as datagrams of ``unet_protocol`` and its received
+    datagrams of that protocol come back as frames."""
+
+    modem_host: str = option(Option("host", hint="the modem's address, such as 192.168.1.12"))
+    port: int = option(Option("integer", 1, 65535), 1100)
+    unet_protocol: int = option(Option("integer", 0, 63), 0)  # 0: DATA; 32-63: USER protocols
+    command_timeout_s: float = option(Option("number", above=0), 5.0)
+    send_timeout_s: float = option(Option("number", above=0), 60.0)  # a datagram's transmission, at most
+    queue_frames: int = option(Option("integer", 0, 100_000), 50)
+    limits: "ModemLimits | None" = from_limits(None)  # None: UNET_LIMITS
+
+
+@dataclass(frozen=True)
+class UnetEmulatorOptions:
+    """``emulate: {protocol: unet}`` (:class:`hilgate.drivers.unet_emulator.UnetEmulator`): the protocol
+    number the node gives received frames of other families, which carry none on air."""
+
+    unet_protocol: int = option(Option("integer", 0, 63), 0)
+
+
+WAYS = ("pty", "tcp")  # where an emulated device can be: its ``emulate:`` key
+
+
+@dataclass(frozen=True)
+class Reach:
+    """One way a row's driver reaches an emulated device of its own row on the same machine (the whole HIL
+    chain on one bench): the emulated link's ``emulate: {<way>: WHERE}`` (``pty``: a path, ``tcp``: a
+    loopback port) and the driver link's scene ``options`` that name it, ``{where}`` standing for WHERE.
+
+    Why data in the row: a driver names its modem in its own keys (a serial row's ``port`` is the pty, an
+    EvoLogics modem's may also be ``socket://HOST:PORT``, a UnetStack modem's is ``modem_host`` and
+    ``port``), and whatever builds such a bench (the driver-table suite, ``tests/bench_kit.py``) reads it
+    here: a test that knew it by the row's name would miss the next row."""
+
+    way: str
+    options: tuple[tuple[str, str], ...]
+
+    def __post_init__(self) -> None:
+        if self.way not in WAYS:
+            raise ValueError(f"reach way {self.way!r}: one of {', '.join(WAYS)}")
+
+    def driver_options(self, where: Any) -> dict[str, str]:
+        """The driver link's scene options (as text) that reach the emulated device at ``where``."""
+        return {key: value.format(where=where) for key, value in self.options}
+
+
+BY_PTY = (Reach("pty", (("port", "{where}"),)),)
+"""A serial row's: its driver's ``port`` is the emulated device's pty."""
+
+
+@dataclass(frozen=True)
 class Driver:
     """One row of the table (see the module's docstring)."""
 
@@ -259,9 +314,19 @@ class Driver:
     options: type   # a frozen dataclass made of option() and from_link() fields
     backend: str    # "module:Class" of the backend
     emulator: str | None = None  # "module:Class" of the emulated device, if there is one
-    emulator_tcp: bool = False   # the emulated device also listens on a loopback TCP port
+    reach: tuple[Reach, ...] = BY_PTY  # where the emulated device can be, and how the driver reaches it there
     emulator_options: type | None = None  # the emulated device's own ``emulate:`` keys (option() fields)
     limits: ModemLimits | None = None  # what the modem accepts when the link's preset does not say
+
+    @property
+    def emulator_pty(self) -> bool:
+        """The emulated device can be on a pty (a UnetStack modem's API is TCP only)."""
+        return any(r.way == "pty" for r in self.reach)
+
+    @property
+    def emulator_tcp(self) -> bool:
+        """The emulated device can listen on a loopback TCP port."""
+        return any(r.way == "tcp" for r in self.reach)
 
 
 EVOLOGICS_LIMITS = ModemLimits("evologics", (("im", 64), ("ims", 64), ("pbm", 64), ("burst", 1024)),
@@ -285,15 +350,23 @@ MICROMODEM_LIMITS = ModemLimits("micromodem", tuple((f"rate{n}", size) for n, si
 RATES, WHOI's software interface guide); 19200 baud, its default serial rate; GLI frames go as one packet
 of the driver's ``rate`` (1 by default)."""
 
+UNET_LIMITS = ModemLimits("unet", (("datagram", 64),), send_as="datagram")
+"""A UnetStack modem's DATA frame as hilgate assumes it without a preset (the modem's own ``phy[2].MTU``
+decides; ``models/unet-m25m.yaml`` says where its figures come from)."""
+
 DRIVERS: dict[str, Driver] = {driver.name: driver for driver in (
     Driver("evologics", "EvoLogics modem", EvologicsOptions, "hilgate.drivers.evologics:EvologicsBackend",
-           "hilgate.drivers.emulators:EvologicsEmulator", emulator_tcp=True, limits=EVOLOGICS_LIMITS),
+           "hilgate.drivers.emulators:EvologicsEmulator", limits=EVOLOGICS_LIMITS,
+           reach=(*BY_PTY, Reach("tcp", (("port", "socket://127.0.0.1:{where}"),)))),
     Driver("s100", "S100", S100Options, "hilgate.drivers.s100:S100Backend",
            "hilgate.drivers.emulators:S100Emulator", emulator_options=S100EmulatorOptions, limits=S100_LIMITS),
     Driver("m64", "Modem-M64", M64Options, "hilgate.drivers.m64:M64Backend",
            "hilgate.drivers.m64_emulator:M64Emulator", emulator_options=M64EmulatorOptions, limits=M64_LIMITS),
     Driver("micromodem", "Micro-Modem", MicromodemOptions, "hilgate.drivers.micromodem:MicromodemBackend",
            "hilgate.drivers.micromodem_emulator:MicromodemEmulator", limits=MICROMODEM_LIMITS),
+    Driver("unet", "UnetStack modem", UnetOptions, "hilgate.drivers.unet:UnetBackend",
+           "hilgate.drivers.unet_emulator:UnetEmulator", emulator_options=UnetEmulatorOptions, limits=UNET_LIMITS,
+           reach=(Reach("tcp", (("modem_host", "127.0.0.1"), ("port", "{where}"))),)),
 )}
 
 

@@ -147,21 +147,22 @@ def cmd_sim(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     from .daemon.service import Daemon
     from .core.paths import daemon_runtime_dir, default_scene
+    from .core.priority import DEFAULT_PRIORITY
 
     scene = args.scene or default_scene()
     if args.speed <= 0:
         raise SceneError("--speed", 0, "", f"must be positive, not {args.speed:g}")
     status_line = args.status_line if args.status_line is not None else sys.stderr.isatty()
-    if args.realtime_priority:
-        from .core.realtime import make_realtime
-
-        log.info("real-time set-up: %s", make_realtime(args.realtime_priority))
+    if args.realtime_priority is not None and not 1 <= args.realtime_priority <= 99:
+        raise SceneError("--realtime-priority", 0, "", f"must be from 1 to 99, not {args.realtime_priority}")
+    realtime = args.realtime_priority or (DEFAULT_PRIORITY if args.realtime else 0)
     daemon = Daemon(scene, args.overrides, daemon_runtime_dir(args.runtime_dir), args.speed, args.tcp,
                     args.trace, args.summary, args.until, status_line, args.gli_backlog, args.group,
                     args.max_clients, args.max_link_clients, plugins=args.plugins, preset_dirs=args.preset_dirs,
                     host=args.host, zenoh_connect=args.zenoh_connect, zenoh_listen=args.zenoh_listen,
                     clock_offset_s=args.clock_offset_s, tcp_token=args.tcp_token,
-                    zenoh_credentials=args.zenoh_credentials, zenoh_insecure=args.zenoh_insecure, web=args.web)
+                    zenoh_credentials=args.zenoh_credentials, zenoh_insecure=args.zenoh_insecure, web=args.web,
+                    auth_timeout_s=args.auth_timeout, realtime_priority=realtime)
     return daemon.run()
 
 
@@ -260,23 +261,33 @@ def _print_status(status: dict, as_json: bool) -> None:
 
     if as_json:
         print(json.dumps({"links": status["links"], "vehicles": status["vehicles"],
-                          **({"ros2": status["ros2"]} if "ros2" in status else {})}), flush=True)
+                          **({"scheduling": status["scheduling"]} if "scheduling" in status else {}),
+                          **{key: status[key] for key in ("ros2", "tcp", "web") if key in status}}),
+              flush=True)
         return
     from .report.tables import _render
 
     print(f"t = {status.get('time', 0):.3f} s")
+    if "scheduling" in status:  # (a daemon of an older version does not say)
+        print(f"scheduling: {status['scheduling']['text']}")
     print(_render(["link", "backend", "state", "since s", "tx", "rx", "drops", "unread", "fifo B", "note"],
                   [[l["id"], l["backend"], l["state"], _since(l), str(l["tx_packets"]), str(l["rx_packets"]),
                     str(l["drops"]), str(l.get("unread", 0)), str(l["fifo_bytes"]), _link_note(l)]
                    for l in status["links"]], left=3))
     print()
-    print(_render(["vehicle", "source", "x", "y", "z", "age s"],
+    print(_render(["vehicle", "source", "x", "y", "z", "age s", "pose"],
                   [[v["name"], v["source"], *(f"{c:.3f}" for c in (v["position"] or [float("nan")] * 3)),
-                    "-" if v["age_s"] is None else f"{v['age_s']:.2f}"] for v in status["vehicles"]]), flush=True)
+                    "-" if v["age_s"] is None else f"{v['age_s']:.2f}", _pose_note(v)] for v in status["vehicles"]]),
+          flush=True)
     tcp = status.get("tcp")
     if tcp:
         refused = ", ".join(f"{cause} {n}" for cause, n in sorted(tcp["refused"].items()) if n) or "none"
         print(f"\nTCP GLI: refused {refused}; {tcp['waiting']} connections waiting to authenticate", flush=True)
+    web = status.get("web")
+    if web and "refused" in web:
+        refused = ", ".join(f"{cause} {n}" for cause, n in sorted(web["refused"].items()) if n) or "none"
+        print(f"\nweb view: {web['pages']} pages; refused {refused}; {web['waiting']} connections waiting to "
+              f"prove the token", flush=True)
     if status.get("cameras"):
         print()
         print(_render(["camera", "frames/s", "frames", "problem"],
@@ -292,6 +303,12 @@ def _print_status(status: dict, as_json: bool) -> None:
                           [[p["vehicle"], p["topic"], str(p["messages"]), str(p["applied"]),
                             ", ".join(f"{cause} {n}" for cause, n in sorted(p["refused"].items())) or "none"]
                            for p in ros2["poses_in"]]), flush=True)
+
+
+def _pose_note(vehicle: dict) -> str:
+    """STALE in capitals: the one word on the table an operator must not miss."""
+    stale = vehicle.get("stale")
+    return "STALE" if stale == "stale" else "STALE (never heard)" if stale == "never" else "fresh"
 
 
 def cmd_pose(args: argparse.Namespace) -> int:
@@ -453,6 +470,16 @@ def _web_address(value: str) -> str:
     return _parsed_by(parse_web, value)
 
 
+def _handshake_seconds(value: str) -> float:
+    try:
+        seconds = float(value)
+    except ValueError:
+        seconds = float("nan")
+    if not 0.1 <= seconds <= 3600:
+        raise argparse.ArgumentTypeError(f"{value!r} is not a number of seconds from 0.1 to 3600")
+    return seconds
+
+
 def _parsed_by(parse, value: str) -> str:
     """``value`` as it was given, once ``parse`` took it (the parser is imported by the option's own check, so
     that ``hilgate`` starts without it); its ValueError is argparse's one-line usage error."""
@@ -532,16 +559,38 @@ def cmd_emulate(args: argparse.Namespace) -> int:
         raise SceneError("hilgate emulate", 0, "", "give --pty PATH or --tcp PORT")
     line = {key: value for key, value in (("baud", args.baud), ("rtscts", args.rtscts)) if value is not None}
     emulate = {"protocol": args.protocol, **where, **line}  # the scene checks the line options (S100 only)
-    args.overrides = [*args.overrides, f"links.{args.link}.emulate={json.dumps(emulate)}"]
-    args.tcp = None  # here --tcp is the emulated modem's port, not a GLI listener
     from .core.paths import default_scene
 
     args.scene = args.scene or default_scene()
+    _emulated_link_exists(args.scene, args.link, args.overrides)
+    args.overrides = [*args.overrides, f"links.{args.link}.emulate={json.dumps(emulate)}"]
+    args.tcp = None  # here --tcp is the emulated modem's port, not a GLI listener
     return cmd_run(args)
 
 
+def _emulated_link_exists(scene_path: str, link: str, overrides: list[str]) -> None:
+    """``--link`` names a link of the scene (or of a ``--set``): said as such, with the scene's links, not as
+    the ``--set`` that ``emulate`` makes of it ("links.X: missing required key 'vehicle'")."""
+    import difflib
+
+    import yaml
+
+    try:
+        with open(scene_path, encoding="utf-8") as file:
+            data = yaml.safe_load(file)
+    except (OSError, yaml.YAMLError):
+        return  # the scene's own loading says what is wrong with the file
+    links = list((data or {}).get("links") or {}) if isinstance(data, dict) else []
+    if link in links or any(o.startswith(f"links.{link}.") or o.startswith(f"links.{link}=") for o in overrides):
+        return
+    close = difflib.get_close_matches(link, links, n=1)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    raise SceneError("--link", 0, "", f"no link {link!r} in {scene_path}{hint}; its links: "
+                                      f"{', '.join(links) or 'none'}")
+
+
 def cmd_report(args: argparse.Namespace) -> int:
-    from .report.figures import report
+    from .report.figures import DPI, report
     from .report.tracedata import pick_run, trace_runs
     from .report.tracefile import TraceError
 
@@ -553,13 +602,14 @@ def cmd_report(args: argparse.Namespace) -> int:
             print(f"{args.trace} holds {len(runs)} runs of the daemon; showing {which}: run {run.id} started "
                   f"{run.start} (scene {run.scene}); choose another with --run ID or --run N", file=sys.stderr)
         formats = tuple(dict.fromkeys(["png", *(args.formats or [])]))
+        dpi = DPI if args.dpi is None else args.dpi
         written = report(args.trace, args.summaries, args.out, args.vehicles, args.csv, args.title,
                          tuple(args.window) if args.window else None, run if len(runs) > 1 else None, formats,
-                         args.width)
+                         args.width, dpi, args.captions)
         if args.water:
             from .waterfig import water_figures
 
-            drawn = water_figures(args.trace, args.water, args.out, formats)
+            drawn = water_figures(args.trace, args.water, args.out, formats, dpi)
             if not drawn:
                 print(f"{args.water}: no channel with water, or no simulated sender with a pose in the trace: "
                       f"no field drawn", file=sys.stderr)
@@ -715,6 +765,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--web", metavar="[ADDR:]PORT", type=_web_address,
                    help="serve the live operator view in a browser (loopback by default; port 0: any free one); "
                         "pages prove the token of --tcp-token, and `hilgate view` prints the address with it")
+    p.add_argument("--auth-timeout", type=_handshake_seconds, default=5.0, metavar="S",
+                   help="how long a --tcp or --web connection has, from its connection on, to prove the token "
+                        "(default 5; the handshake is one round trip)")
     p.add_argument("--runtime-dir", help="where the sockets go (default: $RUNTIME_DIRECTORY, /run/hilgate, "
                                           "$XDG_RUNTIME_DIR/hilgate or /tmp/hilgate-UID)")
     p.add_argument("--trace", help="append the event trace (JSON lines) here")
@@ -722,9 +775,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--until", type=float, help="stop after this many model seconds")
     p.add_argument("--status-line", action=argparse.BooleanOptionalAction, default=None,
                    help="a live status line on stderr (default: when it is a terminal)")
-    p.add_argument("--realtime-priority", type=int, default=0, metavar="N",
-                   help="run with SCHED_FIFO priority N and locked memory (needs CAP_SYS_NICE; the systemd "
-                        "unit sets it); keeps the worst delivery lateness under a millisecond on a busy host")
+    p.add_argument("--realtime", action="store_true",
+                   help="run the loop at real-time priority (SCHED_RR 10, memory locked) where the host "
+                        "allows it (CAP_SYS_NICE or RLIMIT_RTPRIO: the systemd unit allows it), else at the lowest "
+                        "niceness allowed; the log and `hilgate status` say which")
+    p.add_argument("--realtime-priority", type=int, default=None, metavar="N",
+                   help="--realtime at priority N (1-99) instead of 10")
 
     p.add_argument("--gli-backlog", type=int, default=1000, metavar="N",
                    help="frames kept per link while an application's receive queue is full (default 1000); "
@@ -808,6 +864,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--width", type=float, metavar="INCHES",
                    help="draw the figures this wide, e.g. 3.5 for one column of a paper (default 9, the bars of "
                         "many flows wider; text keeps its size, tick labels are thinned where they would overlap)")
+    p.add_argument("--dpi", type=float, metavar="N",
+                   help="the PNGs' resolution in dots per inch (default 300, what journals ask; 600 or more for "
+                        "line art); SVG and PDF are vector")
+    p.add_argument("--captions", action="store_true",
+                   help="also draw each figure's caption under it (it is always in the file's metadata and "
+                        "index.html; a journal sets captions itself)")
     p.add_argument("--run", metavar="ID|N", help="a trace the daemon appended to across restarts holds several runs: "
                                                  "this one (its id, or 1 for the first, -1 the last; default the last)")
     p.add_argument("--water", metavar="SCENE", help="also draw each channel with water's BELLHOP transmission loss "
@@ -891,7 +953,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     except OSError as exc:
         print(f"hilgate: {exc}", file=sys.stderr)
-        return 1
+        return getattr(exc, "exit_status", 1)  # (2 where trying again cannot help: an extra not installed)
     except Exception as exc:  # a client tool's error (GliError, …): one line, no traceback
         from .channel.runner import BellhopError
         from .gli.socket_client import GliError

@@ -72,12 +72,13 @@ def serve_trace(args: argparse.Namespace, stop: threading.Event | None = None,
         print(f"hilgate: view: {exc}", file=sys.stderr)
         return 1
     replay = Replay(trace, _scenes(args, trace), os.path.basename(args.trace))
-    if args.token_file:
-        token, hint = read_token(args.token_file), args.token_file
+    if args.token_file:  # (its path is not said to pages that have not proved it)
+        token, hint = read_token(args.token_file), "the token of the file hilgate view was given"
     else:
         token, hint = secrets.token_hex(32).encode(), "the address hilgate view printed"
     host, port = parse_web(args.web)
-    server = WebServer(host, port, TokenCheck(token, hint), replay=replay, token_hint=hint)
+    server = WebServer(host, port, TokenCheck(token, args.token_file or ""), replay=replay, token_hint=hint,
+                       token_file=args.token_file or "")
     stop = stop or threading.Event()
     previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)} \
         if threading.current_thread() is threading.main_thread() else {}

@@ -16,8 +16,10 @@ import numpy as np
 __all__ = ["water_figures"]
 
 
-def water_figures(trace_path: str, scene_path: str, out: str, formats: tuple[str, ...] = ("png",)) -> list[str]:
-    """The figures written (one per channel with water); [] when the scene has none."""
+def water_figures(trace_path: str, scene_path: str, out: str, formats: tuple[str, ...] = ("png",),
+                  dpi: float = 300.0) -> list[str]:
+    """The figures written (one per channel with water, each format); [] when the scene has none.  PNGs at
+    ``dpi``, as ``hilgate report``'s other figures."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -77,7 +79,7 @@ def water_figures(trace_path: str, scene_path: str, out: str, formats: tuple[str
         fig.tight_layout()
         for fmt in formats:
             path = os.path.join(out, f"water-{name}.{fmt}")
-            fig.savefig(path, dpi=110)
+            fig.savefig(path, dpi=dpi)
             written.append(path)
         plt.close(fig)
     return written

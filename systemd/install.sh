@@ -20,7 +20,7 @@
 set -eu
 umask 022 # the daemon's user must read the venv, whatever umask root has
 
-usage="usage: $0 install|uninstall   (variables: DESTDIR PREFIX SYSCONFDIR UNITDIR LOGROTATEDIR BINDIR PYTHON PIP_ARGS PURGE)"
+usage="usage: $0 install|uninstall   (variables: DESTDIR PREFIX SYSCONFDIR UNITDIR LOGROTATEDIR BINDIR PYTHON PIP_ARGS PURGE EXTRAS)"
 action=${1:-}
 SRC=$(cd "$(dirname "$0")/.." && pwd)
 DESTDIR=${DESTDIR:-}
@@ -31,6 +31,7 @@ LOGROTATEDIR=${LOGROTATEDIR:-/etc/logrotate.d}
 BINDIR=${BINDIR:-/usr/local/bin}
 PYTHON=${PYTHON:-python3}
 PIP_ARGS=${PIP_ARGS:-}
+EXTRAS=${EXTRAS-web} # optional extras for the service's venv (comma-separated; empty: none)
 PURGE=${PURGE:-}
 ACCOUNT=hilgate  # the unit's User= and Group=
 
@@ -142,7 +143,7 @@ do_install() {
     if [ -n "$D" ]; then compile=--no-compile; fi # compiled below with the target's paths
     # shellcheck disable=SC2086  # PIP_ARGS: several words
     "$D$PREFIX/bin/python" -m pip install --quiet --disable-pip-version-check --no-warn-script-location \
-        $compile $PIP_ARGS "$WORK/src"
+        $compile $PIP_ARGS "$WORK/src${EXTRAS:+[$EXTRAS]}"
     install -D -m 0644 "$SRC/README.md" "$D$PREFIX/share/doc/hilgate/README.md"
     for page in "$SRC"/docs/*.md "$SRC"/docs/figures/*.png; do # the README's links, relative as in the checkout
         install -D -m 0644 "$page" "$D$PREFIX/share/doc/hilgate/${page#"$SRC"/}"

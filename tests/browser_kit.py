@@ -85,6 +85,24 @@ class Browser:
     def screenshot(self, path: str) -> None:
         self.driver.save_screenshot(path)
 
+    def viewport(self, width: int, height: int) -> None:
+        """The page's own size (the window's, less nothing): what an operator's 1280×800 screen shows."""
+        self.driver.execute_cdp_cmd("Emulation.setDeviceMetricsOverride",
+                                    {"width": width, "height": height, "deviceScaleFactor": 1, "mobile": False})
+
+    def keep(self, directory, name: str) -> str:
+        """The page as it is now, kept as the test's artefacts: ``NAME.png`` and ``NAME.html`` (its DOM) in
+        ``directory`` (a test's tmp_path; ``HILGATE_ARTEFACTS=DIR`` keeps them there instead)."""
+        directory = os.environ.get("HILGATE_ARTEFACTS") or str(directory)
+        os.makedirs(directory, exist_ok=True)
+        shot = os.path.join(directory, name + ".png")
+        self.screenshot(shot)
+        with open(os.path.join(directory, name + ".html"), "w", encoding="utf-8") as handle:
+            handle.write(self.js("return document.documentElement.outerHTML"))
+        with open(shot, "rb") as handle:
+            assert handle.read(8) == b"\x89PNG\r\n\x1a\n"
+        return shot
+
     def close(self) -> None:
         try:
             self.driver.quit()

@@ -15,10 +15,12 @@ from __future__ import annotations
 import json
 import os
 import select
+import shutil
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 import tty
@@ -174,14 +176,43 @@ def _unlimited_queue_budget() -> None:
         pass
 
 
+def _in_order(*steps):
+    """One ``preexec_fn`` that runs each of ``steps`` (None: none) in the daemon's process before it starts."""
+    steps = [step for step in steps if step is not None]
+    if not steps:
+        return None
+
+    def run() -> None:
+        for step in steps:
+            step()
+
+    return run
+
+
+SHORT_PREFIX = "hgrt-"
+UNIX_PATH_ROOM = 60  # a runtime directory longer than this leaves too little of AF_UNIX's 107 bytes for gli/ID.sock
+
+
+def _short_enough(runtime: str) -> str:
+    """The runtime directory under the test's folder, or, when that path is too long for the daemon's Unix
+    sockets (pytest's folders grow with the run's number, xdist's worker and the test's name: AF_UNIX path
+    too long was seen), a short one of its own in the system's temporary folder, removed at close."""
+    if len(runtime) <= UNIX_PATH_ROOM:
+        return runtime
+    return tempfile.mkdtemp(prefix=SHORT_PREFIX)
+
+
 class Daemon:
+    """The daemon ``hilgate run`` in a subprocess; ``preexec``: run in its process before it starts (to take
+    a privilege away, as a host would not grant it)."""
+
     def __init__(self, tmp_path, scene_text: str, links: list[str], *args: str, env: dict | None = None,
-                 runtime: str | None = None, queue_budget_unlimited: bool = False):
+                 runtime: str | None = None, queue_budget_unlimited: bool = False, preexec=None):
         self.tmp = tmp_path
         self.links = links
         self.scene = tmp_path / "scene.yaml"
         self.scene.write_text(scene_text)
-        self.runtime = runtime or str(tmp_path / "rt")
+        self.runtime = runtime or _short_enough(str(tmp_path / "rt"))
         self.trace = tmp_path / "trace.jsonl"
         self.summary = tmp_path / "summary.json"
         self.notify_path = str(tmp_path / "notify.sock")
@@ -192,7 +223,7 @@ class Daemon:
             args=[sys.executable, "-m", "hilgate", "-v", "run", str(self.scene), "--runtime-dir", self.runtime,
                   "--trace", str(self.trace), "--summary", str(self.summary), "--no-status-line", *args],
             stdout=self.log, stderr=subprocess.STDOUT, env=dict(os.environ, NOTIFY_SOCKET=self.notify_path, **(env or {})),
-            preexec_fn=_unlimited_queue_budget if queue_budget_unlimited else None)
+            preexec_fn=_in_order(_unlimited_queue_budget if queue_budget_unlimited else None, preexec))
         self.process = subprocess.Popen(**self._start)
         self.notifications: list[str] = []
         self.budget_waits = 0
@@ -307,6 +338,8 @@ class Daemon:
         self.notify.close()
         self.log.close()
         unlink_queues(self.links)
+        if os.path.basename(self.runtime).startswith(SHORT_PREFIX):
+            shutil.rmtree(self.runtime, ignore_errors=True)
 
 
 def walk_a_live_vehicle(daemon: Daemon, topside: str, bluerov: str, move_away, fall_silent) -> dict:

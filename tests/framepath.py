@@ -109,6 +109,7 @@ def _scheduler(a: str, b: str, path: Path) -> type[RealtimeScheduler]:
             self.clock += 1.0
             self.fire_due(self.clock)  # whatever was due before the frame (housekeeping) first
             self.run_deferred()
+            self.housekeeping_posted()
             to_a.send(message)
             if traced:
                 sys.setprofile(_tracer(path))
@@ -120,6 +121,12 @@ def _scheduler(a: str, b: str, path: Path) -> type[RealtimeScheduler]:
                 sys.setprofile(None)
             _drain(from_a)
             return _drain(from_b)
+
+        def housekeeping_posted(self) -> None:
+            """Wall-clock timers that came due late (each pass leaps a second) wait for the inputs ready by
+            then (RealtimeScheduler.after_wall): they are housekeeping too, done before the frame."""
+            if self.io.posted:
+                self._handle_inputs(0.0)  # (as the loop would: the wake-up and the posted calls)
 
         def run(self, until: float = float("inf")) -> int:
             queues = {name: posix_ipc.MessageQueue(f"/{name}") for name in

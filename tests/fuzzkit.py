@@ -1,7 +1,8 @@
 """How long the fuzz tests run: bounded to seconds in CI, for minutes under ``make fuzz``.
 
 Every fuzz test takes its example count from :func:`examples` (``@settings(max_examples=examples(300))``)
-and is named ``test_fuzz_*`` so that ``make fuzz`` (``HILGATE_FUZZ=1 pytest -k fuzz``) finds it.
+and is named ``test_fuzz_*`` so that ``make fuzz`` (``HILGATE_FUZZ=1 pytest -k "fuzz or redteam"``) finds it
+(the red team at the doors, ``test_redteam_doors.py``, takes its number of tries from it too).
 ``HILGATE_FUZZ`` multiplies the counts (default 100 when set to 1).
 """
 

@@ -20,7 +20,7 @@ ALLOWED = {
     "hilgate.sim": {"hilgate.core", "hilgate.models", "hilgate.scene", "hilgate.channel"},
     "hilgate.report": {"hilgate.core"},
     "hilgate.ros2": {"hilgate.core", "hilgate.gli"},  # gli: the Zenoh door's per-client bounds
-    "hilgate.web": {"hilgate.core", "hilgate.report"},  # report: the trace reader the player uses
+    "hilgate.web": {"hilgate.core", "hilgate.report"},  # report: the trace reader the player uses, causes' words
     "hilgate.daemon": {"hilgate.core", "hilgate.models", "hilgate.scene", "hilgate.sim", "hilgate.gli",
                        "hilgate.drivers", "hilgate.ros2", "hilgate.web", "hilgate.channel"},
 }

@@ -81,10 +81,10 @@ def test_a_new_row_takes_part_in_only_for_and_did_you_mean(fake):
     assert error_of("backend: s100, port: /dev/ttyUSB0, queue_frames: 3, depth_m: 1") == \
         "/tmp/scene.yaml:5: links.x.depth_m: only for backend fake (this link is s100)"
     assert error_of("queue_frames: 3") == \
-        "/tmp/scene.yaml:5: links.x.queue_frames: only for backend evologics or s100 or m64 or micromodem or fake (this link is sim)"
+        "/tmp/scene.yaml:5: links.x.queue_frames: only for backend evologics or s100 or m64 or micromodem or unet or fake (this link is sim)"
     assert error_of("backend: fake, port: /dev/ttyFAKE0, dept_m: 1") == \
         "/tmp/scene.yaml:5: links.x.dept_m: unknown key (did you mean 'depth_m'?)"
-    assert error_of("backend: fakes").endswith("links.x.backend: must be one of sim, evologics, s100, m64, micromodem, fake, "
+    assert error_of("backend: fakes").endswith("links.x.backend: must be one of sim, evologics, s100, m64, micromodem, unet, fake, "
                                                "not the text 'fakes'")
 
 
@@ -92,8 +92,32 @@ def test_a_new_row_can_be_emulated_and_says_it_is_serial(fake, tmp_path):
     spec = load_scene_text(scene("emulate: {protocol: fake, pty: tty0}"), str(tmp_path / "scene.yaml"))
     assert spec.links["x"].emulate == (("protocol", "fake"), ("pty", str(tmp_path / "tty0")))
     assert error_of("emulate: {protocol: fake, tcp: 9200}") == \
-        "/tmp/scene.yaml:5: links.x.emulate.tcp: only the EvoLogics modem speaks TCP; the fake modem is serial"
+        "/tmp/scene.yaml:5: links.x.emulate.tcp: only the EvoLogics modem or the UnetStack modem speaks TCP; the fake modem is serial"
     assert table.emulator_for("fake") is FakeEmulator
+
+
+def test_a_row_says_how_its_driver_reaches_its_emulated_device_and_the_scene_follows(fake, monkeypatch):
+    """One declaration, ``reach``: where the emulated device can be (the scene's ``emulate:`` keys) and the
+    driver's options that name it there (what a bench of the row, tests/bench_kit.py, is built from)."""
+    tcp = table.Reach("tcp", (("port", "socket://127.0.0.1:{where}"),))
+    monkeypatch.setitem(DRIVERS, "fake", dataclasses.replace(fake, reach=(tcp,)))
+    spec = load_scene_text(scene("emulate: {protocol: fake, tcp: 9300}"), "/tmp/scene.yaml")
+    assert spec.links["x"].emulate == (("protocol", "fake"), ("tcp", 9300))
+    assert error_of("emulate: {protocol: fake, pty: tty0}") == \
+        "/tmp/scene.yaml:5: links.x.emulate.pty: the fake modem speaks TCP only: give tcp (a loopback port)"
+    assert tcp.driver_options(9300) == {"port": "socket://127.0.0.1:9300"}
+    with pytest.raises(ValueError, match="reach way 'usb'"):
+        table.Reach("usb", (("port", "{where}"),))
+
+
+def test_every_rows_reach_names_options_of_its_own_driver():
+    for name, driver in DRIVERS.items():
+        keys = {key for key, _, _ in table.scene_options(driver)}
+        for reach in driver.reach:
+            assert set(dict(reach.options)) <= keys, (name, reach)
+    assert [(r.way, r.driver_options(1100)) for r in DRIVERS["unet"].reach] == \
+        [("tcp", {"modem_host": "127.0.0.1", "port": "1100"})]
+    assert [r.way for r in DRIVERS["evologics"].reach] == ["pty", "tcp"]
 
 
 def test_open_backend_builds_the_rows_options_with_those_from_the_link(fake):
@@ -122,18 +146,19 @@ def test_the_built_in_rows_keep_todays_names_keys_and_classes():
     from hilgate.drivers.evologics import EvologicsBackend, EvologicsOptions
     from hilgate.drivers.s100 import S100Backend, S100Options
 
-    assert BACKENDS == ("sim", "evologics", "s100", "m64", "micromodem")
-    assert LINK_KEYS[-23:] == ("port", "baud", "im", "ack", "source_level", "gain", "extended", "im_retries",
+    assert BACKENDS == ("sim", "evologics", "s100", "m64", "micromodem", "unet")
+    assert LINK_KEYS[-26:] == ("port", "baud", "im", "ack", "source_level", "gain", "extended", "im_retries",
                                "command_timeout_s", "delivery_timeout_s", "queue_frames", "eol", "rtscts",
                                "role", "modem_channel", "queued_packets", "poll_s", "diagnostic_s",  # m64
                                "rate", "cycle_timeout_s", "ack_timeout_s",  # micromodem
+                               "modem_host", "unet_protocol", "send_timeout_s",  # unet
                                "emulate", "addressing")
     assert EvologicsOptions is table.EvologicsOptions and S100Options is table.S100Options
     assert table._resolve(DRIVERS["evologics"].backend) is EvologicsBackend
     assert table._resolve(DRIVERS["s100"].backend) is S100Backend
     assert {name: table.emulator_for(name) for name in ("evologics", "s100")} == {"evologics": EvologicsEmulator,
                                                                                  "s100": S100Emulator}
-    assert table.emulated_protocols() == ("evologics", "s100", "m64", "micromodem")
+    assert table.emulated_protocols() == ("evologics", "s100", "m64", "micromodem", "unet")
     assert S100Options("/dev/x") == S100Options(port="/dev/x", baud=9600, rtscts=False, air_bitrate_bps=1800.0,
                                                 queue_frames=50)
     assert EvologicsOptions("socket://h:1").eol_bytes() == b"\n"

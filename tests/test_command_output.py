@@ -16,7 +16,7 @@ import pytest
 
 from daemon_kit import Daemon, HANG_GUARD_S, free_port, hilgate, unique, wait_until
 from hilgate.client import Link
-from hilgate.daemon.access import AccessError, LinkLock
+from hilgate.daemon.access import AccessError, LinkLock, prepare_lock_directory
 from hilgate.gli.queues import unlink_queues
 from hilgate.scene import SceneError
 from hilgate.scene.load import load_scene
@@ -246,26 +246,75 @@ def test_the_address_error_says_how_to_go_past_254(tmp_path):
 HOLDER = """
 import sys
 from hilgate.daemon.access import LinkLock
-lock = LinkLock(sys.argv[1])
+lock = LinkLock(sys.argv[2], sys.argv[1])
 print("held", flush=True)
 sys.stdin.read()
 """
 
 
-def test_a_held_link_names_the_holders_whole_command_line():
+def test_a_held_link_names_the_holders_whole_command_line(tmp_path):
     link = unique("held")
+    locks = str(tmp_path / "locks")
+    prepare_lock_directory(locks)
     tail = "--trace /var/log/some/where/far/down/a/long/path/" + "x" * 200 + "/trace.jsonl scene-of-the-holder.yaml"
-    holder = subprocess.Popen([sys.executable, "-c", HOLDER, link, tail], stdin=subprocess.PIPE,
+    holder = subprocess.Popen([sys.executable, "-c", HOLDER, locks, link, tail], stdin=subprocess.PIPE,
                               stdout=subprocess.PIPE, text=True)
     try:
         assert holder.stdout.readline() == "held\n"
         with pytest.raises(AccessError) as caught:
-            LinkLock(link)
+            LinkLock(link, locks)
         assert f"process {holder.pid} of " in str(caught.value)
         assert str(caught.value).endswith(f"{link} {tail}") or f"{link} {tail}" in str(caught.value)
     finally:
         holder.stdin.close()
         holder.wait(HANG_GUARD_S)
+
+
+# -- errors that say what to do (issue 40 item 3) -------------------------------------------------------
+
+def test_a_link_the_daemon_does_not_serve_is_answered_with_its_links(pair, tmp_path):
+    daemon, a, b = pair
+    result = hilgate("send", "nc_nope", "hi", "--runtime-dir", daemon.runtime)
+    assert result.returncode == 1
+    assert result.stderr == (f"hilgate: the daemon at {daemon.runtime} serves no link 'nc_nope' over its sockets; "
+                             f"its links: {', '.join(sorted([a, b]))}\n")
+    nobody = tmp_path / "nobody"
+    nobody.mkdir()
+    result = hilgate("listen", a, "--runtime-dir", str(nobody))
+    assert result.returncode == 1
+    assert result.stderr == (f"hilgate: no hilgate daemon runs with the runtime directory {nobody} (cannot reach "
+                             f"link {a!r}): start one, or give this command the --runtime-dir the daemon was "
+                             f"started with\n")
+
+
+def test_an_application_without_credentials_is_told_to_bring_them(tmp_path):
+    """A network made with ``hilgate network init`` takes only applications with their credentials: one
+    without them is told so, not sent to look at the key prefix."""
+    creds = tmp_path / "creds"
+    assert hilgate("network", "init", str(creds), "--hosts", "h1", "--apps", "1").returncode == 0
+    link, port = unique("zc"), free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    daemon = Daemon(tmp_path, scene({link: ""}, f"zenoh: {{lease_s: 5, credentials: {creds}}}\n"), [link],
+                    "--host", "h1", "--zenoh-listen", endpoint)
+    try:
+        daemon.wait_for("READY=1")
+        result = hilgate("send", link, "hello", "--zenoh", endpoint)
+        assert result.returncode == 1 and "--zenoh-credentials DIR/apps/NAME" in result.stderr, result.stderr
+        assert "prefix" not in result.stderr
+        apps = sorted((creds / "apps").iterdir())
+        result = hilgate("send", link, "hello", "--zenoh", endpoint, "--zenoh-credentials", str(apps[0]))
+        assert result.returncode == 0, result.stderr
+    finally:
+        daemon.close()
+
+
+def test_emulate_names_a_link_the_scene_lacks_as_such(tmp_path):
+    scene_file = tmp_path / "lab.yaml"
+    scene_file.write_text(scene({"rov2_ac": "", "rov2_rf": ""}))
+    result = hilgate("emulate", "evologics", str(scene_file), "--link", "rov2_a", "--pty", str(tmp_path / "tty"))
+    assert result.returncode == 2
+    assert result.stderr == (f"hilgate: --link: no link 'rov2_a' in {scene_file} (did you mean 'rov2_ac'?); "
+                             f"its links: rov2_ac, rov2_rf\n")
 
 
 # -- the Zenoh prefix ----------------------------------------------------------------------------------

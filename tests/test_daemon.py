@@ -260,13 +260,16 @@ def test_status_command_prints_the_documented_json(pair):
                             capture_output=True, text=True, timeout=20)
     assert result.returncode == 0, result.stderr
     status = json.loads(result.stdout)
-    assert list(status) == ["links", "vehicles"]
+    assert list(status) == ["links", "vehicles", "scheduling"]
     assert [list(link) for link in status["links"]] == [
         ["id", "backend", "state", "tx_packets", "rx_packets", "drops", "fifo_bytes", "unread", "drop_causes",
          "clients", "ready", "app_dst", "since_s", "since"]] * 2
     assert all(link["since_s"] == 0.0 and link["since"].endswith("+00:00") for link in status["links"])
     assert all(link["ready"] is True for link in status["links"])  # idle links
-    assert status["vehicles"][1] == {"name": "vb", "source": "static", "position": [150.0, 0.0, 0.0], "age_s": 0.0}
+    assert status["vehicles"][1] == {"name": "vb", "source": "static", "position": [150.0, 0.0, 0.0], "age_s": 0.0,
+                                     "stale": None, "heading": None}
+    assert list(status["scheduling"]) == ["kind", "policy", "priority", "nice", "memory_locked", "asked_priority",
+                                          "notes", "text"]
     table = subprocess.run([sys.executable, "-m", "hilgate", "status", "--runtime-dir", daemon.runtime],
                            capture_output=True, text=True, timeout=20)
     assert a in table.stdout and "vehicle" in table.stdout

@@ -202,3 +202,89 @@ def test_traces_and_summaries_are_created_0640_for_the_daemons_group(tmp_path):
     assert result.returncode == 0, result.stderr
     for name in ("sim-trace.jsonl", "sim-summary.json"):
         assert stat.S_IMODE(os.stat(tmp_path / name).st_mode) == 0o640, name
+
+
+# -- issue 37 item 6: another user's link in the path, another user's file -------------------------------
+
+OUTSIDER = (65534, 65534)
+
+
+def refused_run(tmp_path, link: str, *args: str) -> str:
+    """The one-line error of a daemon that must not start with ``args``."""
+    daemon = Daemon(tmp_path, trace_scene(link, tmp_path / "scene-trace.jsonl").replace("trace: {file", "#"),
+                    [link], *args)
+    code = daemon.process.wait(60)
+    output = daemon.output()
+    daemon.close()
+    assert code == 1 and "Traceback" not in output, output
+    return output
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="needs root: another user's directory and link (chown)")
+def test_a_directory_in_the_path_that_is_another_users_link_is_refused(tmp_path):
+    """Root followed another user's symlink ``logs -> their 0700 directory`` and wrote the trace there
+    (``--trace logs/t.jsonl``): that user chose where root writes.  A link in the path must be root's
+    or the daemon user's own; the file is opened through the directories walked one by one."""
+    theirs = tmp_path / "theirs"
+    theirs.mkdir(mode=0o700)
+    os.chown(theirs, *OUTSIDER)
+    logs = tmp_path / "logs"
+    logs.symlink_to(theirs)
+    os.lchown(logs, *OUTSIDER)
+    scene = tmp_path / "scene.yaml"
+    scene.write_text(trace_scene("x", tmp_path / "scene-trace.jsonl").replace("trace: {file", "#"))
+    for option in ("--trace", "--summary"):
+        result = hilgate("sim", str(scene), "--until", "1", "-q", option, str(logs / "out.json"))
+        assert result.returncode == 1 and f"{logs} is a symbolic link of uid 65534" in one_line(result)
+    nested = logs / "deeper" / "t.jsonl"  # the link anywhere in the path, not only the last directory
+    result = hilgate("sim", str(scene), "--until", "1", "-q", "--trace", str(nested))
+    assert result.returncode == 1 and "symbolic link of uid 65534" in one_line(result)
+    in_scene = tmp_path / "in-scene.yaml"
+    in_scene.write_text(trace_scene("x", logs / "t.jsonl"))
+    result = hilgate("check", str(in_scene))
+    assert result.returncode == 2 and "trace.file" in result.stderr and "symbolic link of uid 65534" in result.stderr
+    in_scene.write_text(emulator_scene("x", logs / "tty"))  # an emulated modem's pty link: the same rule
+    result = hilgate("check", str(in_scene))
+    assert result.returncode == 2 and "emulate.pty" in result.stderr and "symbolic link of uid 65534" in result.stderr
+    with pytest.raises(OutputError, match="symbolic link of uid 65534"):
+        PtyHost(str(logs / "tty"), None, None, "x")
+    for option in ("--trace", "--summary"):
+        (tmp_path / option).mkdir()
+        output = refused_run(tmp_path / option, unique("tr"), option, str(logs / "run.jsonl"))
+        assert "symbolic link of uid 65534" in output
+    assert os.listdir(theirs) == []
+    # a link of the daemon's own user (or root's: /var/run -> /run) is the user's choice, and followed
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    own = tmp_path / "own"
+    own.symlink_to(mine)
+    result = hilgate("sim", str(scene), "--until", "1", "-q", "--trace", str(own / "t.jsonl"))
+    assert result.returncode == 0, result.stderr
+    assert (mine / "t.jsonl").read_text().startswith('{"t":')
+
+
+def test_an_existing_output_file_others_may_write_is_refused(tmp_path):
+    """An empty 0666 trace made beforehand was accepted and written to: whoever could write it could
+    read the trace, or truncate it under the daemon."""
+    scene = tmp_path / "scene.yaml"
+    scene.write_text(trace_scene("x", tmp_path / "scene-trace.jsonl").replace("trace: {file", "#"))
+    shared = tmp_path / "shared.jsonl"
+    shared.write_bytes(b"")
+    os.chmod(shared, 0o666)
+    for option in ("--trace", "--summary"):
+        result = hilgate("sim", str(scene), "--until", "1", "-q", option, str(shared))
+        assert result.returncode == 1 and "writable by others (mode 0666)" in one_line(result)
+    (tmp_path / "d").mkdir()
+    assert "writable by others" in refused_run(tmp_path / "d", unique("tr"), "--trace", str(shared))
+    assert shared.read_bytes() == b""
+    if os.geteuid() == 0:  # another user's, however closed
+        theirs = tmp_path / "theirs.jsonl"
+        theirs.write_bytes(b"")
+        os.chown(theirs, *OUTSIDER)
+        for mode in (0o666, 0o600):
+            os.chmod(theirs, mode)
+            result = hilgate("sim", str(scene), "--until", "1", "-q", "--trace", str(theirs))
+            assert result.returncode == 1 and "belongs to uid 65534" in one_line(result)
+        (tmp_path / "e").mkdir()
+        assert "belongs to uid 65534" in refused_run(tmp_path / "e", unique("tr"), "--summary", str(theirs))
+        assert theirs.read_bytes() == b""

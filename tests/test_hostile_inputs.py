@@ -16,6 +16,7 @@ import pytest
 
 from at_client import AtClient
 from daemon_kit import Daemon, free_port, hilgate, unique
+from doorkit import closed_by_peer, idle, listening_addresses
 from hilgate.drivers.emulators import MAX_TCP_CLIENTS
 from hilgate.scene import SceneError, load_scene_text
 from hilgate.scene.flow_spec import MAX_FRAME_BYTES
@@ -83,8 +84,9 @@ def test_evologics_emulator_answers_hostile_numbers_in_one_line(tmp_path):
 
 
 def test_evologics_emulator_serves_a_bounded_number_of_tcp_clients(tmp_path):
-    """The 1 500 clients of the issue: the ninth at once is closed, those that left free their place
-    (and their protocol state: 300 come and go, and eight can connect again)."""
+    """The 1 500 clients of issue 23: at most eight at once, a ninth served in the place of the one quiet
+    longest; those that left free their place (and their protocol state: 300 come and go, and eight
+    are served again, none closed for another)."""
     port = free_port()
     daemon, _ = evologics_daemon(tmp_path, port)
     try:
@@ -94,24 +96,43 @@ def test_evologics_emulator_serves_a_bounded_number_of_tcp_clients(tmp_path):
         for client in clients:  # each is served (and so was accepted before the next one connects)
             assert client.command("?AL") == "4"
         extra = AtClient(port)
-        assert extra.closed_by_peer(timeout=60)
-        assert all(client.command("?AL") == "4" for client in clients)  # the others are undisturbed
-        clients.pop().close()
-        deadline = time.monotonic() + 60  # the daemon sees the close on its next loop turn
-        while True:
-            late = AtClient(port)
-            try:
-                assert late.command("?AL") == "4"
-                break
-            except (EOFError, ConnectionResetError):
-                assert time.monotonic() < deadline, "no room for a client after one left"
-                time.sleep(0.05)
-        for client in [*clients, late, extra]:
+        assert extra.command("?AL") == "4"
+        assert clients[0].closed_by_peer(timeout=60)  # the one quiet longest made room
+        rest = clients[1:] + [extra]
+        assert all(client.command("?AL") == "4" for client in rest)  # the others are undisturbed
+        rest.pop(0).close()
+        late = AtClient(port)  # in the place the one that left freed, though its close may not be read yet
+        assert late.command("?AL") == "4"
+        assert all(client.command("?AL") == "4" for client in rest)
+        for client in [*rest, late, clients[0]]:
             client.close()
     finally:
         output = stopped(daemon)
-    assert "emulated modem refused a TCP client" in output
+    assert "(1 closed so far)" in output and "(2 closed so far)" not in output
     assert "Traceback" not in output
+
+
+def test_idle_tcp_hosts_do_not_keep_the_labs_software_out_and_the_port_is_loopback(tmp_path):
+    """Issue 37 item 6: 8 connections that never said anything took every place of an emulated modem's
+    TCP port, and the lab's own software was closed at once.  Now the newcomer is served and the host
+    that has been quiet longest makes room; one that talks keeps its place.  The port listens on
+    loopback only (as docs/security.md says: any local user may connect, as anyone on a real modem's
+    network may)."""
+    port = free_port()
+    daemon, _ = evologics_daemon(tmp_path, port)
+    try:
+        assert listening_addresses(port) == ["127.0.0.1"]
+        strangers = idle(port, sources=["127.0.0.1"], per_address=MAX_TCP_CLIENTS)
+        lab = AtClient(port)
+        assert lab.command("?AL") == "4"  # served: the quietest stranger made room
+        assert [closed_by_peer(sock) for sock in strangers] == [True] + [False] * (MAX_TCP_CLIENTS - 1)
+        more = idle(port, sources=["127.0.0.1"], per_address=MAX_TCP_CLIENTS - 1)
+        assert lab.command("?AL") == "4"  # the lab's software talked since: the older strangers went
+        assert all(closed_by_peer(sock) for sock in strangers) and not any(closed_by_peer(s) for s in more)
+        lab.close()
+    finally:
+        output = stopped(daemon)
+    assert "emulated modem closed the TCP host quiet longest" in output and "Traceback" not in output
 
 
 # -- a flow's frame size --------------------------------------------------------------------------------

@@ -272,7 +272,7 @@ def test_make_targets_run_what_the_readme_says():
         assert result.returncode == 0, result.stderr
         return result.stdout.strip().splitlines()[-1]
 
-    assert last_line("fuzz") == "HILGATE_FUZZ=1 .venv/bin/python -m pytest -q -k fuzz"
+    assert last_line("fuzz") == 'HILGATE_FUZZ=1 .venv/bin/python -m pytest -q -k "fuzz or redteam"'
     allowed = shutil.which("unshare") and subprocess.run(["unshare", "--ipc", "true"], capture_output=True).returncode == 0
     isolate = "unshare --ipc " if allowed else ""  # an IPC namespace of its own where allowed (the Makefile's ISOLATE)
     assert last_line("test") == f"{isolate}.venv/bin/python -m pytest -q -m serial"  # after the parallel part

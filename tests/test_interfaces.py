@@ -14,6 +14,7 @@ import pytest
 import hilgate
 from hilgate.core.backend import Backend
 from hilgate.core.endpoint import Door, Endpoint, LinkPort
+from hilgate.core.unet_node import NodeHost
 from hilgate.core.scheduler import Loop, Scheduler
 from hilgate.daemon.live_sources import PoseFeed
 from hilgate.models.clock import Clock
@@ -29,9 +30,13 @@ SEAMS = {
     Endpoint: ["hilgate.gli.queues:MqEndpoint", "hilgate.gli.sockets:GliClient",
                "hilgate.gli.zenoh_door:ZenohEndpoint", "hilgate.drivers.emulators:EvologicsEmulator",
                "hilgate.drivers.emulators:S100Emulator", "hilgate.drivers.m64_emulator:M64Emulator",
-               "hilgate.drivers.micromodem_emulator:MicromodemEmulator", "hilgate.ros2.door:Ros2Endpoint"],
+               "hilgate.drivers.micromodem_emulator:MicromodemEmulator", "hilgate.ros2.door:Ros2Endpoint",
+               "hilgate.gli.unet_door:UnetEndpoint", "hilgate.drivers.unet_emulator:UnetEmulator"],
     Door: ["hilgate.gli.queues:QueueDoor", "hilgate.gli.sockets:SocketDoor", "hilgate.gli.zenoh_door:ZenohDoor",
-           "hilgate.drivers.emulators:EmulatorDoor", "hilgate.ros2.door:Ros2Door", "hilgate.daemon.ros2_bridge:Ros2Bridge"],
+           "hilgate.drivers.emulators:EmulatorDoor", "hilgate.ros2.door:Ros2Door", "hilgate.daemon.ros2_bridge:Ros2Bridge",
+           "hilgate.gli.unet_door:UnetDoor"],
+    NodeHost: ["hilgate.core.unet_server:NodeServer", "hilgate.gli.unet_door:UnetEndpoint",
+               "hilgate.drivers.unet_emulator:UnetEmulator"],
     LinkPort: ["hilgate.daemon.router:RoutedLink"],
     RadioHost: ["hilgate.models.modem:SimModem"],
     MacHost: ["hilgate.models.modem:SimModem"],
@@ -57,7 +62,7 @@ SEAMS = {
 SEAMS[Propagation] = ["hilgate.models.propagation:StraightLine", "hilgate.models.bellhop_fields:BellhopChannel"]
 BACKENDS = ["hilgate.sim.sim_backend:SimBackend", "hilgate.drivers.evologics:EvologicsBackend",
             "hilgate.drivers.s100:S100Backend", "hilgate.drivers.m64:M64Backend",
-            "hilgate.drivers.micromodem:MicromodemBackend"]
+            "hilgate.drivers.micromodem:MicromodemBackend", "hilgate.drivers.unet:UnetBackend"]
 
 
 def load(name):

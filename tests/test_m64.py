@@ -53,6 +53,18 @@ def test_the_modem_takes_commands_with_or_without_checksum_and_payloads_by_their
     assert ModemCodec.refusal(BadChecksum()) == b"wr!*1e\n" and ModemCodec.refusal(Malformed("x")).startswith(b"wr?*")
 
 
+def test_a_payload_that_ends_in_cr_is_the_payload_not_a_line_end():
+    """``wlmodem`` sends ``wcq,8,<8 bytes>`` and LF, no checksum: a payload whose 8th byte is CR ends in CR LF,
+    and that CR is the payload's (it was taken for a CR LF line end: 7 bytes, ``wrq,n``, and the datagram
+    lost, about one random WlUDPSocket packet in 256)."""
+    modem = ModemCodec()
+    assert modem.receive_data(b"wcq,8,1234567\r\n") == [Command("q", ("8",), b"1234567\r")]
+    assert modem.receive_data(b"wcq,8,\r\r\r\r\r\r\r\r\r\n") == [Command("q", ("8",), b"\r" * 8)]
+    assert modem.receive_data(b"wcv\r\n") == [Command("v")]  # a CR after the sentence is still its line end
+    host = HostCodec(with_checksum=False)
+    assert host.receive_data(b"wrp,8,1234567\r\r\n") == [Packet(b"1234567\r")]  # CR LF after the payload
+
+
 def test_the_host_reads_what_wlmodem_reads():
     host = HostCodec()
     assert host.receive_data(ModemCodec.packet(b"\n*\r\n\x00abc") + b"wr?\nwr!\n" + ModemCodec.response("d", "y", "3", "1", "0.0")) == [
@@ -140,6 +152,8 @@ def test_wlmodem_connects_configures_queues_flushes_and_receives_between_two_emu
     assert a.cmd_queue_packet(b"HelloSea") and a.cmd_queue_packet(b"Hi*there")  # '*' as 6th byte: wlmodem's quirk
     assert b.get_data_packet(timeout=30) == b"HelloSea"
     assert b.get_data_packet(timeout=30) == b"Hi*there"
+    assert a.cmd_queue_packet(b"1234567\r")  # its CR is the payload's, not a line end (was wrq,n)
+    assert b.get_data_packet(timeout=30) == b"1234567\r"
     assert b.cmd_queue_packet(b"HelloTop")
     assert a.get_data_packet(timeout=30) == b"HelloTop"
     for _ in range(3):
@@ -187,6 +201,49 @@ def test_a_wlmodem_datagram_crosses_two_emulated_m64s_both_ways(tmp_path, daemon
             s.stop()
 
 
+def test_a_modem_whose_partner_falls_silent_misses_several_packets_and_loses_sync(tmp_path, daemon_of):
+    """Water Linked: B "will go back to listen mode if several consecutive packets from the modem with role A
+    cannot be decoded (i.e. signal is lost)", and an undecodable packet counts in ``pkt_loss_cnt``.  When A
+    moves to another channel nothing more arrives at B: B misses a packet a slot (counted, traced ``missed``)
+    until it has missed three, then listens (link ``n``) and counts no more.  B follows A there, the pair is
+    in sync again, and B leaves: A, which hears no answers any more, the same.  (Before, nothing that never
+    arrived was counted: the figures froze and the link flag only said that nothing came lately.)"""
+    ea, eb = unique("ma"), unique("mb")
+    daemon = daemon_of(scene(tmp_path, ea, eb), [ea, eb], "--speed", str(SPEED))
+    a, b = open_modems(tmp_path / "a", tmp_path / "b")
+
+    def in_sync(modem):
+        return wait_until(lambda: (d := modem.cmd_get_diagnostic()) and d["link_up"] and d or None)
+
+    def moved(link, band):
+        t = wait_until(lambda: next((e["t"] for e in daemon.trace_so_far()[::-1] if e["ev"] == "band"
+                                     and e["link"] == link and e["band_khz"] == band), None))
+        wait_until(lambda: any(e["t"] > t + 8 for e in daemon.trace_so_far()) or None)  # the model's 8 s
+        return t
+
+    assert a.cmd_configure("a", 3) and b.cmd_configure("b", 3)
+    assert in_sync(b)["pkt_loss_cnt"] == 0 and in_sync(a)["pkt_loss_cnt"] == 0
+    assert a.cmd_configure("a", 6)  # B is left alone on channel 3 (A starts a new pairing: it counts nothing)
+    a_moved = moved(ea, [187.0, 218.0])
+    silent_b = b.cmd_get_diagnostic()
+    assert not silent_b["link_up"] and silent_b["pkt_loss_cnt"] == 3
+    assert b.cmd_configure("b", 6)  # B follows: in sync again
+    assert in_sync(a)["pkt_loss_cnt"] == 0 and in_sync(b)
+    assert b.cmd_configure("b", 2)  # and leaves: A is left alone
+    b_moved = moved(eb, [62.25, 93.75])
+    silent_a = a.cmd_get_diagnostic()
+    close_modems(a, b)
+    daemon.stop()
+    assert not silent_a["link_up"] and silent_a["pkt_loss_cnt"] == 3
+    events = daemon.trace_events()
+    for link, since in ((eb, a_moved), (ea, b_moved)):
+        missed = [e for e in events if e.get("link") == link and e["ev"] == "err" and e["cause"] == "missed"]
+        assert len(missed) == 3 and [e.get("sync") for e in missed] == [None, None, "lost"]
+        times = [e["t"] for e in missed]
+        assert [round(t2 - t1, 9) for t1, t2 in zip(times, times[1:])] == [1.0, 1.0]  # one a slot
+        assert times[0] > since
+
+
 def test_packets_the_model_loses_show_in_wcd_and_in_the_trace_and_channels_do_not_meet(tmp_path, daemon_of):
     ea, eb = unique("ma"), unique("mb")
     # B's receiver loses half of what it hears (its error model); A hears B perfectly
@@ -195,11 +252,12 @@ def test_packets_the_model_loses_show_in_wcd_and_in_the_trace_and_channels_do_no
     assert a.cmd_configure("a", 3) and b.cmd_configure("b", 3)
     wait_until(lambda: (d := b.cmd_get_diagnostic()) and d["pkt_loss_cnt"] >= 2 and d["pkt_cnt"] >= 2 or None)
     # A moves to channel 5: B hears nothing of it any more (another band), so its figures stop once
-    # what was on its way has arrived (the model's time, read from the live trace: 3 s after the move)
+    # what was on its way has arrived and it has missed what it then expected (the model's time, read
+    # from the live trace: 8 s after the move)
     assert a.cmd_configure("a", 5)
     moved = wait_until(lambda: next((e["t"] for e in daemon.trace_so_far() if e["ev"] == "band"
                                      and e["link"] == ea and e["band_khz"] == [156.0, 187.0]), None))
-    wait_until(lambda: any(e["t"] > moved + 3 for e in daemon.trace_so_far()) or None)
+    wait_until(lambda: any(e["t"] > moved + 8 for e in daemon.trace_so_far()) or None)  # B has missed its three
     final = b.cmd_get_diagnostic()
     close_modems(a, b)
     daemon.stop()
@@ -207,8 +265,13 @@ def test_packets_the_model_loses_show_in_wcd_and_in_the_trace_and_channels_do_no
     heard = [e for e in events if e.get("link") == eb and e.get("src") == ea and e["ev"] in ("rx", "err")]
     lost = [e for e in heard if e["ev"] == "err"]
     assert lost and {e["cause"] for e in lost} <= {"prop", "col"}
-    # B counts every packet from its A that reached it, good or lost: the model's own lines
-    assert final["pkt_loss_cnt"] == len(lost)
+    # B counts every packet from its A that reached it, good or lost: the model's own lines; and, in sync
+    # when A moved, those it then missed until three in a row were undecodable (fewer when the last ones
+    # before the move were lost already; none when it was listening)
+    missed = [e for e in events if e.get("link") == eb and e["ev"] == "err" and e["cause"] == "missed"]
+    assert len(missed) <= 3 and all(e["t"] > moved for e in missed)
+    assert [e.get("sync") for e in missed[-1:]] in ([], ["lost"])
+    assert final["pkt_loss_cnt"] == len(lost) + len(missed)
     assert final["pkt_cnt"] == len(heard) - len(lost)
     assert not [e for e in heard if e["t"] > moved + 2.0]  # nothing from channel 5 reached channel 3
 
@@ -278,3 +341,27 @@ def test_a_wlmodem_datagram_application_and_a_dccomms_application_understand_eac
     finally:
         for s in sockets:
             s.stop()
+
+
+def test_emulated_m64s_are_on_their_power_on_channel_before_any_wcs(tmp_path, daemon_of):
+    """Two pairs powered on channels 2 and 4 (``emulate: {channel}``), their roles set there too, no host
+    sending ``wcs``: each pair hears only itself.  The power-on channel never reached the simulation (the
+    emulator tuned before its link had a backend): both A's transmit at the same instants, and every packet
+    collided at both B's (found by tests/test_fuzz_bytes_m64.py)."""
+    ids = {(pair, role): unique("m") for pair in (2, 4) for role in "ab"}
+    links = "".join(
+        f"  {ids[channel, role]}: {{vehicle: {'va' if role == 'a' else 'vb'}, model: m64, address: {channel + (role == 'b')},"
+        f" gli: [socket], emulate: {{protocol: m64, pty: {tmp_path / f'{channel}{role}'}, role: {role}, channel: {channel}}}}}\n"
+        for channel in (2, 4) for role in "ab")
+    daemon = daemon_of(f"channels: {{ac: {{speed_mps: 1500}}}}\nvehicles:\n  va: {{pose: {{static: [0, 0, 0]}}}}\n"
+                       f"  vb: {{pose: {{static: [150, 0, 0]}}}}\nlinks:\n{links}", list(ids.values()), "--speed", str(SPEED))
+    b2, b4 = open_modems(tmp_path / "2b", tmp_path / "4b")
+    for b in (b2, b4):
+        figures = wait_until(lambda: (d := b.cmd_get_diagnostic()) and d["pkt_cnt"] >= 3 and d or None)
+        assert figures["link_up"] and figures["pkt_loss_cnt"] == 0
+    close_modems(b2, b4)
+    daemon.stop()
+    bands = {e["link"]: e["band_khz"] for e in daemon.trace_events() if e["ev"] == "band"}
+    assert bands == {ids[2, "a"]: [62.25, 93.75], ids[2, "b"]: [62.25, 93.75],
+                     ids[4, "a"]: [125.0, 156.0], ids[4, "b"]: [125.0, 156.0]}
+    assert not [e for e in daemon.trace_events() if e["ev"] == "err"]

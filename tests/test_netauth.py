@@ -38,18 +38,18 @@ def creds(tmp_path_factory):
     return {"root": root, "foreign": foreign}
 
 
-def scene_text(prefix: str, creds: str, a: str, b: str, extra: str = "") -> str:
-    return two_hosts_scene(f"prefix: {prefix}, lease_s: 5, credentials: {creds}{extra}", a, b, SPEED, 100000)
+def scene_text(prefix: str, creds: str, a: str, b: str, extra: str = "", bitrate_bps: float = 100000) -> str:
+    return two_hosts_scene(f"prefix: {prefix}, lease_s: 5, credentials: {creds}{extra}", a, b, SPEED, bitrate_bps)
 
 
 class Lab:
-    def __init__(self, tmp_path, creds: dict, start_b: bool = True, extra: str = ""):
+    def __init__(self, tmp_path, creds: dict, start_b: bool = True, extra: str = "", bitrate_bps: float = 100000):
         self.tmp = tmp_path
         self.creds = creds["root"]
         self.foreign = creds["foreign"]
         self.prefix = f"hilgate-test-{uuid.uuid4().hex[:8]}"
         self.a, self.b = unique("xa"), unique("xb")
-        self.scene = scene_text(self.prefix, self.creds, self.a, self.b, extra)
+        self.scene = scene_text(self.prefix, self.creds, self.a, self.b, extra, bitrate_bps)
         self.ports = [free_port(), free_port()]
         self.hosts: dict[str, Host] = {"A": Host(tmp_path, "A", self.scene, [self.a], self.ports[0])}
         self.hosts["A"].daemon.wait_for("READY=1")

@@ -42,6 +42,19 @@ def test_a_transmission_comes_back_whole_with_its_application_frame_and_served_f
             app_back.t0, app_back.meta) == (app.real, app.payload, "vl2b", 7, 1, 2, 12.5, {"kind": "im", "ack": False})
 
 
+@pytest.mark.parametrize("name", ["simple:20", "dlf16", "raw"])
+def test_every_packet_class_crosses_hosts_by_its_name(name):
+    """simple:N's name has a colon: read as not a name of its kind, its every frame was refused by the
+    other hosts (counted bad_message) and never delivered there."""
+    packet = packet_class(name)
+    payload = b"\x01" * 17 if name.startswith("simple") else b"hi"
+    app = AppFrame(packet.encode(payload, 1, 2), payload, packet, 7, 1, 2, 12.5, None)
+    frame = Frame(41, "a", "b", 2, len(app.real), 12.5, app_frame=app)
+    frame.src_addr = 1
+    back = decode_transmission(encode_transmission("hostA", 5, 1, frame, 12.5, 0.1, None)).frame.app_frame
+    assert (back.packet.name, back.real, back.payload) == (name, app.real, app.payload)
+
+
 def test_model_times_cross_hosts_through_their_epochs():
     assert to_local(10.0, 2_000_000_000, 1_000_000_000) == 11.0   # the sender started a second later
     assert to_local(10.0, 1_000_000_000, 1_500_000_000) == 9.5
@@ -205,3 +218,49 @@ def test_the_replay_window_takes_each_number_once_per_session():
     window.resync = True
     assert window.admit("s2", 200, 10_000_000_000) == 0
     assert window.admit("s2", 200, 10_000_000_002) == 1
+
+
+def test_a_forged_session_of_a_later_epoch_leaves_the_hosts_own_session_heard():
+    """Issue 37: a thief with the host's key puts one message of a session a nanosecond newer.  The
+    host's own session (its daemon alive) goes on; a session whose daemon is gone does not."""
+    window = ReplayWindow()
+    assert [window.admit("honest", 100, n, alive=True) for n in (1, 2, 3)] == [0, 0, 0]
+    assert window.admit("forged", 101, 1) == 0  # (a stolen key forges: taken)
+    assert [window.admit("honest", 100, n, alive=True) for n in (4, 5)] == [0, 0]
+    assert window.admit("honest", 100, 5, alive=True) == "replay"  # its own window, as before
+    assert window.admit("honest", 100, 6, alive=False) == "replay"  # an older start whose daemon is gone
+    assert window.admit("honest", 99, 7, alive=True) == "bad_message"  # not that session's epoch
+
+
+def test_a_number_far_ahead_costs_the_honest_run_nothing():
+    window = ReplayWindow()
+    assert [window.admit("s", 100, n) for n in range(1, 11)] == [0] * 10
+    far = 10 + ReplayWindow.MAX_JUMP - 1
+    assert window.admit("s", 100, far) == far - 11  # a run of its own (the gap counted, as Zenoh's would be)
+    assert [window.admit("s", 100, n) for n in range(11, 2000)] == [0] * 1989  # the honest run goes on
+    assert window.admit("s", 100, far) == "replay" and window.admit("s", 100, 1500) == "replay"
+    assert window.admit("s", 100, 5) == "replay"  # below every run's window
+    # the honest numbers reach the forged one (its window: gaps counted at the jump): each is taken once,
+    # the forged number itself is the one lost
+    assert [window.admit("s", 100, n) for n in range(far - 3, far + 3)] == [0, 0, 0, "replay", 0, 0]
+
+
+def test_what_is_refused_takes_no_place():
+    """A refused message (a jump too far, a second session beside the newest) is not remembered: a thief
+    cannot push the host's session out with messages that are refused anyway."""
+    window = ReplayWindow()
+    assert window.admit("honest", 100, 1) == 0
+    for i in range(2 * ReplayWindow.SESSIONS):
+        assert window.admit(f"f{i}", 100 + i + 1, ReplayWindow.MAX_JUMP + 5) == "bad_message"
+    assert list(window.sessions) == ["honest"] and window.newest == 100
+    assert window.admit("other", 100, 1) == "replay"  # beside the newest, not alive
+    assert window.admit("other", 100, 1, alive=True) == 0  # …unless its daemon holds the host's token
+
+
+def test_a_restarted_host_is_heard_whatever_epoch_was_forged():
+    window = ReplayWindow()
+    assert window.admit("first", 100, 1, alive=True) == 0
+    assert window.admit("forged", 10_000, 1) == 0  # a start later than the host's next one
+    assert window.admit("restarted", 500, 1) == "replay"  # (its token not heard yet)
+    assert window.admit("restarted", 500, 1, alive=True) == 0  # its daemon holds the host's token: heard
+    assert [window.admit("restarted", 500, n, alive=True) for n in (2, 3)] == [0, 0]

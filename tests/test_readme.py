@@ -79,6 +79,7 @@ README = REPO / "README.md"
 QUICK_START = "## Quick start"
 DEMO_LINKS = ("bluerov_rf", "rov2_rf", "bluerov_ac", "rov2_ac", "auv_ac")
 TWO_HOST_LINKS = ("rov_rf", "rov2_rf", "rov_ac", "boat_ac")
+TANK_LINKS = ("tank_evo", "tank_pier")
 
 
 def words(text: str) -> int:
@@ -138,11 +139,12 @@ class Walk:
     def __init__(self, tmp_path):
         self.dir = tmp_path
         self.token = uuid.uuid4().hex[:6]
-        self.links = [*DEMO_LINKS, *TWO_HOST_LINKS]
+        self.links = [*DEMO_LINKS, *TWO_HOST_LINKS, *TANK_LINKS]
         self.port = free_port()
         self.runtime = tmp_path / "rt"
         self.substitutions = [(r"\b7447\b", str(self.port)), (r"/tmp/tank-pc\b", str(tmp_path / "tank-pc")),
-                              (r"/tmp/pier-pc\b", str(tmp_path / "pier-pc"))]
+                              (r"/tmp/pier-pc\b", str(tmp_path / "pier-pc")), (r"/tmp/tank(?![-\w])", str(tmp_path / "tank")),
+                              (r"/tmp/hilgate-tank-evo\b", str(tmp_path / "tank-evo"))]
         self.substitutions += [(rf"\b{re.escape(link)}\b", f"{link}_{self.token}") for link in dict.fromkeys(self.links)]
         shutil.copytree(REPO / "scenes", tmp_path / "scenes")  # the checkout's, as a newcomer has them
         shutil.copytree(REPO / "examples", tmp_path / "examples", ignore=shutil.ignore_patterns("__pycache__"))
@@ -290,15 +292,17 @@ def test_every_quick_start_command_prints_what_the_readme_shows(walk):
     walk.stop(daemon)
     walk.unlink_queues()
 
-    # (b) one link to a real modem, without a restart
+    # (b) one link to a real modem, without a restart: the emulated one of scenes/tank.yaml
     walk.run("cp scenes/demo.yaml lab.yaml")
     daemon = walk.start("hilgate run lab.yaml", ready="started: scene")
+    tank = walk.start("hilgate run scenes/tank.yaml --runtime-dir /tmp/tank", ready="started: scene")
     new_line = walk.mine(re.search(r"^```yaml\n(  rov2_ac: .*)\n```", quick_start(), re.M).group(1))
     lab = walk.dir / "lab.yaml"
     lab.write_text(re.sub(rf"^  rov2_ac_{walk.token}: .*$", lambda _: new_line, lab.read_text(), flags=re.M))
     walk.run("hilgate reload")
     walk.run("hilgate status", until_shown=True)
     walk.stop(daemon)
+    walk.stop(tank)
     walk.unlink_queues()
 
     # (c) the experiment in virtual time, with figures
@@ -323,3 +327,11 @@ def test_every_quick_start_command_prints_what_the_readme_shows(walk):
 
     # and nothing the README shows was left out
     assert {command: len(outputs) for command, outputs in walk.shown.items()} == walk.checked
+
+
+def test_the_docs_point_at_nothing_outside_the_repository():
+    """Users have the repository, not the team's working material beside it (issue 39 item 4)."""
+    outside = re.compile(r"DESIGN\.md|shared/protocols|shared/peers|\.\./shared")
+    found = [f"{page.name}:{n}" for page in pages() for n, line in enumerate(page.read_text().splitlines(), 1)
+             if outside.search(line)]
+    assert found == []

@@ -45,6 +45,18 @@ def test_every_figure_is_written_and_the_page_shows_them(runs, tmp_path):
     assert any(",err,prop," in row for row in packets) and any(",err,col," in row for row in packets)
 
 
+@pytest.mark.parametrize("extra", [[], ["--format", "pdf"], ["--format", "svg", "--format", "pdf", "--csv"]])
+def test_the_files_counted_are_the_files_written(runs, tmp_path, capsys, extra):
+    """Issue 40: ``--format pdf`` said "6 files" and wrote 11 (one per figure was counted, not one per
+    format)."""
+    folder, trace = runs
+    out = tmp_path / "report"
+    assert main(["report", str(trace), str(folder / "csma.json"), "--out", str(out), *extra]) == 0
+    said = capsys.readouterr().out
+    count = int(said.split(" files in ")[0].split()[-1])
+    assert count == len(os.listdir(out)), (said, sorted(os.listdir(out)))
+
+
 def test_missing_matplotlib_is_a_clear_message(runs, tmp_path):
     _, trace = runs
     code = ("import sys; sys.modules['matplotlib'] = None; from hilgate.cli import main; "

@@ -338,6 +338,34 @@ def test_fuzz_the_emulated_s100_is_transparent(tmp_path_factory, stream, rtscts,
         eb.close()
 
 
+def test_a_long_raw_frame_in_paced_pieces_keeps_the_cr_and_lf_of_its_payload(tmp_path):
+    """Without flow control a long frame crosses as 45-byte pieces; a CR or LF of its payload that begins
+    a piece was taken for the CR LF after a frame and dropped (the far driver's CRC then failed: found by
+    tests/test_fuzz_bytes_s100.py).  Every byte of the frame and of its CR LF now reaches the far host."""
+    from hilgate.core.packets import HilgateFrame
+
+    clock = _Loop()
+    la, lb = _Link("a", clock), _Link("b", clock)
+    la.packet = lb.packet = packet_class("raw")
+    ea = S100Emulator(la, {"baud": 9600, "rtscts": False, "pty": str(tmp_path / "a")}, clock)
+    eb = S100Emulator(lb, {"baud": 9600, "rtscts": False, "pty": str(tmp_path / "b")}, clock)
+    try:
+        la.peer, lb.peer = eb, ea
+        host_a, host_b = _Host(), _Host()
+        ea.states = {host_a: next(iter(ea.states.values()))}
+        eb.states = {host_b: next(iter(eb.states.values()))}
+        # (after the frame's 4-byte head) CR LF at the start of the second piece, LF at the third's
+        payload = b"x" * 41 + b"\r\n" + b"y" * 43 + b"\n+++ATC\r\n" + b"z" * 40
+        wire = HilgateFrame().encode(payload) + b"\r\n"
+        for k, start in enumerate(range(0, len(wire), 45)):  # the driver's pieces, paced at the air bitrate
+            clock.at(k * 45 * 8 / 1000, ea._on_data, host_a, wire[start:start + 45])
+        clock.run(100)
+        assert la.lost_bytes == 0 and bytes(host_b.out) == wire
+    finally:
+        ea.close()
+        eb.close()
+
+
 def test_hilgate_emulate_takes_the_line_options_and_the_scene_checks_them(tmp_path):
     import subprocess
     import sys

@@ -19,7 +19,7 @@ import posix_ipc
 import pytest
 
 from daemon_kit import Daemon, unique
-from hilgate.daemon.access import AccessError, LinkLock, prepare_private_dir
+from hilgate.daemon.access import AccessError, LinkLock, lock_directory, prepare_lock_directory, prepare_private_dir
 
 OUTSIDER = (65534, 65534)
 MEMBER = (65533, 65533)
@@ -196,6 +196,12 @@ def test_a_runtime_directory_that_is_a_symlink_or_someone_elses_is_refused(tmp_p
         os.chown(theirs, *OUTSIDER)
         with pytest.raises(AccessError, match="belongs to"):
             prepare_private_dir(str(theirs))
+        their_link = tmp_path / "their-link"  # another user's link on the way to it (issue 37 item 6)
+        their_link.symlink_to(theirs)
+        os.lchown(their_link, *OUTSIDER)
+        with pytest.raises(AccessError, match="symbolic link of uid 65534"):
+            prepare_private_dir(str(their_link / "rt"))
+        assert os.listdir(theirs) == []
     mine = tmp_path / "mine"
     mine.mkdir(mode=0o777)
     os.chmod(mine, 0o777)
@@ -208,15 +214,66 @@ def test_a_runtime_directory_that_is_a_symlink_or_someone_elses_is_refused(tmp_p
     daemon.close()
 
 
-def test_link_lock_names_its_holder():
+def test_link_lock_names_its_holder(tmp_path):
     name = unique("lock")
-    held = LinkLock(name)
+    directory = str(tmp_path / "locks")
+    prepare_lock_directory(directory)
+    assert stat.S_IMODE(os.stat(directory).st_mode) == 0o700
+    held = LinkLock(name, directory)
     try:
         with pytest.raises(AccessError, match=f"process {os.getpid()}"):
-            LinkLock(name)
+            LinkLock(name, directory)
     finally:
         held.release()
-    LinkLock(name).release()  # free again once released
+    LinkLock(name, directory).release()  # free again once released
+    assert os.listdir(directory) == []
+    stale = LinkLock(name, directory)  # a holder that died leaves its file, unlocked: taken again
+    os.close(stale.fd)
+    LinkLock(name, directory).release()
+
+
+SQUATTER = textwrap.dedent("""\
+    # Takes a link's name first, as the lock before issue 37 was (an abstract Unix socket), and holds it
+    # until its stdin closes.
+    import socket, sys
+    held = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    held.bind(b"\\0hilgate/link/" + sys.argv[1].encode())
+    held.listen(1)
+    print("held", flush=True)
+    sys.stdin.read()
+""")
+
+
+def test_another_user_cannot_keep_a_link_from_starting(tmp_path):
+    """Issue 37 item 6: the link's lock was an abstract Unix socket named after its id, which any local
+    user could bind first; the daemon was refused ("already served by process N of nobody").  Now the
+    lock is a file in a directory only the daemon's user may enter."""
+    a = unique("a")
+    who = {"user": OUTSIDER[0], "group": OUTSIDER[1]} if os.geteuid() == 0 else {}
+    python = python_for(*OUTSIDER) if who else sys.executable
+    if python is None:
+        pytest.skip("no Python interpreter that another user may run")
+    squatter = subprocess.Popen([python, "-c", SQUATTER, a], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                text=True, **who)
+    try:
+        assert squatter.stdout.readline().strip() == "held"
+        daemon = Daemon(tmp_path, scene(a), [a])
+        try:
+            daemon.wait_for("READY=1")
+            assert [link["id"] for link in daemon.status()["links"]] == [a]
+            directory = lock_directory(daemon.runtime)
+            info = os.stat(directory)
+            assert stat.S_IMODE(info.st_mode) == 0o700 and info.st_uid == os.geteuid()
+            if who:  # the lock itself: another user can neither open it nor make a name beside it
+                probe = subprocess.run([python, "-c", "import sys; open(sys.argv[1]).close()",
+                                        os.path.join(directory, f"{a}.lock")], capture_output=True, text=True,
+                                       timeout=60, **who)
+                assert probe.returncode == 1 and "PermissionError" in probe.stderr
+        finally:
+            daemon.close()
+    finally:
+        squatter.stdin.close()
+        squatter.wait(60)
 
 
 def test_an_unknown_group_is_a_configuration_error(tmp_path):

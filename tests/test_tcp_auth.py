@@ -12,16 +12,19 @@ language would be.
 
 import json
 import os
+import select
 import shutil
 import socket
 import stat
 import subprocess
 import tempfile
 import textwrap
+import time
 
 import pytest
 
-from daemon_kit import Daemon, free_port, quick_scene, unique
+from daemon_kit import Daemon, free_port, quick_scene, unique, wait_until
+from doorkit import Slowloris, closed_by_peer, first_tries, idle
 from hilgate.client import GliError, Link
 from hilgate.gli import wire
 from hilgate.gli.session import AuthError, Hello, Session
@@ -121,8 +124,8 @@ def test_a_daemon_with_an_unusable_token_does_not_start(tmp_path):
 class Raw:
     """A TCP peer speaking the framing by hand, as an attacker (or another language) would."""
 
-    def __init__(self, port: int):
-        self.sock = socket.create_connection(("127.0.0.1", port), timeout=30)
+    def __init__(self, port: int, source: str = "127.0.0.1"):
+        self.sock = socket.create_connection(("127.0.0.1", port), timeout=30, source_address=(source, 0))
         self.decoder = wire.Decoder()
         self.messages: list[tuple[int, bytes]] = []
 
@@ -211,26 +214,109 @@ def test_only_applications_that_prove_the_token_reach_a_link(tmp_path, daemon_of
         "forged" in json.dumps(e) for e in events)
 
 
+def honest(link: str, port: int, token_file: str):
+    """The honest application's attempt: open ``link`` over TCP with the token (True: in)."""
+    def attempt() -> bool:
+        with Link.open(link, tcp=("127.0.0.1", port), token_file=token_file, timeout=60) as opened:
+            return opened.address == 1
+    return attempt
+
+
 def test_connections_that_do_not_authenticate_are_bounded_and_time_out(daemon_of):
+    """At most 8 from one address wait to authenticate: a ninth takes the place of the oldest, which is
+    told so and closed (it has had the longest to prove the token); each is closed at the deadline."""
     a, b = unique("a"), unique("b")
     port = free_port()
-    daemon = daemon_of(scene(a, b), [a, b], "--tcp", str(port))
+    daemon = daemon_of(scene(a, b), [a, b], "--tcp", str(port), "--auth-timeout", "3")
     token_file = os.path.join(daemon.runtime, "tcp.token")
     idle = [Raw(port) for _ in range(8)]
     for peer in idle:
         peer.nonce()  # each was accepted (and counted) before the next connects
     ninth = Raw(port)
-    assert ninth.refused() == "too many connections waiting to authenticate"
-    with pytest.raises(GliError, match="waiting to authenticate"):  # from this address, for now
-        Link.open(a, tcp=("127.0.0.1", port), token_file=token_file)
+    ninth.nonce()
+    assert idle[0].refused() == "too many connections wait to authenticate from 127.0.0.1: the oldest is closed"
+    assert daemon.status()["tcp"]["waiting"] == 8
+    assert honest(a, port, token_file)()  # from the same address: it takes the place of the next oldest
+    assert idle[1].refused().startswith("too many connections wait to authenticate")
     with Link.open(a, runtime_dir=daemon.runtime) as local:  # the Unix socket is not affected
         assert local.address == 1
-    for peer in idle:  # after 10 s without HELLO each is told so and closed
-        assert peer.refused() == "no HELLO within 10 s"
-    with Link.open(a, tcp=("127.0.0.1", port), token_file=token_file) as link:
-        assert link.address == 1
-    refused = daemon.status()["tcp"]["refused"]
-    assert refused["auth_timeout"] == 8 and refused["auth_pending"] == 2
+    for peer in idle[2:] + [ninth]:  # after 3 s without HELLO each is told so and closed
+        assert peer.refused() == "no HELLO within 3 s"
+    tcp = daemon.status()["tcp"]
+    assert tcp["refused"]["auth_timeout"] == 7 and tcp["refused"]["auth_pending"] == 2 and tcp["waiting"] == 0
+
+
+def test_idle_strangers_on_many_addresses_do_not_keep_a_token_holder_out(daemon_of):
+    """Issue 37 item 4: 64 connections from 127.0.0.2-9 that never prove the token filled every place
+    among those waiting to authenticate, and the honest client was refused ("too many connections
+    waiting to authenticate") until they timed out.  Now the newcomer is let in, and the oldest of the
+    address holding the most waiting connections makes room."""
+    a, b = unique("a"), unique("b")
+    port = free_port()
+    daemon = daemon_of(scene(a, b), [a, b], "--tcp", str(port))
+    token_file = os.path.join(daemon.runtime, "tcp.token")
+    strangers = idle(port)
+    assert daemon.status()["tcp"]["waiting"] == 64
+    assert first_tries(honest(a, port, token_file), 5) == [True] * 5
+    tcp = daemon.status()["tcp"]
+    # the first made room (the oldest of 127.0.0.2, all holding 8); the others found its place free
+    assert [sock for sock in strangers if closed_by_peer(sock)] == strangers[:1]
+    assert tcp["refused"]["auth_pending"] == 1 and tcp["waiting"] == 63
+
+
+def test_strangers_waiting_to_authenticate_take_no_clients_place(daemon_of):
+    """--max-clients counts the clients a link serves: 64 strangers waiting on TCP kept an application
+    of the Unix socket (and the honest TCP client) out once they and the others reached it."""
+    a, b = unique("a"), unique("b")
+    port = free_port()
+    daemon = daemon_of(scene(a, b), [a, b], "--tcp", str(port), "--max-clients", "2")
+    token_file = os.path.join(daemon.runtime, "tcp.token")
+    strangers = idle(port)
+    with Link.open(a, runtime_dir=daemon.runtime) as local, Link.open(b, runtime_dir=daemon.runtime) as other:
+        assert (local.address, other.address) == (1, 2)
+        with pytest.raises(GliError, match="too many clients"):  # the limit itself holds
+            Link.open(a, runtime_dir=daemon.runtime)
+    assert honest(a, port, token_file)()
+    assert len(strangers) == 64
+
+
+def test_a_slowloris_on_many_addresses_does_not_keep_a_token_holder_out(daemon_of):
+    """Issue 37 item 4: 64 connections from 127.0.0.2-9 trickling HELLO a byte a second (each closed one
+    opened again at once) kept the honest client out 21 times in 23."""
+    a, b = unique("a"), unique("b")
+    port = free_port()
+    daemon = daemon_of(scene(a, b), [a, b], "--tcp", str(port))
+    token_file = os.path.join(daemon.runtime, "tcp.token")
+    attempt = honest(a, port, token_file)
+
+    def paced() -> bool:
+        time.sleep(0.25)  # tries spread over the attack (pacing only: nothing is timed)
+        return attempt()
+
+    with Slowloris(port, hello(a, proof=proof(b"0" * 64, b"n" * 32))):
+        wait_until(lambda: daemon.status()["tcp"]["waiting"] == 64, "the slowloris's 64 connections")
+        tries = first_tries(paced, 8)
+        assert daemon.status()["tcp"]["waiting"] >= 60  # the attack went on meanwhile
+    assert tries == [True] * 8
+
+
+def test_the_handshake_has_one_deadline_however_slowly_it_trickles(daemon_of):
+    """The deadline is for the whole handshake, from the connection on: a HELLO trickled a byte at a time
+    is closed at it, however many bytes keep coming (a deadline per byte would never come)."""
+    a, b = unique("a"), unique("b")
+    port = free_port()
+    daemon = daemon_of(scene(a, b), [a, b], "--tcp", str(port), "--auth-timeout", "1")
+    peer = Raw(port)
+    message = hello(a, proof=proof(read_token(os.path.join(daemon.runtime, "tcp.token")), peer.nonce()))
+    sent = 0
+    while sent < len(message) - 1:  # a byte every 20 ms: 1 s is about 50 of its bytes
+        readable, _, _ = select.select([peer.sock], [], [], 0.02)
+        if readable:
+            break
+        peer.sock.send(message[sent:sent + 1])
+        sent += 1
+    assert peer.refused() == "no HELLO within 1 s"
+    assert daemon.status()["tcp"]["refused"]["auth_timeout"] == 1
 
 
 CLIENT = textwrap.dedent("""\

@@ -12,8 +12,6 @@ from __future__ import annotations
 import asyncio
 import csv
 import json
-import os
-import shutil
 import signal
 import socket
 import subprocess
@@ -28,12 +26,12 @@ from browser_kit import HANG_GUARD_S, browser  # noqa: F401  (the fixture)
 from daemon_kit import Daemon, hilgate, unique
 from hilgate.client import Link
 from hilgate.gli.token import proof
+from hilgate.report.causes import RECEIVED, words
 from hilgate.report.tracedata import load_trace
 from hilgate.web.picture import Flight, frame_view, scene_message
 from hilgate.web.replay import Replay
 
 REPO = Path(__file__).resolve().parent.parent
-FIGURE = REPO / "docs" / "figures" / "web-live.png"
 pytest.importorskip("tornado", reason="the web view needs tornado: pip install -e '.[test]'")
 
 
@@ -93,6 +91,8 @@ def test_the_live_view_draws_the_scene_a_frame_in_flight_and_its_fate_and_a_swap
     assert browser.js("return location.hash") == ""  # the token left the address bar
     assert sorted(browser.view("v.state.vehicles.map(x => x.name)")) == ["auv", "glider", "topside"]
     browser.wait("document.querySelectorAll('#top [data-vehicle]').length == 3", "the vehicles drawn")
+    legend = browser.js("return [...document.querySelectorAll('#legend [data-fate]')].map(s => s.textContent)")
+    assert legend[:3] == [RECEIVED.words, words("col"), words("mult")]  # the report's words (report/causes.py)
     assert browser.view("v.scene.mode") == "live"
     for link in (a, b, c):
         assert badge(browser, link) == "sim"
@@ -125,13 +125,9 @@ def test_the_live_view_draws_the_scene_a_frame_in_flight_and_its_fate_and_a_swap
         browser.wait(f"[...v.seen.values()].some(e => e.src == '{ea}' && e.states.includes('rx'))",
                      "the emulated modem's frame delivered", alive=alive)
         la.send(b"one more, for the picture", dst=2)
-        browser.wait(f"[...document.querySelectorAll('#top .wave')].length >= 2 &&"
-                     f" document.querySelectorAll('#top .flight').length >= 1", "frames in flight", alive=alive)
-        shot = tmp_path / "web-live.png"
-        browser.screenshot(str(shot))
-        assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-        if os.environ.get("HILGATE_WRITE_FIGURES"):  # the README's screenshot (docs/live-view.md says how)
-            shutil.copyfile(shot, FIGURE)
+        browser.wait(f"[...document.querySelectorAll('#flight .wave')].length >= 2 &&"
+                     f" document.querySelectorAll('#flight .flight').length >= 1", "frames in flight", alive=alive)
+        browser.keep(tmp_path, "live-swapped")  # (the README's screenshot is test_web_operator.py's, at 1280×800)
         lb.recv(timeout=HANG_GUARD_S)
     status = daemon.status()
     assert status["web"]["pages"] == 1 and status["web"]["url"] in url
@@ -175,6 +171,8 @@ links:
         host_b.process.send_signal(signal.SIGKILL)
         host_b.process.wait()
         browser.wait(f"{row} == 'down'", "host B down after its daemon was killed")
+        browser.wait("[...document.querySelectorAll('#log-list li[data-kind=\"host\"][data-level=\"error\"]')]"
+                     ".some(li => li.textContent.includes('host B lost'))", "host B lost, in the event log")
         browser.wait(f"(() => {{ const r = document.querySelector('tr[data-link=\"{b}\"] td.state');"
                      f" return r && r.textContent == 'down'; }})()", "B's link down")
         assert browser.js("return document.querySelector('tr[data-host=\"B\"] td.state').className").endswith("down")
@@ -337,9 +335,9 @@ def test_a_page_without_the_token_gets_nothing_and_pages_of_other_sites_are_refu
     right: list = []
     asyncio.run(_session(ws, right, answer=lambda nonce: proof(token, bytes.fromhex(nonce)),
                          commands=[{"class": "SPEED", "speed": 1000}, {"class": "SEEK", "t": "x"},
-                                   {"class": "EVAL", "code": "1"}], count=7))
+                                   {"class": "EVAL", "code": "1"}], count=8))
     kinds = [m.get("class") for m in right]
-    assert kinds[:3] == ["HELLO", "WELCOME", "SCENE"] and "STATE" in kinds
+    assert kinds[:4] == ["HELLO", "WELCOME", "SCENE", "EVENTS"] and "STATE" in kinds
     errors = [m["error"] for m in right if m.get("class") == "ERROR"]
     assert errors == ["speed must be a number from 0.1 to 100", "t must be a number of seconds",
                       "unknown command 'EVAL' (PLAY, PAUSE, SPEED, SEEK)"]

@@ -37,6 +37,9 @@ class AppFrame:
     """``(frame, delivered, one_way_tau_s)`` when its acknowledgement came back or the last retry failed."""
     airtime_s: float | None = None
     """Seconds on air when the sending modem decides it (a Micro-Modem's rate), not the link's bit rate."""
+    on_dropped: Callable[["AppFrame", str], Any] | None = field(default=None, repr=False)
+    """``(frame, cause)`` when the backend drops it before the air (a full FIFO, a modem down): a sender
+    that promised its application a fate (a UnetStack door's ``DatagramFailureNtf``) keeps the promise."""
 
 
 @dataclass(frozen=True)
@@ -156,6 +159,8 @@ class QueuedBackend(Backend):
     def drop(self, frame: AppFrame, cause: str) -> None:
         self.drops += 1
         self.event("drop", dst=frame.dst, size=len(frame.real), cause=cause)
+        if frame.on_dropped is not None:
+            frame.on_dropped(frame, cause)
 
     def set_state(self, state: str, reason: str | None = None) -> None:
         """``reason``: why the link is down (kept until the next state), None otherwise."""

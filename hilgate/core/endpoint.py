@@ -56,6 +56,18 @@ class LinkPort(Protocol):
     def limits(self) -> Any:
         """What the link's modem accepts (``drivers.table.ModemLimits``, its ``limits:``), None if not stated."""
 
+    @property
+    def bitrate_bps(self) -> float:
+        """The link's bit rate on air (its preset's ``bitrate_bps``), whatever its backend."""
+
+    @property
+    def unet(self) -> dict[str, Any]:
+        """The scene's ``unet:`` options for the link's UnetStack door (empty when it has none)."""
+
+    def address_of(self, name: str) -> int | None:
+        """The address of the link called ``name``, or of the one link of the vehicle called ``name``, on
+        this link's channel (None: no such one): a UnetStack application's ``host(name)``."""
+
     def send(self, frame: AppFrame) -> None:
         """Hand a frame to the backend; :class:`~hilgate.core.packets.PacketError` if it cannot carry it."""
 

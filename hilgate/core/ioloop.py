@@ -66,9 +66,10 @@ class IoLoop:
         """Run ``fn(*args)`` in the loop as soon as possible; safe from other threads and signal handlers.
 
         Only the call that finds the queue of posted calls empty writes a wake-up: until the loop has
-        taken every call (it takes them until none is left), one already written stands for the rest.
-        (Appending and counting are each atomic under the GIL; a call appended while the loop empties
-        the queue is either seen by its ``while`` or finds it empty and wakes it.)"""
+        taken every call, one already written stands for the rest.  (Appending and counting are each
+        atomic under the GIL.  The loop takes, each round, the calls posted before the round; it never
+        sleeps while calls are waiting, so a call appended meanwhile is either left for its next round
+        or finds the queue empty and wakes it.)"""
         posted = self.posted
         posted.append((fn, args))
         if len(posted) == 1:

@@ -16,8 +16,9 @@ loop collects the young generations itself when the next event is at least ``gc_
 models make no reference cycles per event, so reference counting frees nearly everything anyway.
 
 What remains is the kernel: on a shared 2-core machine a normal process is sometimes preempted
-for milliseconds.  :func:`make_realtime` (``hilgate run --realtime-priority``, or
-``CPUSchedulingPolicy=fifo`` in the systemd unit) removes most of that.
+for milliseconds.  ``hilgate run --realtime`` (:mod:`hilgate.core.priority`: SCHED_RR for the loop
+thread alone where the host allows it, else the lowest niceness it allows; the systemd unit allows it)
+removes most of that.
 
 Timers fire with the model clock set to their exact scheduled time (lateness is visible as the
 difference with :meth:`model_time`), so the models compute the same times as in virtual time.  Input
@@ -68,23 +69,11 @@ def lower_timer_slack(nanoseconds: int = 1000) -> bool:
 
 
 def make_realtime(priority: int) -> str:
-    """SCHED_FIFO at ``priority`` and all memory locked (no page faults in the loop); returns what
-    could be done, for the log.  Needs CAP_SYS_NICE and RLIMIT_MEMLOCK (or root)."""
-    done = []
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-        done.append(f"SCHED_FIFO priority {priority}")
-    except (OSError, AttributeError) as exc:
-        done.append(f"no SCHED_FIFO ({exc})")
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        if libc.mlockall(1 | 2) == 0:  # MCL_CURRENT | MCL_FUTURE
-            done.append("memory locked")
-        else:
-            done.append(f"memory not locked ({os.strerror(ctypes.get_errno())})")
-    except (OSError, AttributeError):
-        done.append("memory not locked")
-    return ", ".join(done)
+    """The calling thread at real-time priority ``priority`` where allowed (:func:`priority.raise_priority`);
+    what it got, for the log."""
+    from .priority import raise_priority
+
+    return raise_priority(priority).describe()
 
 
 PAIRING_TRIES = 20
@@ -303,7 +292,10 @@ class RealtimeScheduler(VirtualScheduler):
                         reader()
                     except Exception:
                         self._failed(reader)
-        while posted:
+        for _ in range(len(posted)):
+            # (only the calls posted before this round: one posted meanwhile, by another thread or by a
+            # call itself, waits for the next round, after the descriptors; taking calls until none was
+            # left kept the loop here, the control socket unanswered, for as long as a flood kept posting)
             fn, args = posted.popleft()
             self._input_time()
             try:

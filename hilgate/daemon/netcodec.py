@@ -63,7 +63,7 @@ MAX_TRANSMISSION = 65536
 JSON take under 24 kB): a longer message is refused before it is read."""
 LINK_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,200}|\*")  # a link id (scene.links.LINK_ID), or * (broadcast)
 KIND = re.compile(r"[a-z][a-z0-9_]{0,31}")
-PACKET_NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")
+PACKET_NAME = re.compile(r"[A-Za-z0-9_.:-]{1,64}")  # (simple:N has a colon)
 SESSION = re.compile(r"[0-9a-f]{1,32}")
 
 
@@ -347,46 +347,116 @@ class ReplayWindow:
     """The message numbers of one host's sessions: which were seen, which are new.
 
     A session is the sender's start (its Zenoh session id and epoch): numbers count from 1 in each, so a
-    restarted host is a new session, never a gap.  A session with an older epoch than the current one
-    is a replay of the past.  Within a session the window remembers the last :data:`WINDOW` numbers
-    (IPsec's anti-replay window, RFC 4303 §3.4.3): a number seen, or older than that, is a replay; a
-    number ahead counts the numbers skipped as gaps (what Zenoh dropped), at most :data:`MAX_JUMP` at
-    once (a larger jump is refused: numbers are not made up that far ahead).  After the host was down,
-    any jump ahead is taken without a gap (numbers went on for the hosts that still heard it)."""
+    restarted host is a new session, never a gap.  Within a session, IPsec's anti-replay window (RFC 4303
+    §3.4.3) remembers the last :data:`WINDOW` numbers below the highest: a number seen, or older than
+    that, is a replay; a number ahead counts the numbers skipped as gaps (what Zenoh dropped), at most
+    :data:`MAX_JUMP` at once (a larger jump is refused: numbers are not made up that far ahead).  After
+    the host was down, any jump ahead is taken without a gap (numbers went on for the hosts that still
+    heard it).
+
+    IPsec's window trusts its highest number and its one session, and so did this one: with a host's
+    stolen key, one message of a session a nanosecond newer (or numbered far ahead) moved it, and every
+    later frame of the honest host was a replay, even after it restarted.  So here no one message moves
+    what the honest host's frames are judged by:
+
+    - **Sessions** are kept side by side (:data:`SESSIONS`, the one heard least lately forgotten first),
+      each with its numbers: a forged session beside the host's own costs the host nothing.  A session
+      older than the newest heard (by epoch: a start before the latest) is heard only while its daemon
+      is alive (``alive``: its Zenoh id holds the host's liveliness token, which only the host's key can
+      declare), so a host restarted after a forged session of a later epoch is heard, and the messages
+      of a start whose daemon is gone are replays of the past.  A known session's message with another
+      epoch is none of it (``bad_message``).
+    - **Runs** of numbers within a session are followed side by side too (:data:`RUNS`): a number up to
+      :data:`WINDOW` ahead of a run moves it (Zenoh's gaps); one further ahead starts a run of its own
+      instead of moving the honest one, which goes on undisturbed: one forged number costs the host at
+      most the frame of its number.  A number below every run's window is a replay.
+
+    Only a message that would be used may move anything: the caller checks everything else first (it
+    decodes, its host and link are right, its times and epoch are plausible) and asks here last.  A
+    thief who keeps sending can still silence the host (a run or a session for every honest frame): that
+    is what revoking the key is for (docs/security.md)."""
 
     WINDOW = 1024
     MAX_JUMP = 1 << 24
+    SESSIONS = 4
+    RUNS = 4
 
-    __slots__ = ("session", "epoch_ns", "highest", "seen", "resync")
+    __slots__ = ("sessions", "newest", "resync")
 
     def __init__(self) -> None:
-        self.session: str | None = None
-        self.epoch_ns = 0
-        self.highest = 0
-        self.seen = 0  # bit i: number highest - i was seen
+        self.sessions: dict[str, _Session] = {}  # (in the order last heard: the first is forgotten first)
+        self.newest: int | None = None  # the newest epoch heard: the host's latest start
         self.resync = False
 
-    def admit(self, session: str, epoch_ns: int, number: int) -> str | int:
-        """``"replay"``, ``"bad_message"`` (a jump too far), or the count of numbers skipped (0: in order)."""
-        if session != self.session:
-            if self.session is not None and epoch_ns <= self.epoch_ns:
-                return "replay"  # an earlier start of the host, or a second one beside it
-            self.session, self.epoch_ns, self.highest, self.seen, self.resync = session, epoch_ns, 0, 0, False
-        if number > self.highest:
-            skipped = number - self.highest - 1
-            if self.resync:
-                skipped, self.resync = 0, False
-            elif skipped >= self.MAX_JUMP:
-                return "bad_message"
-            shift = number - self.highest
-            self.seen = ((self.seen << shift) | 1) & ((1 << self.WINDOW) - 1) if shift < self.WINDOW else 1
-            self.highest = number
-            return skipped
-        back = self.highest - number
-        if back >= self.WINDOW or (self.seen >> back) & 1:
-            return "replay"
-        self.seen |= 1 << back  # late but never seen (counted as a gap when it was skipped)
-        return 0
+    def admit(self, session: str, epoch_ns: int, number: int, alive: bool = False) -> str | int:
+        """``"replay"``, ``"bad_message"`` (a jump too far, an epoch not its session's), or the count of
+        numbers skipped (0: in order).  ``alive``: the session's daemon holds the host's liveliness token."""
+        newest = self.newest
+        if newest is not None and epoch_ns < newest and not alive:
+            return "replay"  # an earlier start of the host, its daemon gone
+        sessions = self.sessions
+        known = sessions.get(session)
+        if known is None:
+            if newest is not None and epoch_ns == newest and not alive:
+                return "replay"  # a second start beside the newest
+            known = _Session(epoch_ns)
+        elif known.epoch_ns != epoch_ns:
+            return "bad_message"
+        verdict = known.admit(number, self.resync, self.WINDOW, self.MAX_JUMP, self.RUNS)
+        if isinstance(verdict, str):
+            return verdict  # (a session only refused is not remembered: it takes no honest one's place)
+        sessions.pop(session, None)
+        if len(sessions) >= self.SESSIONS:
+            del sessions[next(iter(sessions))]
+        sessions[session] = known
+        self.resync = False
+        if newest is None or epoch_ns > newest:
+            self.newest = epoch_ns
+        return verdict
+
+
+class _Session:
+    """One session's runs of numbers, each ``[highest, seen]`` (bit i of ``seen``: number highest - i was
+    heard), the one moved last at the end.  A session starts with a run at 0 (numbers count from 1)."""
+
+    __slots__ = ("epoch_ns", "runs")
+
+    def __init__(self, epoch_ns: int):
+        self.epoch_ns = epoch_ns
+        self.runs: list[list[int]] = [[0, 1]]
+
+    def admit(self, number: int, resync: bool, window: int, max_jump: int, most: int) -> str | int:
+        runs = self.runs
+        below = None  # the run whose highest is the largest below the number
+        for run in runs:
+            back = run[0] - number
+            if 0 <= back < window:
+                if (run[1] >> back) & 1:
+                    return "replay"
+                run[1] |= 1 << back  # late but never seen (counted as a gap when it was skipped)
+                runs.remove(run)
+                runs.append(run)
+                return 0
+            if back < 0 and (below is None or run[0] > below[0]):
+                below = run
+        if below is None:
+            return "replay"  # older than every run's window
+        skipped = number - below[0] - 1
+        if resync:
+            skipped = 0
+        elif skipped >= max_jump:
+            return "bad_message"
+        runs.remove(below)
+        if number - below[0] <= window:
+            shift = number - below[0]
+            below[0], below[1] = number, ((below[1] << shift) | 1) & ((1 << window) - 1)
+            runs.append(below)
+        else:  # far ahead: a run of its own; the run below goes on as it was
+            runs.append(below)
+            if len(runs) >= most:
+                del runs[0]
+            runs.append([number, 1])
+        return skipped
 
 
 def encode_pose(host: str, epoch_ns: int, vehicle: str, t: float, position: Any, velocity: Any) -> bytes:

@@ -29,7 +29,8 @@ from the lab's credentials, :mod:`hilgate.gli.zenoh_auth`) lets each host publis
 tokens only under its own name.  What a key's host says is then checked against the scene (a
 transmission from a link the scene gives another host, a token of a link that is not its own: ignored,
 counted ``foreign_sender``), against the message (a transmission whose host is not its key's:
-``forged``), and against what was heard before (:class:`~.netcodec.ReplayWindow`: ``replay``).
+``forged``; a time or an epoch no host can have: ``out_of_time``), and last, only once the message is
+good in every other way, against what was heard before (:class:`~.netcodec.ReplayWindow`: ``replay``).
 
 Key layout (under ``<prefix>``, ``hilgate`` unless the scene's ``zenoh.prefix`` says otherwise):
 ``tx/<host>/<channel>`` transmissions, ``pose/<host>/<vehicle>`` poses, ``alive/<host>/host/<zid>`` and
@@ -64,11 +65,19 @@ REMEMBERED_FRAMES = 4096  # frames a control frame of another host may still ref
 JOIN_WAIT_S = 2.0
 SWITCH_INTERVAL_S = 0.0002
 TIME_WINDOW_S = 60.0  # another host's transmission or pose further from now than this is dropped (counted)
-FIFO_DEPTH = 2048
-"""Transmissions Zenoh keeps for the loop (beyond that it holds back its own reader): at most
-FIFO_DEPTH × the size filter's 128 kB = 256 MB, reached only by a host with credentials sending
-nothing but messages hilgate never makes; a frame's transmission is 0.1-3 kB (≤ 6 MB)."""
-INBOX_DEPTH = 4096  # poses and liveliness changes waiting for the loop (each a few hundred bytes)
+FIFO_DEPTH = 128
+"""Transmissions Zenoh keeps for the thread that hands them to the loop (beyond that Zenoh holds back
+its own reader): that thread takes them at once, and drops what the hand-over cannot hold, so this
+queue stays short; at most FIFO_DEPTH × the size filter's 128 kB = 32 MB, only while the thread waits
+for the GIL under a flood."""
+TX_DEPTH = 2048
+"""Transmissions of one host waiting for the loop (a frame's transmission is 0.1-4 kB) …"""
+TX_BYTES = 4 << 20
+"""… and their bytes, at most; beyond either, what the host sends is dropped until the loop has taken
+some (counted ``inbox_full``, traced per host).  The hosts together: :data:`TX_TOTAL_BYTES`."""
+TX_TOTAL_BYTES = 16 << 20
+INBOX_DEPTH = 4096  # poses (per host) and liveliness changes waiting for the loop (each a few hundred bytes)
+INBOX_BATCH = 256  # messages the loop takes from one inbox per turn (then its other inputs get a turn)
 
 
 def zenoh_config(spec: Any, identity: Identity | None, connect: list[str] | tuple[str, ...] = (),
@@ -205,19 +214,21 @@ class Network:
         self.apply(scene)
         liveliness = session.liveliness()
         put = zenoh.SampleKind.PUT
-        alive = Inbox(post, self._on_alives, INBOX_DEPTH)
+        alive = Inbox(post, self._on_alives, INBOX_DEPTH, batch=INBOX_BATCH)
         self._entities.append(liveliness.declare_subscriber(
             f"{self.prefix}/alive/**", lambda s: alive.put((str(s.key_expr), "PUT" if s.kind == put else "DELETE")),
             history=True))
         transmissions = session.declare_subscriber(f"{self.prefix}/tx/**", zenoh.handlers.FifoChannel(FIFO_DEPTH))
         self._entities.append(transmissions)
-        threading.Thread(target=self._drain, args=(transmissions.handler,), name="network-tx",
+        handover = Inbox(post, self._on_transmissions, TX_DEPTH, TX_BYTES, TX_TOTAL_BYTES, batch=INBOX_BATCH)
+        threading.Thread(target=self._drain, args=(transmissions.handler, handover), name="network-tx",
                          daemon=True).start()
-        poses = Inbox(post, self._on_poses, INBOX_DEPTH)
+        poses = Inbox(post, self._on_poses, INBOX_DEPTH, batch=INBOX_BATCH)
 
         def on_pose(sample: Any) -> None:
-            size = len(sample.payload)
-            poses.put((str(sample.key_expr), sample.payload.to_bytes() if size <= MAX_TRANSMISSION else size))
+            key, size = str(sample.key_expr), len(sample.payload)
+            poses.put((key, sample.payload.to_bytes() if size <= MAX_TRANSMISSION else size),
+                      source=self._key_host(key, "pose"))
 
         self._entities.append(session.declare_subscriber(f"{self.prefix}/pose/**", on_pose))
         status_key = f"{self.prefix}/status/{self.host}"  # (the answer under this host's own key: the ACL's)
@@ -247,9 +258,9 @@ class Network:
 
     # -- liveliness ------------------------------------------------------------------------------
 
-    def _on_alives(self, changes: list[tuple[str, str]], dropped: int) -> None:
+    def _on_alives(self, changes: list[tuple[str, str]], dropped: dict[str, int]) -> None:
         if dropped:
-            self.counters["inbox_full"] += dropped
+            self.counters["inbox_full"] += sum(dropped.values())
         for key, kind in changes:
             self._on_alive(key, kind)
         self._refresh_status()
@@ -315,30 +326,34 @@ class Network:
                                           sender.pose.position(t), self.zid))
         self.counters["published"] += 1
 
-    def _drain(self, handler: Any) -> None:
-        """The others' transmissions, from Zenoh's queue to the loop in batches: one wake-up (and one
-        hand-over of the GIL) for all that came meanwhile, not one per message, and in their order."""
-        post = self.scheduler.post
+    def _drain(self, handler: Any, handover: Inbox) -> None:
+        """The others' transmissions, from Zenoh's queue to the loop's (``handover``: one queue per host,
+        bounded in messages and bytes, taken in turns; one wake-up for all that came meanwhile, and each
+        host's in its order).  What a host's queue cannot hold is dropped here, uncopied, and counted:
+        this thread never waits for the loop, so Zenoh's queue stays short."""
 
-        def item(sample: Any) -> tuple[str, bytes | int]:
-            # (the size first: one too long is counted, never copied; Zenoh's filter refused longer ones)
-            size = len(sample.payload)
-            return str(sample.key_expr), sample.payload.to_bytes() if size <= MAX_TRANSMISSION else size
+        def copied(item: tuple[str, Any]) -> tuple[str, bytes]:
+            return item[0], item[1].payload.to_bytes()
 
         while True:
             try:
                 sample = handler.recv()  # (waits with the GIL released)
             except Exception:  # the subscriber was undeclared: the daemon is stopping
                 return
-            batch = [item(sample)]
-            while len(batch) < 256:
+            while sample is not None:
+                key, size = str(sample.key_expr), len(sample.payload)
+                host = self._key_host(key, "tx")
+                if size <= MAX_TRANSMISSION:
+                    handover.put((key, sample), size, host, copied)
+                else:  # (counted on the loop, never copied; Zenoh's filter refused longer ones)
+                    handover.put((key, size), 0, host)
                 sample = handler.try_recv()
-                if sample is None:
-                    break
-                batch.append(item(sample))
-            post(self._on_transmissions, batch)
 
-    def _on_transmissions(self, batch: list[tuple[str, bytes | int]]) -> None:
+    def _on_transmissions(self, batch: list[tuple[str, bytes | int]], dropped: dict[str, int]) -> None:
+        for host, n in dropped.items():  # what the hand-over could not hold: counted and traced per host
+            self.counters["inbox_full"] += n
+            self.recorder.event({"t": round(self.scheduler.now(), 9), "ev": "drop", "link": "*", "src": host,
+                                 "cause": "inbox_full", "n": n})
         for key, data in batch:
             self._on_transmission(key, data)
 
@@ -361,31 +376,36 @@ class Network:
             if message.host != self.host:
                 self.counters["foreign_sender"] += 1
             return
-        verdict = view.window.admit(message.session, message.epoch_ns, message.number)
-        if isinstance(verdict, str):
-            self.counters[verdict] += 1
-            self.recorder.event({"t": round(self.scheduler.now(), 9), "ev": "drop", "link": "*",
-                                 "src": message.host, "cause": verdict})
-            return
-        if verdict:
-            view.gaps += verdict
-            self.recorder.event({"t": round(self.scheduler.now(), 9), "ev": "drop", "link": "*",
-                                 "src": message.host, "cause": "net_gap", "n": verdict})
         frame = message.frame
         world = self.router.world
         modem = world.modems.get(frame.src_link)
         if modem is None or modem.radio.listens or self.remote_links.get(frame.src_link) != message.host:
             self.counters["foreign_sender"] += 1  # not a link the scene gives that host: ignored
             return
+        now = self.scheduler.now()
+        t = to_local(message.t, message.epoch_ns, self.epoch_ns)
+        # A clock that far off (or a forged time) would schedule nonsense; and no host started later than
+        # now (its epoch, the UNIX clock at its model time 0, is its start: 2**62 is no start, however its
+        # t makes up for it)
+        if abs(now - t) > TIME_WINDOW_S or message.epoch_ns - self.epoch_ns > (now + TIME_WINDOW_S) * 1e9:
+            self.counters["out_of_time"] += 1
+            return
+        # Only now, the message known good in every other way, may it move the replay window (a message
+        # refused above moved it before issue 37: one forged epoch made the host's every frame a replay)
+        verdict = view.window.admit(message.session, message.epoch_ns, message.number, message.session in view.zids)
+        if isinstance(verdict, str):
+            self.counters[verdict] += 1
+            self.recorder.event({"t": round(now, 9), "ev": "drop", "link": "*", "src": message.host,
+                                 "cause": verdict})
+            return
+        if verdict:
+            view.gaps += verdict
+            self.recorder.event({"t": round(now, 9), "ev": "drop", "link": "*", "src": message.host,
+                                 "cause": "net_gap", "n": verdict})
         if message.ref_key is not None:
             mine = self.sent.get(message.ref_key) if message.ref_key[0] not in self.remote_links else None
             frame.ref = mine or self.heard.get(message.ref_key) or frame.ref
         self._remember(self.heard, (frame.src_link, frame.id), frame)
-        now = self.scheduler.now()
-        t = to_local(message.t, message.epoch_ns, self.epoch_ns)
-        if abs(now - t) > TIME_WINDOW_S:  # a clock that far off (or a forged time) would schedule nonsense
-            self.counters["out_of_time"] += 1
-            return
         view.heard += 1
         delay = now - t
         view.delay_sum += delay
@@ -460,9 +480,9 @@ class Network:
 
         self.scheduler.after_wall(interval, publish)
 
-    def _on_poses(self, poses: list[tuple[str, bytes | int]], dropped: int) -> None:
+    def _on_poses(self, poses: list[tuple[str, bytes | int]], dropped: dict[str, int]) -> None:
         if dropped:
-            self.counters["inbox_full"] += dropped
+            self.counters["inbox_full"] += sum(dropped.values())
         for key, data in poses:
             self._on_pose(key, data)
 

@@ -18,6 +18,7 @@ from typing import Any, Callable
 
 from .access import LinkLock
 from .accounts import Counters, LinkAccount
+from .stale_poses import staleness
 from ..core.backend import AppFrame, Backend, PhyEvent
 from ..core.endpoint import ABSENT, KEPT, TAKEN, Door, Endpoint
 from ..core.packets import Decoded, PacketClass, packet_class
@@ -82,6 +83,7 @@ class RoutedLink:
         backend.on_receive = self.deliver
         backend.on_idle = self.state_changed
         backend.on_state = lambda state: self.state_changed()
+        self._tune()  # an emulated modem's channel (at power-on it came before the link had a backend)
         self._watch_phy()
         self.state_changed()
 
@@ -121,11 +123,15 @@ class RoutedLink:
         log.info("link %s: address %d -> %d (AT!AL)", self.id, old, address)
 
     def set_band(self, band_khz: tuple[float, float]) -> None:
-        """An emulated modem's channel (an M64's ``wcs``): the simulation has this link send and listen
-        in ``band_khz`` from now on, so that pairs on other channels never meet it."""
+        """An emulated modem's channel (an M64's ``wcs``, or its channel at power-on): the simulation has
+        this link send and listen in ``band_khz`` from now on, so that pairs on other channels never meet
+        it.  At power-on the link has no backend yet (its doors open first): the band waits for it."""
+        self.retuned = (float(band_khz[0]), float(band_khz[1]))
+        self._tune()
+
+    def _tune(self) -> None:
         backend = self.backend
-        if backend is not None and backend.set_band(band_khz):
-            self.retuned = (float(band_khz[0]), float(band_khz[1]))
+        if backend is not None and self.retuned is not None and backend.set_band(self.retuned):
             self.router.recorder.event({"t": round(self.router.scheduler.now(), 9), "ev": "band", "link": self.id,
                                         "band_khz": list(self.retuned)})
 
@@ -162,6 +168,28 @@ class RoutedLink:
     def limits(self) -> Any:
         """What the link's modem accepts (its ``limits:``, from its preset; None: not stated)."""
         return self.spec.limits
+
+    @property
+    def bitrate_bps(self) -> float:
+        return self.spec.params.bitrate_bps
+
+    @property
+    def unet(self) -> dict[str, Any]:
+        return dict(self.spec.unet)
+
+    def address_of(self, name: str) -> int | None:
+        scene = self.router.scene
+        if scene is None:
+            return None
+        channel = self.spec.params.tx_channel
+        spec = scene.links.get(name)
+        if spec is None:
+            mine = [s for s in scene.links.values() if s.vehicle == name and s.params.rx_channel == channel]
+            spec = mine[0] if len(mine) == 1 else None
+        if spec is None or spec.params.rx_channel != channel:
+            return None
+        other = self.router.links.get(spec.id)
+        return other.address if other is not None else spec.params.address
 
     @property
     def ready(self) -> bool:
@@ -442,7 +470,8 @@ class Router:
     a reload changed (:func:`hilgate.scene.diff.diff`).  The daemon gives it the doors."""
 
     def __init__(self, scheduler: Any, recorder: Recorder, doors: list[Door] | None = None,
-                 max_link_clients: int = 32, host: str | None = None):
+                 max_link_clients: int = 32, host: str | None = None, lock_dir: str = ""):
+        self.lock_dir = lock_dir  # where the links' locks are (hilgate.daemon.access.lock_directory)
         self.host = host  # in a scene spread over hosts, the links of this host only (scene/hosts.py)
         self.network: Any = None  # hilgate.daemon.network.Network, when there are several hosts
         self.scheduler = scheduler
@@ -541,6 +570,10 @@ class Router:
             if change.removed and change.id in self.links:
                 log.info("link %s removed", change.id)
                 self.links.pop(change.id).close()
+        # A real modem's driver opens its port at once; its modem may be an emulated one of this scene, whose
+        # pty the emulated link's door makes: every link's doors first, the drivers after, whatever the
+        # order of the scene (a driver listed first looked for a pty not yet there: a warning, a retry)
+        drivers: list[tuple[RoutedLink, LinkSpec]] = []
         for spec in scene.links.values():
             change = changes.links.get(spec.id)
             link = self.links.get(spec.id)
@@ -550,14 +583,14 @@ class Router:
                     self.links.pop(spec.id).close()
                 continue
             if link is None:
-                self._add(spec, announce=not first)
+                self._add(spec, announce=not first, drivers=drivers)
                 continue
             if change is None:
                 continue
             link.update(spec, change.endpoints_changed)
             if change.backend_changed:
                 log.info("link %s: backend %s -> %s", spec.id, change.before.backend, spec.backend)
-                link.set_backend(self.backend_factories[spec.backend](spec), spec.backend)
+                self._set_backend(link, spec, drivers)
             elif isinstance(link.backend, SimBackend):
                 link.backend.rebind(self.world.modems[spec.id])
                 link.backend.everyone_in_range = spec.everyone_in_range
@@ -565,11 +598,20 @@ class Router:
                 link._watch_phy()
                 log.info("link %s reconfigured", spec.id)
             link.state_changed()
+        for link, spec in drivers:
+            link.set_backend(self.backend_factories[spec.backend](spec), spec.backend)
         if first:
             self.world.start()
 
-    def _add(self, spec: LinkSpec, announce: bool) -> None:
-        lock = LinkLock(spec.id)  # one daemon per link id on this host, or refused here
+    def _set_backend(self, link: RoutedLink, spec: LinkSpec, drivers: list[tuple[RoutedLink, LinkSpec]]) -> None:
+        """Give ``link`` its backend now, or, a real modem's driver, once every link's doors are open."""
+        if spec.backend in DRIVERS:
+            drivers.append((link, spec))
+        else:
+            link.set_backend(self.backend_factories[spec.backend](spec), spec.backend)
+
+    def _add(self, spec: LinkSpec, announce: bool, drivers: list[tuple[RoutedLink, LinkSpec]]) -> None:
+        lock = LinkLock(spec.id, self.lock_dir)  # one daemon per link id of this user, or refused here
         account = self.accounts.get(spec.id) or LinkAccount(spec.id)  # a link re-added goes on counting
         link = RoutedLink(spec, self, account)
         link.lock = lock
@@ -580,7 +622,7 @@ class Router:
             raise
         self.links[spec.id] = link
         self.accounts[spec.id] = account
-        link.set_backend(self.backend_factories[spec.backend](spec), spec.backend)
+        self._set_backend(link, spec, drivers)
         if announce:
             log.info("link %s added (%s)", spec.id, spec.backend)
 
@@ -630,18 +672,22 @@ class Router:
         return status
 
     def vehicle_status(self) -> list[dict[str, Any]]:
-        """Every vehicle now: its pose source, position (None: unknown) and the age of its pose."""
+        """Every vehicle now: its pose source, position (None: unknown), the age of its pose, whether it is
+        stale (:func:`.stale_poses.staleness`) and its heading when its source tells it."""
         assert self.world is not None and self.scene is not None
         now = self.scheduler.now()
         vehicles = []
         for name, pose in self.world.poses.items():
             position = pose.position(now)
             age = pose.age(now)
+            spec = self.scene.vehicles.get(name)
             vehicles.append({
                 "name": name,
-                "source": self.scene.vehicles[name].pose.source_name,
+                "source": spec.pose.source_name if spec is not None else "?",
                 "position": None if position is None else [round(v, 4) for v in position],
                 "age_s": None if age is None else round(age, 3),
+                "stale": staleness(pose, spec, now),
+                "heading": _heading(pose),
             })
         return vehicles
 
@@ -649,3 +695,13 @@ class Router:
         for link in self.links.values():
             link.close()
         self.links.clear()
+
+
+def _heading(pose: Any) -> float | None:
+    """The yaw (rad, from north through east: NED) a live source measured, else None (the page then
+    heads a vehicle along its track)."""
+    attitude = pose.attitude
+    if attitude is None:
+        return None
+    yaw = attitude[2]
+    return round(yaw, 4) if isinstance(yaw, (int, float)) and math.isfinite(yaw) else None

@@ -15,17 +15,21 @@ import uuid
 from typing import Any, Callable
 
 from .. import __version__
-from .access import prepare_private_dir, raise_descriptor_limit, resolve_group
+from .access import (lock_directory, prepare_lock_directory, prepare_private_dir, raise_descriptor_limit,
+                     resolve_group)
 from .control import ControlServer
 from ..drivers.emulators import EmulatorDoor
 from ..gli.queues import QueueDoor, forget_created, plan_message_size, raise_queue_budget, unlink_created
 from ..gli.sockets import ClientLimits, SocketDoor, tcp_listener
+from ..gli.unet_door import UnetDoor
 from ..gli.token import TOKEN_FILE, TokenCheck, load_or_create
 from .live_sources import LiveSources
 from .ros2_bridge import Ros2Bridge
+from ..core.priority import Scheduling, current, raise_priority
 from ..core.realtime import RealtimeScheduler
 from ..sim.recorder import Recorder
 from .router import Router
+from .stale_poses import StaleWatch
 from .network import Network
 from ..gli.zenoh_auth import CredentialError, Identity, load_identity
 from ..scene import Scene, SceneError, load_scene
@@ -72,6 +76,10 @@ def _endpoint_list(scene: Scene, host: str | None, runtime_dir: str, tcp: str | 
     if tcp:
         parts.append(f"TCP {tcp}")
     for link in served:
+        if link.unet:
+            door = dict(link.unet)
+            parts.append(f"{link.id} as a UnetStack node at {door['host']}:{door['tcp']}")
+    for link in served:
         emulate = dict(link.emulate)
         if emulate:
             where = f"pty {emulate['pty']}" if emulate.get("pty") else f"TCP port {emulate.get('tcp')}"
@@ -89,8 +97,12 @@ class Daemon:
                  preset_dirs: list[str] | tuple[str, ...] = (), host: str | None = None,
                  zenoh_connect: list[str] | tuple[str, ...] = (), zenoh_listen: list[str] | tuple[str, ...] = (),
                  clock_offset_s: float = 0.0, tcp_token: str | None = None,
-                 zenoh_credentials: str | None = None, zenoh_insecure: bool = False, web: str | None = None):
+                 zenoh_credentials: str | None = None, zenoh_insecure: bool = False, web: str | None = None,
+                 auth_timeout_s: float = 5.0, realtime_priority: int = 0):
         self.web = web
+        self.auth_timeout_s = auth_timeout_s
+        self.realtime_priority = realtime_priority
+        self.scheduling = Scheduling()  # what the loop thread runs at (status): set as the loop starts
         self.web_server: Any = None
         self.web_feed: Any = None
         self.tcp_token = tcp_token
@@ -150,7 +162,8 @@ class Daemon:
             from ..web.server import WebServer, parse_web
 
             web_host, web_port = parse_web(self.web)
-            self.web_server = WebServer(web_host, web_port, token_check, token_hint=token_check.path)
+            self.web_server = WebServer(web_host, web_port, token_check, token_file=token_check.path,
+                                        auth_timeout_s=self.auth_timeout_s)
         raise_queue_budget()
         raise_descriptor_limit()
         trace_path = self.trace_path or scene.trace_file
@@ -170,14 +183,18 @@ class Daemon:
                              "start": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="milliseconds"),
                              "scene": scene.name, "path": os.path.abspath(self.scene_path), "version": __version__,
                              "speed": self.speed, "scene_hash": view_hash(view), "scene_view": view})
-        self.router = Router(scheduler, self.recorder, max_link_clients=self.max_link_clients, host=host)
-        self.clients = ClientLimits(self.max_clients, self.max_link_clients)
+        lock_dir = lock_directory(self.runtime_dir)
+        prepare_lock_directory(lock_dir)
+        self.router = Router(scheduler, self.recorder, max_link_clients=self.max_link_clients, host=host,
+                             lock_dir=lock_dir)
+        self.clients = ClientLimits(self.max_clients, self.max_link_clients, auth_timeout_s=self.auth_timeout_s)
         self.router.doors = [
             QueueDoor(scheduler, plan_message_size(sum(1 for l in scene.links.values()
                                                         if host in (None, l.host) and "mq" in l.gli)),
                       self.gli_backlog, group),
             SocketDoor(os.path.join(self.runtime_dir, "gli"), scheduler, self.clients, self.router.port, group),
             EmulatorDoor(scheduler),
+            UnetDoor(scheduler),
         ]
         self.ros2 = Ros2Bridge(scheduler, self.router, self.scene_path)
         self.router.doors.append(self.ros2)  # opens nothing, and loads no DDS, for links not on ROS 2
@@ -218,6 +235,7 @@ class Daemon:
             scheduler.on_signal(signal.SIGTERM, self.stop)
             scheduler.on_signal(signal.SIGINT, self.stop)
             self._periodic()
+            StaleWatch(scheduler, self.router).start()
             gc.collect()
             gc.freeze()  # everything built so far is long-lived: keep it out of the collector's walks
             log.info("hilgate %s started: scene %r (%s), %s (%s), endpoints: %s; run %s",
@@ -237,6 +255,7 @@ class Daemon:
                                  "epoch_ns": self.network.epoch_ns})
             log.info("joined the network as host %s (zenoh %s, prefix %s)", host, self.network.zid,
                      self.network.prefix)
+        self._take_priority()
         try:
             notify("READY=1", f"STATUS=running {scene.name!r}: {len(self.router.links)} links",
                    f"MAINPID={os.getpid()}")
@@ -244,6 +263,16 @@ class Daemon:
         finally:
             self.shutdown()
         return 0
+
+    def _take_priority(self) -> None:
+        """Real-time priority for this thread (the loop's) once everything is open: the start-up's work,
+        and every thread made during it, ran at normal priority (:mod:`hilgate.core.priority`)."""
+        if not self.realtime_priority:
+            self.scheduling = current()
+            return
+        self.scheduling = raise_priority(self.realtime_priority)
+        level = logging.INFO if self.scheduling.kind == "realtime" else logging.WARNING
+        log.log(level, "scheduling: %s", self.scheduling.describe())
 
     def _host(self, scene: Scene) -> str | None:
         """This daemon's host name in a scene spread over hosts (None: the scene is for one daemon)."""
@@ -311,15 +340,16 @@ class Daemon:
             ping()
 
     def status(self) -> dict[str, Any]:
-        status = {**self.router.status(), "cameras": self.live.status()}
+        status = {**self.router.status(), "cameras": self.live.status(),
+                  "scheduling": current(self.scheduling.asked, self.scheduling.notes).as_dict()}  # (the loop's thread)
         ros2 = self.ros2.status()
         if ros2 is not None:  # only once the daemon is on ROS 2
             status["ros2"] = {**ros2, "poses_in": self.live.ros2_status()}
         if self.tcp_listener is not None:  # what the TCP GLI refused, by cause; how many wait to authenticate
-            status["tcp"] = {"refused": dict(self.clients.refused), "waiting": sum(self.clients.pending.values())}
-        if self.web_server is not None:  # where the web view is, and the token its pages prove
+            status["tcp"] = {"refused": dict(self.clients.refused), "waiting": len(self.clients.pending)}
+        if self.web_server is not None:  # where the web view is, the token its pages prove, what it refused
             status["web"] = {"url": self.web_server.url, "pages": self.web_server.clients,
-                             "token_file": self.web_server.token_hint}
+                             "token_file": self.web_server.token_file, **self.web_server.status()}
         return status
 
     def status_text(self) -> str:

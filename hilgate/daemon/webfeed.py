@@ -14,6 +14,7 @@ import logging
 from typing import Any
 
 from ..scene.view import scene_view
+from ..sim.budget import budget_tables
 from ..sim.sim_backend import SimBackend
 from ..web.picture import Flight, LINGER_S, extent_m, scene_message
 
@@ -47,10 +48,8 @@ class WebFeed:
     # -- the recorder's tap (only while a page is connected) ---------------------------------------
 
     def frame(self, ev: str, t: float, link: str, frame: Any, cause: str | None) -> None:
-        if frame.kind != "data":
-            return  # a MAC's control frames: not on the picture (nor in hilgate report's)
-        try:
-            self.flight.frame(ev, t, link, frame.id, frame.src_link, frame.dst_link, frame.size, cause)
+        try:  # a MAC's control frames too: the page draws them when the operator asks for them
+            self.flight.frame(ev, t, link, frame.id, frame.src_link, frame.dst_link, frame.size, cause, frame.kind)
         except Exception:
             self._broken()
 
@@ -92,6 +91,10 @@ class WebFeed:
         message = scene_message(scene_view(scene), "live")
         served = set(self.router.links)  # in a network of hosts, the others' links are theirs to draw
         message["served"] = sorted(served)
+        try:  # the pair of modems the page hovers: SNR and PER over distance (hilgate check's budget)
+            message["budget"] = budget_tables(scene)
+        except Exception:
+            log.exception("web view: the link budget could not be tabled (the page shows no PER)")
         self.flight.links = message["links"]
         return message
 
@@ -104,12 +107,17 @@ class WebFeed:
             status = link.status()
             backend = link.backend
             lost = dict(backend.modem.stats.lost) if isinstance(backend, SimBackend) else {}
+            causes = {cause: n for cause, n in lost.items() if n}
+            for cause, n in status["drop_causes"].items():
+                if n:
+                    causes[cause] = causes.get(cause, 0) + n
             links.append({"id": status["id"], "backend": status["backend"], "state": status["state"],
                           "ready": status["ready"], "fifo_bytes": status["fifo_bytes"],
                           "tx": status["tx_packets"], "rx": status["rx_packets"], "drops": status["drops"],
                           "lost": sum(lost.values()), "unread": status["unread"], "clients": status["clients"],
                           "drop_causes": status["drop_causes"], "since_s": status["since_s"],
-                          "reason": status.get("reason"), "errors": self.flight.errors_of(status["id"])})
+                          "reason": status.get("reason"), "errors": self.flight.errors_of(status["id"]),
+                          "causes": causes})
         vehicles = router.vehicle_status()
         self.flight.extent_m = extent_m(vehicle["position"] for vehicle in vehicles)
         hosts = []
@@ -130,7 +138,7 @@ class WebFeed:
         speed = self.scheduler.speed
         picture = {"class": "STATE", "t": round(now, 6), "rate": speed, "playing": True, "speed": speed,
                    "linger_s": LINGER_S * speed, "vehicles": vehicles, "links": links, "hosts": hosts,
-                   "frames": self.flight.visible(now, LINGER_S * speed), "flows": flows}
+                   "frames": self.flight.visible(now, LINGER_S * speed, 2 * INTERVAL_S * speed), "flows": flows}
         if self.extra is not None:
             picture.update(self.extra())
         return picture

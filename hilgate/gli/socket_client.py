@@ -48,6 +48,34 @@ def zenoh_options(zenoh: Any) -> dict[str, Any]:
     return dict(zenoh)
 
 
+def unreachable(link_id: str, runtime: str, path: str, exc: OSError) -> str:
+    """Why ``link_id``'s socket could not be reached, and what to do: a daemon runs there without that
+    link (its links named), or no daemon runs in that runtime directory (``--runtime-dir`` named)."""
+    if not _daemon_listens(os.path.join(runtime, "control.sock")):
+        return (f"no hilgate daemon runs with the runtime directory {runtime} (cannot reach link {link_id!r}): "
+                f"start one, or give this command the --runtime-dir the daemon was started with")
+    try:
+        links = sorted(name[:-5] for name in os.listdir(os.path.join(runtime, "gli")) if name.endswith(".sock"))
+    except OSError:
+        links = []
+    if not os.path.exists(path):
+        served = f"its links: {', '.join(links)}" if links else "it serves no link over its sockets"
+        return f"the daemon at {runtime} serves no link {link_id!r} over its sockets; {served}"
+    return f"cannot reach link {link_id!r} at {path}: {exc.strerror or exc}"
+
+
+def _daemon_listens(control: str) -> bool:
+    probe = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    probe.settimeout(1.0)
+    try:
+        probe.connect(control)
+        return True
+    except OSError:
+        return False
+    finally:
+        probe.close()
+
+
 class Link:
     def __init__(self, sock: socket.socket, link_id: str):
         self.sock = sock
@@ -91,14 +119,15 @@ class Link:
                 raise GliError(f"cannot reach hilgate's TCP GLI at {tcp[0]}:{tcp[1]}: {exc.strerror or exc}") from None
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         else:
-            path = os.path.join(client_runtime_dir(runtime_dir), "gli", f"{link_id}.sock")
+            runtime = client_runtime_dir(runtime_dir)
+            path = os.path.join(runtime, "gli", f"{link_id}.sock")
             sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
             sock.settimeout(timeout)
             try:
                 sock.connect(path)
             except OSError as exc:
                 sock.close()
-                raise GliError(f"cannot reach link {link_id!r} at {path}: {exc.strerror or exc}") from None
+                raise GliError(unreachable(link_id, runtime, path, exc)) from None
         link = cls(sock, link_id)
         try:
             deadline = time.monotonic() + timeout

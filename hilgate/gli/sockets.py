@@ -4,7 +4,9 @@ The framing is :mod:`hilgate.gli.wire`, the conversation :mod:`hilgate.gli.sessi
 a link's own Unix socket is attached to that link at once (the socket's mode and group say who may
 connect); a TCP client is sent a CHALLENGE and names its link in a HELLO that proves it holds the
 daemon's token (:mod:`hilgate.gli.token`), or is told why not and closed.  Connections that have not
-proved it yet are bounded (in all and per address) and closed after ``auth_timeout_s``, so a peer
+proved it yet wait in a :class:`~hilgate.core.waiting_room.WaitingRoom` (bounded in all and per
+address; a newcomer is always let in, and the oldest of the address holding the most makes room) and
+are closed ``auth_timeout_s`` after they connected, however slowly their HELLO trickles in: a peer
 without the token cannot take the places of those that have it.
 Each client is an endpoint of its link (:class:`~hilgate.core.endpoint.Endpoint`) and reaches the
 link only through its :class:`~hilgate.core.endpoint.LinkPort`.  A client that breaks the framing
@@ -25,6 +27,7 @@ from .token import TokenCheck
 from ..core.endpoint import ABSENT, TAKEN, LinkPort
 from ..core.packets import PacketError
 from ..core.streams import Connection, Listener, listen_unix, refuse
+from ..core.waiting_room import WaitingRoom
 
 log = logging.getLogger(__name__)
 
@@ -32,18 +35,17 @@ log = logging.getLogger(__name__)
 class ClientLimits:
     """How many socket clients the daemon serves at once, in all and per link, and how much output it
     keeps for one that does not read; how many TCP connections may wait to authenticate, in all and
-    from one address, and for how long; and what was refused on TCP."""
+    from one address, and for how long (a handshake is one round trip: 5 s is plenty on any lab
+    network); and what was refused on TCP (``auth_pending``: closed to make room for a newcomer)."""
 
     def __init__(self, total: int = 256, per_link: int = 32, output_cap: int = 256 * 1024,
-                 pending_total: int = 64, pending_per_address: int = 8, auth_timeout_s: float = 10.0):
+                 pending_total: int = 64, pending_per_address: int = 8, auth_timeout_s: float = 5.0):
         self.total = total
         self.per_link = per_link
         self.output_cap = output_cap
-        self.pending_total = pending_total
-        self.pending_per_address = pending_per_address
         self.auth_timeout_s = auth_timeout_s
         self.clients: set[GliClient] = set()
-        self.pending: dict[str, int] = {}  # address → TCP connections not authenticated yet
+        self.pending = WaitingRoom(pending_total, pending_per_address)  # TCP connections not authenticated yet
         self.refused = {"auth": 0, "auth_timeout": 0, "auth_pending": 0}
 
     def refuse(self, cause: str, address: str, detail: str) -> None:
@@ -77,10 +79,11 @@ class GliClient:
         self.auth_timer = None
         self.connection = Connection(sock, scheduler, self._on_data, self._on_close, max_buffer=limits.output_cap)
         limits.clients.add(self)
-        if check is not None:
-            limits.pending[address] = limits.pending.get(address, 0) + 1
+        if check is not None:  # one deadline for the whole handshake, from now: not renewed by its bytes
             self.auth_timer = scheduler.after_wall(limits.auth_timeout_s, self._auth_timeout)
             self.connection.write(self.session.challenge())
+            for older in limits.pending.admit(self, address):
+                older._make_room()
         if port is not None:
             self._bind(port.id)
 
@@ -91,11 +94,13 @@ class GliClient:
         self.waiting = False
         self.scheduler.cancel(self.auth_timer)
         self.auth_timer = None
-        count = self.limits.pending.get(self.address, 0) - 1
-        if count > 0:
-            self.limits.pending[self.address] = count
-        else:
-            self.limits.pending.pop(self.address, None)
+        self.limits.pending.leave(self)
+
+    def _make_room(self) -> None:
+        """The room is full and this one has waited longest of the address holding the most: it goes."""
+        detail = f"too many connections wait to authenticate from {self.address}: the oldest is closed"
+        self.limits.refuse("auth_pending", self.address, detail)
+        self.fail(detail)
 
     def _auth_timeout(self) -> None:
         self.auth_timer = None
@@ -203,10 +208,11 @@ def welcome(port: LinkPort) -> dict[str, Any]:
 
 def accept(sock: socket.socket, scheduler: Any, limits: ClientLimits, lookup: Callable[[str], LinkPort | None],
            port: LinkPort | None = None, check: TokenCheck | None = None) -> None:
-    """A new socket client, unless the daemon serves as many as it may (or, on TCP, as many wait to
-    authenticate, in all or from its address): then it is told why and closed."""
-    if len(limits.clients) >= limits.total:
-        log.info("GLI client refused: %d clients already (--max-clients)", len(limits.clients))
+    """A new socket client, unless the daemon serves as many as it may: then it is told why and closed.
+    On TCP it is let in even when as many wait to authenticate as may (in all, or from its address): the
+    oldest of those from the address holding the most makes room (:mod:`hilgate.core.waiting_room`)."""
+    if len(limits.clients) - len(limits.pending) >= limits.total:  # strangers waiting to authenticate take no place
+        log.info("GLI client refused: %d clients already (--max-clients)", len(limits.clients) - len(limits.pending))
         refuse(sock, wire.encode_json(wire.ERROR, {"error": f"too many clients ({limits.total})"}))
         return
     address = ""
@@ -215,11 +221,6 @@ def accept(sock: socket.socket, scheduler: Any, limits: ClientLimits, lookup: Ca
             address = str(sock.getpeername()[0])
         except OSError:  # already gone
             sock.close()
-            return
-        waiting = limits.pending.get(address, 0)
-        if waiting >= limits.pending_per_address or sum(limits.pending.values()) >= limits.pending_total:
-            limits.refuse("auth_pending", address, f"{waiting} connections from it wait to authenticate already")
-            refuse(sock, wire.encode_json(wire.ERROR, {"error": "too many connections waiting to authenticate"}))
             return
     GliClient(sock, scheduler, limits, lookup, port, check, address)
 

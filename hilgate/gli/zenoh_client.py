@@ -50,16 +50,31 @@ def _session(zenoh_option: Any) -> tuple[Any, str, Identity | None]:
                             identity=identity, prefix=prefix,
                             multicast_scouting=bool(options.get("multicast_scouting", False)),
                             config_file=options.get("config"))
+    from .socket_client import GliError
+
     try:
         session = zenoh.open(config)
     except zenoh.ZError as exc:
-        from .socket_client import GliError
-
         raise GliError(f"cannot open a Zenoh session: {str(exc).splitlines()[0] if str(exc) else exc}") from None
     deadline = time.monotonic() + 2.0
     while options.get("connect") and time.monotonic() < deadline and not list(session.info.peers_zid()):
         time.sleep(0.02)
+    if options.get("connect") and not list(session.info.peers_zid()):
+        session.close()
+        raise GliError(_nobody_at(list(options["connect"]), identity is not None))
     return session, prefix, identity
+
+
+def _nobody_at(endpoints: list[str], with_credentials: bool) -> str:
+    """No daemon took the connection: on an authenticated network (``hilgate network init``) the usual
+    cause is an application without its credentials, whose plain TCP a TLS listener refuses."""
+    where = ", ".join(endpoints)
+    if not with_credentials:
+        return (f"no daemon took a connection at {where}: a network made with hilgate network init takes only "
+                f"applications with their credentials (--zenoh-credentials DIR/apps/NAME, or Link.open(zenoh="
+                f"{{'connect': [...], 'credentials': DIR}})); else no daemon listens there")
+    return (f"no daemon took a connection at {where} with these credentials: no daemon listens there, or its "
+            f"certificates come from another network's CA (hilgate network init)")
 
 
 def _prefix_hint(session: Any, link_id: str, prefix: str) -> str:

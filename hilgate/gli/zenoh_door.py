@@ -24,11 +24,13 @@ whatever it says.  An application finds the host of a link by asking ``<prefix>/
 **Bounded per client.** Zenoh calls back on its own threads; nothing there waits for the loop.  Each
 client has its own queue of SENDs at the door (:data:`CLIENT_QUEUE`) filled at most at
 :data:`CLIENT_RATE_HZ` on average (a token bucket of :data:`CLIENT_BURST`); the loop takes them in turn,
-one per client per round, whenever the link is READY, so one client's flood fills only its own queue:
-its excess is dropped and counted (``rate``, ``client_queue``) while the others' frames go through.
+one per client per turn, whenever the link is READY (the turns kept from one READY to the next), so
+one client's flood fills only its own queue: its excess is dropped and counted (``rate``,
+``client_queue``) while the others' frames go through at their own pace (:class:`SenderQueues`).
 A command query is answered from the loop, at most :data:`QUERY_PENDING` of a client at a time and
 :data:`QUERY_RATE_HZ` on average; one beyond is dropped unanswered (counted ``query_refused``).  What
-the door holds in all is bounded: :data:`MAX_CLIENTS` per link, :data:`DOOR_BYTES` of SENDs.
+the door holds in all is bounded: :data:`MAX_CLIENTS` per link (a newcomer takes the place of a
+client over its share), :data:`DOOR_BYTES` of SENDs.
 """
 
 from __future__ import annotations
@@ -59,7 +61,7 @@ CLIENT_QUEUE = 64          # SENDs of one client waiting at the door for the lin
 CLIENT_RATE_HZ = 1000.0    # SENDs per second a client may make on average …
 CLIENT_BURST = 200         # … and at once
 MAX_SEND = 1 + 65536       # a SEND longer than this is refused unread (no packet class carries more)
-MAX_CLIENTS = 32           # clients a link's door keeps queues for; SENDs of more are refused
+MAX_CLIENTS = 32           # clients a link's door keeps queues for (then one over its share gives its place up)
 DOOR_BYTES = 16 << 20      # bytes of SENDs all links' doors hold in all
 QUERY_PENDING = 4          # command queries of one client waiting for the loop
 QUERY_RATE_HZ = 50.0       # command and info queries per second a client (info: a link) may make …
@@ -123,16 +125,18 @@ class Bucket:
 
 
 class Sender:
-    """What a door holds for one sender of a link (a Zenoh client, a DDS writer): its frames waiting
+    """What a door holds for one sender of a link (a Zenoh client, a ROS 2 node): its frames waiting
     for the link to be READY, its rate, and what it lost since the loop last counted it."""
 
-    __slots__ = ("name", "queue", "sends", "drops")
+    __slots__ = ("key", "name", "queue", "sends", "drops", "over")
 
-    def __init__(self, name: str):
+    def __init__(self, key: Any, name: str):
+        self.key = key  # (its place in the door's ``senders``)
         self.name = name
         self.queue: deque[Any] = deque()
         self.sends = Bucket(CLIENT_RATE_HZ, CLIENT_BURST)
         self.drops: dict[str, int] = {}
+        self.over = False  # a frame of it was refused (rate, queue full) since its queue was last empty
 
     @staticmethod
     def size(item: Any) -> int:
@@ -149,8 +153,8 @@ class Client(Sender):
 
     __slots__ = ("queries", "pending")
 
-    def __init__(self, name: str):
-        super().__init__(name)
+    def __init__(self, key: Any, name: str):
+        super().__init__(key, name)
         self.queries = Bucket(QUERY_RATE_HZ, QUERY_BURST)
         self.pending = 0
 
@@ -160,9 +164,27 @@ class Client(Sender):
 
 class SenderQueues(ABC):
     """The loop's side of a door whose senders each have a queue (this door, and the ROS 2 door's
-    writers): one frame of each sender in turn while the link is READY, so one sender's flood fills
-    only its own queue.  The endpoint fills ``senders`` and ``refused`` on its transport's threads,
-    under ``lock``, and posts :meth:`_pump` to the loop once (``posted``)."""
+    nodes): the senders with frames take turns, one frame each, while the link is READY, so one
+    sender's flood fills only its own queue and costs each other sender one frame per turn.
+
+    The turns are a queue of their own (``turns``: the senders with frames, in the order of their next
+    turn), kept from one READY to the next: a sender whose frame went waits behind every other sender
+    with frames.  (Going round the senders from the first one each time the link was READY again gave
+    the first sender with a frame every turn: a link that sends one frame per READY never got past a
+    flooder, and an honest sender's frames crossed only once the flood was over.)
+
+    Places are bounded (:data:`MAX_CLIENTS`).  When every place is taken and a newcomer sends, a sender
+    that is over its share (a frame of it refused, ``rate`` or ``client_queue``, since its queue was last
+    empty) gives its place up, the one with the longest queue first (what it queued is dropped, counted
+    ``evicted``): a sender that keeps to its share keeps its place however long its queue, and a flood
+    of senders (names, DDS participants) cannot lock an honest one out.  Only when every place is held
+    by a sender within its share is a newcomer refused (``clients``).  (The longest queue alone, as a
+    shared buffer drops from it, evicted the honest sender with a backlog while the flood's senders,
+    evicted in turn, came back with empty queues.)  A sender with nothing queued and nothing sent lately
+    is forgotten.
+
+    The endpoint fills the queues on its transport's threads, under ``lock`` (:meth:`_place`,
+    :meth:`_admit`, :meth:`_queue`), and posts :meth:`_pump` to the loop once (``posted``)."""
 
     source: str  # the ``src`` of what is counted lost ("zenoh", "ros2"; a sender's: "zenoh:<name>")
 
@@ -171,9 +193,37 @@ class SenderQueues(ABC):
         self.port = port
         self.ready: bool | None = None
         self.senders: dict[Any, Sender] = {}
+        self.turns: deque[Sender] = deque()  # the senders with frames queued, in the order of their next turn
         self.refused: dict[str, int] = {}  # frames and queries of no sender the door could keep
+        self.gone: list[tuple[str, dict[str, int]]] = []  # what senders that gave up their places lost
         self.lock: threading.Lock = door.lock  # (one for the door: its byte count is shared)
         self.posted = False
+
+    def _place(self, key: Any, make: Any) -> Sender | None:
+        """Under the lock: the sender ``key`` names, given a place (``make()``) if new; None, counted
+        ``clients``, when every place is held by a sender within its share."""
+        sender = self.senders.get(key)
+        if sender is not None:
+            return sender
+        if len(self.senders) >= MAX_CLIENTS:
+            over = [s for s in self.senders.values() if s.over]
+            if not over:
+                self.refused["clients"] = self.refused.get("clients", 0) + 1
+                return None
+            self._evict(max(over, key=lambda s: len(s.queue)))
+        sender = self.senders[key] = make()
+        return sender
+
+    def _evict(self, sender: Sender) -> None:
+        """Under the lock: ``sender`` gives its place up; its frames are dropped (counted ``evicted``)."""
+        del self.senders[sender.key]
+        if sender.queue:
+            self.turns.remove(sender)
+            self.door.queued -= sum(sender.size(item) for item in sender.queue)
+            sender.drops["evicted"] = sender.drops.get("evicted", 0) + len(sender.queue)
+            sender.queue.clear()
+        if sender.drops:
+            self.gone.append((sender.name, sender.drops))
 
     def _admit(self, sender: Sender, size: int, max_size: int, door_bytes: int) -> bool:
         """Under the lock, on the transport's thread: whether ``sender`` may queue a frame of ``size``
@@ -189,16 +239,27 @@ class SenderQueues(ABC):
             door.queued += size
             return True
         sender.drops[cause] = sender.drops.get(cause, 0) + 1
+        if cause != "bad_frame":
+            sender.over = True
         return False
+
+    def _queue(self, sender: Sender, item: Any) -> None:
+        """Under the lock: ``item`` (admitted) joins ``sender``'s queue; a sender that had nothing queued
+        takes its place at the back of the turns."""
+        if not sender.queue:
+            self.turns.append(sender)
+        sender.queue.append(item)
 
     def _pump(self) -> None:
         """On the loop: report what was dropped, then the senders' frames in turn while the link is READY."""
-        door, port = self.door, self.port
+        door, port, turns = self.door, self.port, self.turns
         with self.lock:
             self.posted = False
             drops = [(sender.name, sender.drops) for sender in self.senders.values() if sender.drops]
             for sender in self.senders.values():
                 sender.drops = {}
+            drops += self.gone
+            self.gone = []
             refused, self.refused = self.refused, {}
         for name, counts in drops:
             for cause, n in counts.items():
@@ -206,19 +267,17 @@ class SenderQueues(ABC):
         for cause, n in refused.items():
             port.lost(cause, 0, src=self.source, n=n)
         while port.ready:
-            sent = False
-            for sender in list(self.senders.values()):
-                with self.lock:
-                    if not sender.queue:
-                        continue
-                    item = sender.queue.popleft()
-                    door.queued -= sender.size(item)
-                self._forward(item, sender)
-                sent = True
-                if not port.ready:
+            with self.lock:
+                if not turns:
                     break
-            if not sent:
-                break
+                sender = turns.popleft()
+                item = sender.queue.popleft()
+                door.queued -= sender.size(item)
+                if sender.queue:
+                    turns.append(sender)  # its next frame after everyone else's
+                else:
+                    sender.over = False
+            self._forward(item, sender)
         with self.lock:  # senders with nothing queued, sending and asking nothing lately, are forgotten
             for key in [key for key, sender in self.senders.items() if sender.idle()]:
                 del self.senders[key]
@@ -233,6 +292,7 @@ class SenderQueues(ABC):
             for sender in self.senders.values():
                 self.door.queued -= sum(sender.size(item) for item in sender.queue)
                 sender.queue.clear()
+            self.turns.clear()
 
 
 class ZenohEndpoint(SenderQueues):
@@ -284,23 +344,16 @@ class ZenohEndpoint(SenderQueues):
     def _client(self, key: str, leaf: str) -> Client | None:
         """The client a key names (under the lock); None, counted, when it cannot be kept."""
         name = key[len(self.base) + len(leaf) + 1:]
-        client = self.senders.get(name)
-        if client is None:
-            if not CLIENT_NAME.fullmatch(name):
-                cause = "bad_client"
-            elif len(self.senders) >= MAX_CLIENTS:
-                cause = "clients"
-            else:
-                client = self.senders[name] = Client(name)
-                return client
-            self.refused[cause] = self.refused.get(cause, 0) + 1
-        return client
+        if name not in self.senders and not CLIENT_NAME.fullmatch(name):
+            self.refused["bad_client"] = self.refused.get("bad_client", 0) + 1
+            return None
+        return self._place(name, lambda: Client(name, name))  # type: ignore[return-value]
 
     def _on_send(self, sample: Any) -> None:
         with self.lock:
             client = self._client(str(sample.key_expr), "send")
             if client is not None and self._admit(client, len(sample.payload), MAX_SEND, DOOR_BYTES):
-                client.queue.append(sample.payload.to_bytes())
+                self._queue(client, sample.payload.to_bytes())
             wake, self.posted = not self.posted, True
         if wake:
             self.door.post(self._pump)

@@ -8,17 +8,21 @@ and jitter per flow.
 
 Made to go in a paper, and checked from what was drawn (``inspect``):
 
-- every caption is *in* the figure file (drawn under the plot, and in the file's metadata), not only
-  in ``index.html``, and says what produced the figure;
+- every caption is *in* the figure file's metadata (PNG text, PDF Subject, SVG description), not only in
+  ``index.html``, and says what produced the figure; drawn under the plot only when asked
+  (``captions``), since a journal sets captions itself;
+- PNG at 300 dpi (what journals ask of figures with colour), another resolution when asked; PDF with
+  TrueType fonts embedded (journals' PDF checks refuse matplotlib's default Type 3);
 - series that coincide get their own line styles and markers, and the caption names them; markers
   are hollow where points of several series overlap (delays);
 - a value axis spanning more than 100× is logarithmic, and values a log axis cannot show honestly
   (zero, or below a nanosecond for times: floating-point residues) are not drawn there; the caption
   says how many;
 - tick labels never overlap, at any ``--width``: labels that would are thinned or turned;
-- each flow's timeline has its own time axis, fitted to that flow's activity; timelines too dense for
-  marks are counted per window;
-- plain tick values, delays in ms below a second, one colour per loss cause everywhere;
+- the flows' timelines share one time axis, spanning every flow's activity, so that panels compare at a
+  glance; timelines too dense for marks are counted per window, the same windows in every panel;
+- plain tick values, delays in ms below a second; loss causes in words and one colour each, from the
+  table the tables and the web view use too (:mod:`.causes`);
 - ``--out`` holds only this run's figures: what an earlier report wrote there is removed first.
 
 matplotlib is an optional extra (``pip install 'hilgate[report]'``); without it the command says so
@@ -31,6 +35,7 @@ import csv
 import html
 import itertools
 import json
+import logging
 import math
 import os
 import textwrap
@@ -38,11 +43,13 @@ import warnings
 from collections import defaultdict
 from typing import Any
 
+from .causes import RECEIVED, legend_order
+from .causes import colour as cause_colour
+from .causes import words as cause_words
 from .tracedata import Packet, ReportError, Run, Trace, load_summary, load_trace
 
-CAUSE_COLOURS = {"prop": "#e69f00", "col": "#d62728", "mult": "#9467bd", "fifo": "#222222", "range": "#1f77b4",
-                 "closed": "#7f7f7f", "band": "#17becf", "modulation": "#bcbd22"}
-OTHER_LOSS = "#8c564b"
+log = logging.getLogger(__name__)
+
 REAL_SHADE = "#9ecae1"
 MISSING_MATPLOTLIB = ("hilgate report needs matplotlib, an optional extra: pip install 'hilgate[report]' "
                       "(or pip install matplotlib); --csv tables need nothing more")
@@ -68,6 +75,19 @@ MAX_SERIES = 12
 """Series on one axes (links' FIFOs, flows' delays): the busiest ones, the caption says how many more."""
 
 WIDTH_IN = 9.0
+
+DPI = 300.0
+"""PNG resolution: journals ask 300 dpi of figures with colour (line art alone: 600 to 1200, on request)."""
+
+DPI_RANGE = (50.0, 1200.0)
+
+MAX_PIXELS = 200e6
+"""A PNG larger than this (800 MB while drawn) is refused with the resolution that fits: the tallest
+timeline (24 panels, 37 inches) at 1200 dpi would take 2 GB of a lab's PC."""
+
+VECTOR_FONTS = {"pdf.fonttype": 42, "ps.fonttype": 42}
+"""TrueType fonts embedded in PDF, not matplotlib's default Type 3, which journals' PDF checks refuse."""
+
 CAPTION_PT = 8.0
 MIN_TICK_PT = 6.0
 
@@ -115,9 +135,10 @@ def write_csv(trace: Trace, summaries: dict[str, dict], vehicles: list[str], out
         files.append(path)
 
     table("packets.csv", ["pkt", "src", "dst", "size", "t_enq", "t_tx", "receiver", "t_outcome", "outcome", "cause",
-                          "delay_s"],
+                          "delay_s", "cause_in_words"],
           ([p.pkt, p.src, p.dst, p.size, p.t_enq, p.t_tx[0] if p.t_tx else "", receiver, t, ev, cause or "",
-            t - p.t_enq if ev == "rx" and p.t_enq is not None else ""]
+            t - p.t_enq if ev == "rx" and p.t_enq is not None else "",
+            cause_words(cause) if ev in ("err", "drop") else ""]
            for p in sorted(trace.packets.values(), key=lambda p: str(p.pkt)) for t, receiver, ev, cause in p.outcomes))
     table("fifo.csv", ["t", "link", "fifo_bytes"],
           ([t, link, size] for link, points in sorted(trace.fifo.items()) for t, size in points))
@@ -188,7 +209,7 @@ def _style(i: int) -> tuple[str, str]:
 
 
 def _span(times: list[float]) -> tuple[float, float]:
-    """The x-range of a panel: its own activity, with a margin."""
+    """A time axis' range: the activity, with a margin."""
     low, high = min(times), max(times)
     pad = 0.04 * (high - low) if high > low else max(0.5, abs(low) * 1e-6)
     return low - pad, high + pad
@@ -313,9 +334,9 @@ def _legible(fig) -> tuple[bool, int]:
 
 def _collisions(fig, caption) -> int:
     """Pairs of texts of different kinds that overlap: tick labels of one axis, axis labels, legends,
-    the caption."""
+    the caption (when drawn)."""
     renderer = fig.canvas.get_renderer()
-    groups: list[list] = [[caption.get_window_extent(renderer)]]
+    groups: list[list] = [[caption.get_window_extent(renderer)]] if caption is not None else []
     for ax in fig.axes:
         for axis in (ax.xaxis, ax.yaxis):
             groups.append(_tick_boxes(axis, renderer))
@@ -359,21 +380,27 @@ def _inside(fig, artist) -> bool:
 
 
 class _Writer:
-    """Saves figures with their caption drawn under them and in the files' metadata."""
+    """Saves figures with their caption in the files' metadata, and drawn under them when asked."""
 
-    def __init__(self, plt, out: str, formats: tuple[str, ...], subtitle: str, inspect: dict, title: str):
+    def __init__(self, plt, out: str, formats: tuple[str, ...], subtitle: str, inspect: dict, title: str,
+                 dpi: float = DPI, captions: bool = False):
         self.plt, self.out, self.formats, self.subtitle, self.inspect, self.title = \
             plt, out, formats, subtitle, inspect, title
+        self.dpi, self.captions = dpi, captions
         self.written: list[tuple[str, str]] = []
+        self.files: list[str] = []  # every file saved, each format of each figure
 
     def save(self, fig, stem: str, caption: str) -> None:
         caption = caption + (f" ({self.subtitle})" if self.subtitle else "")
-        lines = _caption_lines(caption, fig.get_figwidth())
-        extra = (len(lines) * CAPTION_PT * 1.32 + 10) / 72
-        height = fig.get_figheight() + extra
-        fig.set_figheight(height)
-        text = fig.text(0.012, 4 / 72 / height, "\n".join(lines), fontsize=CAPTION_PT, ha="left", va="bottom",
-                        gid="caption")
+        text, extra = None, 0.0
+        height = fig.get_figheight()
+        if self.captions:
+            lines = _caption_lines(caption, fig.get_figwidth())
+            extra = (len(lines) * CAPTION_PT * 1.32 + 10) / 72
+            height += extra
+            fig.set_figheight(height)
+            text = fig.text(0.012, 4 / 72 / height, "\n".join(lines), fontsize=CAPTION_PT, ha="left", va="bottom",
+                            gid="caption")
         with warnings.catch_warnings(record=True) as complaints:
             warnings.simplefilter("always")
             fig.tight_layout(rect=(0, extra / height, 1, 1))
@@ -383,12 +410,20 @@ class _Writer:
         overlaps = _legible(fig)[1]
         self.inspect.setdefault(stem, {}).update({
             "overlaps": overlaps, "collisions": _collisions(fig, text), "outside": _outside(fig), "caption": caption,
-            "caption_inside": _inside(fig, text), "width_in": fig.get_figwidth(),
-            "layout": not any("tight" in str(w.message).lower() for w in complaints)})
-        for fmt in self.formats:
-            metadata = ({"Title": f"{self.title}: {stem}", "Subject": caption} if fmt == "pdf"
-                        else {"Title": f"{self.title}: {stem}", "Description": caption})
-            fig.savefig(os.path.join(self.out, f"{stem}.{fmt}"), dpi=110, metadata=metadata)
+            "caption_drawn": text is not None, "caption_inside": text is not None and _inside(fig, text),
+            "width_in": fig.get_figwidth(), "layout": not any("tight" in str(w.message).lower() for w in complaints)})
+        if "png" in self.formats:
+            _check_pixels(fig, stem, self.dpi)
+        import matplotlib
+
+        with matplotlib.rc_context(VECTOR_FONTS):
+            for fmt in self.formats:
+                metadata = ({"Title": f"{self.title}: {stem}", "Subject": caption} if fmt == "pdf"
+                            else {"Title": f"{self.title}: {stem}", "Description": caption})
+                path = os.path.join(self.out, f"{stem}.{fmt}")
+                fig.savefig(path, dpi=self.dpi, metadata=metadata)
+                self.files.append(path)
+                log.debug("wrote %s", path)
         self.plt.close(fig)
         self.written.append((f"{stem}.{self.formats[0]}", caption))
 
@@ -396,20 +431,39 @@ class _Writer:
 # -- the figures ----------------------------------------------------------------------------------
 
 
+def check_dpi(dpi: float) -> None:
+    if not (math.isfinite(dpi) and DPI_RANGE[0] <= dpi <= DPI_RANGE[1]):
+        raise ReportError(f"--dpi {dpi:g}: give the PNGs' resolution in dots per inch, from {DPI_RANGE[0]:g} "
+                          f"to {DPI_RANGE[1]:g} (journals ask 300)")
+
+
+def _check_pixels(fig, stem: str, dpi: float) -> None:
+    width_in, height_in = fig.get_figwidth(), fig.get_figheight()
+    if width_in * height_in * dpi * dpi > MAX_PIXELS:
+        fits = int(math.sqrt(MAX_PIXELS / (width_in * height_in)))
+        raise ReportError(f"--dpi {dpi:g}: {stem}.png would be {width_in:.1f} × {height_in:.1f} inches at {dpi:g} dpi, "
+                          f"{width_in * height_in * dpi * dpi / 1e6:.0f} million pixels; give --dpi {fits} or less, "
+                          f"or a smaller --width")
+
+
 def figures(trace: Trace, summaries: dict[str, dict], vehicles: list[str], out: str,
             title: str = "", formats: tuple[str, ...] = ("png",), subtitle: str = "",
-            inspect: dict[str, dict] | None = None, width: float | None = None) -> list[tuple[str, str]]:
+            inspect: dict[str, dict] | None = None, width: float | None = None, dpi: float = DPI,
+            captions: bool = False, files: list[str] | None = None) -> list[tuple[str, str]]:
     """Write the figures (PNG, and SVG/PDF when asked), ``width`` inches wide (default ``WIDTH_IN``,
-    and the bars of many flows wider); returns (file name, caption) pairs.  ``inspect`` collects what
-    was drawn, figure by figure (scales, series and their styles, what was left out, whether texts
-    overlap), for tests that check a figure from its data."""
+    and the bars of many flows wider), PNGs at ``dpi``, captions drawn under them when ``captions``;
+    returns (file name, caption) pairs, the name in the first format.  ``files`` collects the path of
+    every file written (each format: what the command counts).  ``inspect`` collects what was drawn,
+    figure by figure (scales, series and their styles, what was left out, whether texts overlap), for
+    tests that check a figure from its data."""
     width_given = width is not None
     width = WIDTH_IN if width is None else width
     if not (math.isfinite(width) and 2.0 <= width <= 40.0):
         raise ReportError(f"--width {width:g}: give the figures' width in inches, from 2 to 40")
+    check_dpi(dpi)
     plt = _pyplot()
     inspect = inspect if inspect is not None else {}
-    writer = _Writer(plt, out, formats, subtitle, inspect, title or "hilgate report")
+    writer = _Writer(plt, out, formats, subtitle, inspect, title or "hilgate report", dpi, captions)
     _distance_figure(plt, writer, trace, vehicles, width)
     flows = _by_flow(trace)
     if flows:
@@ -419,6 +473,8 @@ def figures(trace: Trace, summaries: dict[str, dict], vehicles: list[str], out: 
         _fifo_figure(plt, writer, trace, width)
     if summaries:
         _compare_figure(plt, writer, summaries, width, width_given)
+    if files is not None:
+        files.extend(writer.files)
     return writer.written
 
 
@@ -450,55 +506,70 @@ def _busiest(flows: dict[tuple[str, str], list[Packet]], limit: int) -> list[tup
     return sorted(ranked)
 
 
+def _activity(packets: list[Packet]) -> tuple[list[float], list[float], dict[str | None, list[float]], list[float]]:
+    """A flow's times: sent, received, lost by cause, and all of them with the enqueues."""
+    sent = [t for p in packets for t in p.t_tx]
+    received = [t for p in packets for t, _, ev, _ in p.outcomes if ev == "rx"]
+    lost_by_cause: dict[str | None, list[float]] = defaultdict(list)
+    for p in packets:
+        for t, _, ev, cause in p.outcomes:
+            if ev in ("err", "drop"):
+                lost_by_cause[cause].append(t)
+    every = sent + received + [t for times in lost_by_cause.values() for t in times] + \
+        [p.t_enq for p in packets if p.t_enq is not None]
+    return sent, received, lost_by_cause, every
+
+
 def _timeline_figure(plt, writer: _Writer, trace: Trace, flows: dict[tuple[str, str], list[Packet]],
                      width: float) -> None:
+    """One panel per flow, on one time axis: a reader compares when flows were busy, lost frames or
+    were on a real modem by looking down the page, as a journal's figure of stacked panels reads."""
     chosen = _busiest(flows, MAX_PANELS)
-    fig, axes = plt.subplots(len(chosen), 1, figsize=(width, 1.0 + 1.45 * len(chosen)), squeeze=False)
-    aggregated, spans, shaded = [], {}, {}
+    fig, axes = plt.subplots(len(chosen), 1, figsize=(width, 1.0 + 1.45 * len(chosen)), squeeze=False,
+                             sharex=True)
+    times = {flow: _activity(flows[flow]) for flow in chosen}
+    every = [t for flow in chosen for t in times[flow][3]]
+    low, high = _span(every) if every else (0.0, 1.0)
+    bin_s = (high - low) / 120 if high > low else 1.0  # (the same windows in every dense panel)
+    aggregated, shaded = [], {}
     handles: dict[str, Any] = {}
+    ranks: dict[str, tuple] = {}  # the legend's order: sent, received, losses as the causes' table lists them
     for ax, flow in zip(axes[:, 0], chosen):
-        packets = flows[flow]
-        sent = [t for p in packets for t in p.t_tx]
-        received = [t for p in packets for t, _, ev, _ in p.outcomes if ev == "rx"]
-        lost_by_cause: dict[str, list[float]] = defaultdict(list)
-        for p in packets:
-            for t, _, ev, cause in p.outcomes:
-                if ev in ("err", "drop"):
-                    lost_by_cause[cause or "?"].append(t)
-        activity = sent + received + [t for times in lost_by_cause.values() for t in times] + \
-            [p.t_enq for p in packets if p.t_enq is not None]
-        low, high = _span(activity) if activity else (0.0, 1.0)
-        spans[f"{flow[0]} → {flow[1]}"] = (low, high)
+        sent, received, lost_by_cause, _ = times[flow]
+        causes = sorted(lost_by_cause, key=legend_order)
         if len(sent) > DENSE:  # a solid band as marks: rates per window instead
             aggregated.append(f"{flow[0]} → {flow[1]}")
-            bin_s = (high - low) / 120 if high > low else 1.0
             edges = [low + i * bin_s for i in range(121)]
 
-            def rate(times: list[float]) -> list[float]:
+            def rate(moments: list[float]) -> list[float]:
                 counts = [0] * 120
-                for t in times:
+                for t in moments:
                     counts[min(119, max(0, int((t - low) / bin_s)))] += 1
                 return [c / bin_s for c in counts]
 
             peak = 0.0
-            for label, times, colour in [("sent /s", sent, "#555555"), ("received /s", received, "#2ca02c")] + \
-                    [(f"lost: {cause} /s", times, CAUSE_COLOURS.get(cause, OTHER_LOSS))
-                     for cause, times in sorted(lost_by_cause.items())]:
-                if times:
-                    values = rate(times)
+            for label, moments, colour, rank in [("sent /s", sent, "#555555", (0, 0)),
+                                                 (f"{RECEIVED.words} /s", received, RECEIVED.colour, (0, 1))] + \
+                    [(f"lost: {cause_words(cause)} /s", lost_by_cause[cause], cause_colour(cause),
+                      (1, legend_order(cause))) for cause in causes]:
+                if moments:
+                    values = rate(moments)
                     peak = max(peak, max(values))
                     handles[label] = ax.step(edges[:-1], values, where="post", color=colour, label=label)[0]
+                    ranks[label] = rank
             ax.set_ylim(0, peak * 1.45 or 1.0)
             ax.set_ylabel(f"per s ({bin_s:.3g} s bins)", fontsize="x-small")
         else:
             handles["sent"] = ax.scatter(sent, [2] * len(sent), marker="|", s=40, color="#555555", label="sent")
-            handles["received"] = ax.scatter(received, [1] * len(received), marker="|", s=40, color="#2ca02c",
-                                             label="received")
-            for cause, lost in sorted(lost_by_cause.items()):
-                handles[f"lost: {cause}"] = ax.scatter(lost, [0] * len(lost), marker="x", s=18,
-                                                       color=CAUSE_COLOURS.get(cause, OTHER_LOSS),
-                                                       label=f"lost: {cause}")
-            ax.set_yticks([0, 1, 2], ["lost", "rx", "tx"])
+            handles[RECEIVED.words] = ax.scatter(received, [1] * len(received), marker="|", s=40,
+                                                 color=RECEIVED.colour, label=RECEIVED.words)
+            ranks.update({"sent": (0, 0), RECEIVED.words: (0, 1)})
+            for cause in causes:
+                label = f"lost: {cause_words(cause)}"
+                handles[label] = ax.scatter(lost_by_cause[cause], [0] * len(lost_by_cause[cause]), marker="x", s=18,
+                                            color=cause_colour(cause), label=label)
+                ranks[label] = (1, legend_order(cause))
+            ax.set_yticks([0, 1, 2], ["lost", RECEIVED.words, "sent"])
             ax.set_ylim(-0.6, 3.3)
         periods = []
         for link in dict.fromkeys(flow):
@@ -512,24 +583,26 @@ def _timeline_figure(plt, writer: _Writer, trace: Trace, flows: dict[tuple[str, 
                             fontsize="xx-small", va="bottom", ha="left", clip_on=True)
         if periods:
             shaded[f"{flow[0]} → {flow[1]}"] = periods
-        ax.set_xlim(low, high)
         _plain(ax)
         ax.text(0.005, 0.97, _short(f"{flow[0]} → {flow[1]}", max(16, int(width * 72 * 0.8 / (8.3 * 0.62)))),
                 transform=ax.transAxes, fontsize="small", va="top", ha="left",
                 bbox={"facecolor": "white", "alpha": 0.8, "lw": 0, "pad": 1})
         ax.grid(axis="x", alpha=0.3)
+    axes[0, 0].set_xlim(low, high)  # (shared: every panel's)
     axes[-1, 0].set_xlabel("time (s)")
-    _legend(axes[0, 0], width, list(handles.values()), list(handles))
-    writer.inspect["timeline"] = {"aggregated": aggregated, "xlim": spans, "real_periods": shaded,
+    fig.align_ylabels(axes[:, 0])
+    labels = sorted(handles, key=lambda label: ranks.get(label, (2,)))
+    _legend(axes[0, 0], width, [handles[label] for label in labels], labels)
+    writer.inspect["timeline"] = {"aggregated": aggregated, "xlim": (low, high), "real_periods": shaded,
                                   "panels": [f"{a} → {b}" for a, b in chosen]}
-    note = f"; counted per window for {', '.join(aggregated)}" if aggregated else ""
+    note = f"; counted per {bin_s:.3g} s window for {', '.join(aggregated)}" if aggregated else ""
     if shaded:
         note += ("; shaded: a link of the flow on a real modem (its frames then carry no packet id and are not "
                  "on this timeline)")
     if len(flows) > len(chosen):
         note += f"; the {len(chosen)} busiest of {len(flows)} flows (all are in packets.csv with --csv)"
-    writer.save(fig, "timeline", "Packets of each flow: sent, received, and lost by cause; each panel's time "
-                                 "axis spans its flow's activity" + note)
+    writer.save(fig, "timeline", "Packets of each flow: sent, received, and lost by cause; the panels share one "
+                                 "time axis" + note)
 
 
 def _delay_figure(plt, writer: _Writer, trace: Trace, flows: dict[tuple[str, str], list[Packet]],
@@ -680,12 +753,14 @@ def write_index(out: str, written: list[tuple[str, str]], tables: list[str], tit
 def report(trace_path: str, summary_paths: list[str], out: str, vehicles: list[str] | None = None,
            csv_tables: bool = False, title: str | None = None,
            window: tuple[float, float] | None = None, run: Run | None = None,
-           formats: tuple[str, ...] = ("png",), width: float | None = None) -> list[str]:
-    """Everything ``hilgate report`` writes; returns the paths."""
+           formats: tuple[str, ...] = ("png",), width: float | None = None, dpi: float = DPI,
+           captions: bool = False) -> list[str]:
+    """Everything ``hilgate report`` writes; returns the paths, every one (each format of each figure)."""
     if window is not None and not window[0] < window[1]:
         raise ReportError(f"--window {window[0]:g} {window[1]:g} is empty: give START < END in seconds")
     if width is not None and not (math.isfinite(width) and 2.0 <= width <= 40.0):
         raise ReportError(f"--width {width:g}: give the figures' width in inches, from 2 to 40")
+    check_dpi(dpi)
     trace = load_trace(trace_path, window, run)
     summaries = {os.path.splitext(os.path.basename(p))[0]: load_summary(p) for p in summary_paths}
     chosen = vehicles or sorted(trace.poses)[:4]
@@ -701,11 +776,13 @@ def report(trace_path: str, summary_paths: list[str], out: str, vehicles: list[s
             produced.append(f"{name}: scene {summary.get('scene')}, seed {summary.get('seed')}")
     if window is not None:
         produced.append(f"window {window[0]:g}–{window[1]:g} s")
+    files: list[str] = []
     try:
-        written = figures(trace, summaries, chosen, out, title, formats, "; ".join(produced), width=width)
+        written = figures(trace, summaries, chosen, out, title, formats, "; ".join(produced), width=width, dpi=dpi,
+                          captions=captions, files=files)
     except ReportError:
         if csv_tables:
             write_index(out, [], tables, title)
         raise
     index = write_index(out, written, tables, title)
-    return [os.path.join(out, name) for name, _ in written] + tables + [index]
+    return files + tables + [index]

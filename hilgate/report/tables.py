@@ -1,8 +1,11 @@
-"""The readable per-flow and per-link tables printed at the end of ``hilgate sim``."""
+"""The readable per-flow and per-link tables printed at the end of ``hilgate sim``; loss causes in the
+words of :mod:`.causes`, as the report's figures name them."""
 
 from __future__ import annotations
 
 from typing import Any
+
+from .causes import legend_order, words
 
 
 def _fmt(value: Any, unit: str = "", scale: float = 1.0, digits: int = 3) -> str:
@@ -25,8 +28,10 @@ def format_summary(summary: dict[str, Any]) -> str:
              f"in {summary['wall_time_s']:.3f} s"]
     if summary["flows"]:
         shown = ("prop", "col", "mult", "range")
-        others = sorted({cause for f in summary["flows"] for cause in f["lost"]} - set(shown))  # band, modulation
-        headers = ["flow", "offered", "fifo drop", "tx", "rx", "lost prop", "col", "mult", "range", *others,
+        others = sorted({cause for f in summary["flows"] for cause in f["lost"]} - set(shown),
+                        key=legend_order)  # band, modulation
+        named = [words(cause) for cause in shown + tuple(others)]
+        headers = ["flow", "offered", words("fifo"), "tx", "rx", f"lost: {named[0]}", *named[1:],
                    "B/s", "effic.", "delay mean", "p95", "jitter"]
         rows = []
         for f in summary["flows"]:

@@ -36,6 +36,7 @@ class Packet:
     t_enq: float | None = None
     t_tx: list[float] = field(default_factory=list)
     outcomes: list[tuple[float, str, str, str | None]] = field(default_factory=list)  # (t, receiver, ev, cause)
+    kind: str = "data"  # a MAC's or a modem's control frame: "ack", "rts", "cts", …
 
 
 @dataclass
@@ -51,6 +52,9 @@ class Trace:
     scenes: list[tuple[float, dict]] = field(default_factory=list)
     # (t, host, "up"|"down") of a network of daemons: when this daemon saw another host go or come back
     hosts: list[tuple[float, str, str]] = field(default_factory=list)
+    # the MAC's and modems' control frames (acknowledgements, RTS/CTS): drawn by the player on request,
+    # never counted in a flow
+    control: dict[Any, Packet] = field(default_factory=dict)
 
     def flows(self) -> list[tuple[str, str]]:
         return sorted({(p.src, p.dst) for p in self.packets.values()})
@@ -191,19 +195,23 @@ def load_trace(path: str, window: tuple[float, float] | None = None, run: Run | 
                     trace.poses[vehicle].append((t, spot))
                     trace.end = max(trace.end, t)
                 continue
-            if ev not in FLOW_EVENTS or "pkt" not in event or event.get("kind"):
-                continue  # MAC control frames, driver and GLI events: not part of a flow's story
+            if ev not in FLOW_EVENTS or "pkt" not in event:
+                continue  # driver and GLI events: not part of a flow's story
+            kind = event.get("kind")
+            if kind is not None and not isinstance(kind, str):
+                raise ReportError(f"{where}: 'kind' must be a text, not {describe(kind)}")
+            packets = trace.control if kind else trace.packets  # control frames: not a flow's either
             t = number(event, "t", where)
             if window is not None and not window[0] <= t <= window[1]:
                 continue
             trace.end = max(trace.end, t)
             pkt = _hashable(event["pkt"], "pkt", where)
             link = text(event, "link", where)
-            packet = trace.packets.get(pkt)
+            packet = packets.get(pkt)
             if packet is None:
-                packet = trace.packets[pkt] = Packet(pkt, text(event, "src", where), text(event, "dst", where),
-                                                     count(event, "size", where))
-            if "fifo_bytes" in event and ev in ("enq", "drop", "tx"):
+                packet = packets[pkt] = Packet(pkt, text(event, "src", where), text(event, "dst", where),
+                                               count(event, "size", where), kind=kind or "data")
+            if "fifo_bytes" in event and ev in ("enq", "drop", "tx") and not kind:
                 trace.fifo[link].append((t, count(event, "fifo_bytes", where)))
             cause = event.get("cause")
             if cause is not None and not isinstance(cause, str):

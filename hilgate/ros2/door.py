@@ -14,14 +14,18 @@ topic       type                       who publishes, what
 
 ``send`` and ``recv`` are reliable unless ``ros2.links.reliability`` says ``best_effort``.
 
-**Bounded per writer**, as the Zenoh door is per client (:mod:`hilgate.gli.zenoh_door`): Cyclone DDS
-calls :meth:`Ros2Endpoint._on_send` on its own thread; it takes every sample there, each DDS writer (a
-node's publisher) has its own queue at the door, filled at most at the Zenoh door's rate, and the loop
-takes one frame of each writer in turn while the link is READY (the Zenoh door's pump,
-:class:`hilgate.gli.zenoh_door.SenderQueues`).  What a writer sends beyond is
-dropped and counted (``rate``, ``client_queue``); a sample that does not decode is ``bad_frame``;
-what Cyclone itself could not keep (the reader's history full, a best-effort sample lost on the way)
-is counted too (``dds_rejected``, ``dds_lost``).  At most :data:`MAX_WRITERS` writers per link.
+**Bounded per node**, as the Zenoh door is per client (:mod:`hilgate.gli.zenoh_door`): Cyclone DDS
+calls :meth:`Ros2Endpoint._on_send` on its own thread; it takes every sample there, each node (a DDS
+participant: a ROS 2 process) has its own queue at the door, filled at most at the Zenoh door's rate,
+and the loop takes one frame of each node in turn while the link is READY (the Zenoh door's pump,
+:class:`hilgate.gli.zenoh_door.SenderQueues`).  A node is one sender however many writers it opens on
+the topic: its writers share its queue, rate and turn, so a process that opens 32 writers takes no
+more of the link, nor more of the door's places, than one that opens one (a queue per writer let one
+such process take every place: the next node was refused as ``clients``).  What a node sends beyond
+its share is dropped and counted (``rate``, ``client_queue``); a sample that does not decode is
+``bad_frame``; what Cyclone itself could not keep (the reader's history full, a best-effort sample
+lost on the way) is counted too (``dds_rejected``, ``dds_lost``).  At most :data:`MAX_WRITERS` nodes
+per link (then one over its share gives its place up to a newcomer).
 """
 
 from __future__ import annotations
@@ -47,15 +51,16 @@ __all__ = ["Ros2Door", "Ros2Endpoint", "FRAME", "MAX_WRITERS", "DOOR_BYTES"]
 
 FRAME = "hilgate_msgs/msg/Frame"
 BOOL = "std_msgs/msg/Bool"
-MAX_WRITERS = MAX_CLIENTS
+MAX_WRITERS = MAX_CLIENTS  # nodes a link's door keeps queues for
 MAX_PAYLOAD = 65536
 DOOR_BYTES = 16 << 20  # bytes of frames all links' ROS 2 doors hold in all
 READER_SAMPLES = 256   # samples Cyclone keeps for the reader before the listener takes them
+NODES_KEPT = 4096       # writers whose participant is remembered
 
 
 class Writer(Sender):
-    """What the door holds for one DDS writer (a node's publisher) of a link's ``send`` topic: its
-    queue holds ``(data, dst)``."""
+    """What the door holds for one node (a DDS participant) writing a link's ``send`` topic: its queue
+    holds ``(data, dst)``."""
 
     __slots__ = ()
 
@@ -71,10 +76,11 @@ class Ros2Endpoint(SenderQueues):
     assumes_busy = False  # (hilgate.core.endpoint.Endpoint.assumes_busy: told BUSY by the link after a frame)
     phy = None  # (no PHY reports: hilgate.core.endpoint.Endpoint.phy)
 
-    senders: dict[int, Writer]
+    senders: dict[int, Writer]  # (by the participant's instance handle)
 
     def __init__(self, door: "Ros2Door", port: LinkPort):
         super().__init__(door, port)
+        self.nodes: dict[int, int] = {}  # a writer's instance handle → its participant's (Cyclone's thread only)
         self.matched = 0  # subscriptions of recv (kept up to date by Cyclone: asking per frame costs more)
         self.Frame = message_class(FRAME)
         self.Bool = message_class(BOOL)
@@ -125,18 +131,28 @@ class Ros2Endpoint(SenderQueues):
         for sample in take_each(reader, self._refuse_decode):
             if not hasattr(sample, "data"):  # (by name: a DDS sample, or the invalid one of a writer gone)
                 continue  # a writer went away
-            handle = sample.sample_info.publication_handle
+            node = self._node_of(reader, sample.sample_info.publication_handle)
             data = bytes(sample.data)
             with self.lock:
-                writer = self.senders.get(handle)
-                if writer is None:
-                    if len(self.senders) >= MAX_WRITERS:
-                        self.refused["clients"] = self.refused.get("clients", 0) + 1
-                        continue
-                    writer = self.senders[handle] = Writer(f"{handle:x}")
-                if self._admit(writer, len(data), MAX_PAYLOAD, DOOR_BYTES):
-                    writer.queue.append((data, sample.dst))
+                writer = self._place(node, lambda: Writer(node, f"{node:x}"))
+                if writer is not None and self._admit(writer, len(data), MAX_PAYLOAD, DOOR_BYTES):
+                    self._queue(writer, (data, sample.dst))
         self._wake()
+
+    def _node_of(self, reader: Any, handle: int) -> int:
+        """The participant (a node's process) of the writer ``handle``, as Cyclone's discovery knows it;
+        the writer itself if discovery no longer knows it (it went away meanwhile)."""
+        node = self.nodes.get(handle)
+        if node is None:
+            try:
+                endpoint = reader.get_matched_publication_data(handle)
+            except DDSException:
+                endpoint = None
+            node = endpoint.participant_instance_handle if endpoint is not None else handle
+            if len(self.nodes) >= NODES_KEPT:
+                self.nodes.clear()  # (writers made up by the thousand: the memory starts again)
+            self.nodes[handle] = node
+        return node
 
     def _refuse_decode(self, cause: str) -> None:
         with self.lock:

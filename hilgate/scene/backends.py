@@ -10,6 +10,7 @@ code run here is :func:`hilgate.drivers.port.port_problem`, when a scene names a
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 from ..drivers.table import DRIVERS, Option, emulated_protocols, emulator_options, scene_options
@@ -58,7 +59,20 @@ def checker(option: Option) -> Checker:
         return number(option.minimum, option.maximum, above=option.above)
     if option.kind == "boolean":
         return boolean
+    if option.kind == "host":
+        return _host
     return choice(*option.choices)
+
+
+HOST = re.compile(r"[A-Za-z0-9]([A-Za-z0-9.-]{0,251}[A-Za-z0-9])?|\[?[0-9A-Fa-f:.]+\]?")
+
+
+def _host(node: Node, path: str) -> str:
+    """A host name or an IP address (looked up when the driver connects, not when the scene loads)."""
+    value = text(node, path)
+    if not HOST.fullmatch(value):
+        raise node.error(path, f"{value[:100]!r} is not a host name or an IP address")
+    return value.strip("[]")
 
 
 def _port(node: Node, path: str) -> str:
@@ -87,6 +101,8 @@ def emulated_device(node: Node, path: str) -> tuple[tuple[str, Any], ...]:
     extra = tuple((key, f.get(key, checker(check)) if key in f else default) for key, check, default in own[protocol])
     if ("pty" in f) == ("tcp" in f):
         raise f.error("give exactly one of pty (a path for the device link) or tcp (a loopback port)")
+    if "pty" in f and not DRIVERS[protocol].emulator_pty:
+        raise f.child("pty").error(f.sub("pty"), f"the {DRIVERS[protocol].title} speaks TCP only: give tcp (a loopback port)")
     if "tcp" in f:
         if not DRIVERS[protocol].emulator_tcp:
             speakers = " or the ".join(d.title for d in DRIVERS.values() if d.emulator and d.emulator_tcp)

@@ -47,7 +47,7 @@ class LinkChange:
         endpoints."""
         b, a = self.before, self.after
         return b is not None and a is not None and (b.packet != a.packet or b.emulate != a.emulate
-                                                    or b.gli != a.gli)
+                                                    or b.gli != a.gli or b.unet != a.unet)
 
 
 @dataclass(frozen=True)

@@ -28,12 +28,13 @@ from .plugins import Plugin
 from .presets import MODEM_KEYS, load_preset, merge
 from .ros2 import require_extra
 from .specs import LinkSpec, MacSpec
+from .unet_spec import unet_door
 from .yaml_nodes import Node
 
 __all__ = ["LINK_KEYS", "BACKENDS", "Context", "link_spec", "assign_addresses"]
 
 OWN_KEYS = ("vehicle", "backend", "model", "address", "channel", "tx_channel", "rx_channel", "host",
-            "usbl", "gli")
+            "usbl", "gli", "unet")
 
 
 def link_keys() -> tuple[str, ...]:
@@ -144,8 +145,14 @@ def link_spec(link_id: str, node: Node, path: str, scene: dict[str, Any], ctx: C
         if problem:
             raise child.error(f.sub("address"), f"{params.address} is wider than 8 bits (0..{NARROW_MAX}): {problem}")
     gli = f.get("gli", _gli_endpoints, GLI_DEFAULT)
+    unet = f.get("unet", unet_door, ())
+    if ("unet" in gli) != bool(unet):
+        where = f.child("unet") or f.child("gli") or f.node
+        raise where.error(f.sub("unet") if unet else f.sub("gli"),
+                          "a UnetStack door needs both gli: [..., unet] and unet: {tcp: PORT}")
     return LinkSpec(link_id, vehicle, backend, model, params, mac, packet, node.file, node.line, options, emulate,
-                    addressing, host=host, usbl=usbl, address_line=address_line, gli=gli, limits=limits)
+                    addressing, host=host, usbl=usbl, address_line=address_line, gli=gli, limits=limits,
+                    unet=unet)
 
 
 NARROW_MAX = BROADCAST - 1
@@ -201,13 +208,13 @@ def require_narrow_addresses(links: Any) -> None:
                              f"are for hilgate sim")
 
 
-GLI_ENDPOINTS = ("mq", "socket", "ros2")
+GLI_ENDPOINTS = ("mq", "socket", "ros2", "unet")
 GLI_DEFAULT = ("mq", "socket")
 
 
 def _gli_endpoints(node: Node, path: str) -> tuple[str, ...]:
-    """``gli: [mq, socket]`` (the default), ``[socket]``, ``[mq]`` or ``[]``, and ``ros2`` besides: which GLI
-    endpoints the link opens.  Every ``mq`` link costs two POSIX queues of a per-user and a system-wide
+    """``gli: [mq, socket]`` (the default), ``[socket]``, ``[mq]`` or ``[]``, and ``ros2`` and ``unet`` besides:
+    which GLI endpoints the link opens (``unet``: a UnetStack node on the port its ``unet:`` key gives).  Every ``mq`` link costs two POSIX queues of a per-user and a system-wide
     budget; a link only socket applications (or only an emulated modem) use needs none.  ``ros2`` opens
     the link's ROS 2 topics (:mod:`hilgate.ros2.door`), and needs the ros2 extra."""
     items = [node] if isinstance(node.value, str) else node.value if node.is_list else None

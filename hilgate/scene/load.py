@@ -173,9 +173,15 @@ def scene_summary(scene: Scene) -> str:
         if emulate:
             where = f"pty {emulate['pty']}" if emulate.get("pty") else f"TCP port {emulate.get('tcp')}"
             line += f", emulates {emulate.get('protocol')} at {where}"
-        port = dict(link.options).get("port")
-        if port:
+        options = dict(link.options)
+        port = options.get("port")
+        if options.get("modem_host"):  # a UnetStack modem's API (fjåge's port 1100 unless given)
+            line += f", modem at {options['modem_host']}:{port or 1100}"
+        elif port:
             line += f", port {port}"
+        if link.unet:
+            door = dict(link.unet)
+            line += f", UnetStack door at {door['host']}:{door['tcp']}"
         if link.host:
             line += f", host {link.host}"
         lines.append(line)

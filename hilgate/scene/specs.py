@@ -115,6 +115,7 @@ class LinkSpec:
     address_line: int = field(default=0, compare=False)  # where a wide address (> 254) is written
     gli: tuple[str, ...] = ("mq", "socket")  # the GLI endpoints the daemon opens for it (links.py)
     limits: Any = None  # drivers.table.ModemLimits: what the modem accepts (its preset's limits:), None: unsaid
+    unet: tuple[tuple[str, Any], ...] = ()  # its UnetStack door: tcp, host, protocol (scene/unet_spec.py)
 
     @property
     def everyone_in_range(self) -> bool:

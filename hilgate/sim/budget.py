@@ -139,3 +139,49 @@ def format_budget(rows: list[PairBudget]) -> str:
         ))
     widths = [max(len(r[i]) for r in table) for i in range(len(header))]
     return "\n".join("  ".join(cell.ljust(w) for cell, w in zip(r, widths)).rstrip() for r in table)
+
+
+def budget_tables(scene: Scene, points: int = 24, limit: int = 2000) -> dict[str, Any]:
+    """The link budget as tables over distance, for the live view's pair of modems (the page interpolates
+    at the vehicles' distance): ``{"tables": [{"d", "per", "snr"}], "pairs": {"src>dst": table}}``.  Pairs
+    whose model, frame size and range are alike share a table; error-free pairs and channels whose
+    paths need BELLHOP's fields are left out (the page then says error-free, or shows no PER).  At most
+    ``limit`` pairs: a scene of a thousand links has a million."""
+    sims = [link for link in scene.links.values() if link.backend == "sim"]
+    tables: list[dict[str, Any]] = []
+    index: dict[tuple, int] = {}
+    pairs: dict[str, int] = {}
+    for sender in sims:
+        size = _frame_size(scene, sender.id, DEFAULT_FRAME_BYTES)
+        rmin, rmax = sender.params.range_m
+        high = rmax if math.isfinite(rmax) else FAR_M
+        for receiver in sims:
+            if receiver is sender or receiver.params.rx_channel != sender.params.tx_channel:
+                continue
+            try:
+                model, refused, _ = bind_path(sender.params, receiver.params)
+            except Exception:  # a channel that needs its water's fields: no table
+                continue
+            if refused is not None or model.constant_zero:
+                continue
+            key = (model, size, rmin, high)
+            if key not in index:
+                low = max(rmin, 0.1)
+                ds = [low * (high / low) ** (i / (points - 1)) for i in range(points)] if high > low else [low]
+                snr_of = getattr(model, "snr_db", None)  # (only physical models have an SNR)
+                index[key] = len(tables)
+                tables.append({"size": size, "d": [round(d, 4) for d in ds],
+                               "per": [_finite(model.per(d, size)) for d in ds],
+                               "snr": [_finite(snr_of(d)) for d in ds] if snr_of is not None else None})
+            pairs[f"{sender.id}>{receiver.id}"] = index[key]
+            if len(pairs) >= limit:
+                return {"tables": tables, "pairs": pairs}
+    return {"tables": tables, "pairs": pairs}
+
+
+def _finite(value: Any) -> float | None:
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        return None
+    return round(value, 6) if math.isfinite(value) else None

@@ -97,6 +97,8 @@ class SimBackend(Backend):
             return True
         if sim_frame.ack is not None and frame.on_acknowledged is not None:
             frame.on_acknowledged(frame, False, None)  # dropped before the air (FIFO full): it failed now
+        elif frame.on_dropped is not None:
+            frame.on_dropped(frame, "fifo")
         return False
 
     def _acknowledged(self, frame: Frame, delivered: bool, tau: float | None) -> None:

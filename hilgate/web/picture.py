@@ -16,7 +16,9 @@ import math
 from collections import OrderedDict, deque
 from typing import Any, Iterable
 
-__all__ = ["link_kind", "scene_message", "reach_s", "extent_m", "frame_view", "Flight", "LINGER_S", "MAX_FRAMES",
+from ..report.causes import CAUSES, RECEIVED
+
+__all__ = ["link_kind", "fates", "scene_message", "reach_s", "extent_m", "frame_view", "Flight", "LINGER_S", "MAX_FRAMES",
            "MAX_FLIGHT_S", "ERRORS_KEPT"]
 
 LINGER_S = 2.0
@@ -61,9 +63,16 @@ def link_kind(link: dict[str, Any]) -> str:
     return "sim" if link.get("backend") == "sim" else "real"
 
 
+def fates() -> dict[str, list[str]]:
+    """What the page calls each fate of a frame and draws it in: ``rx`` and every loss cause, from the
+    table the report uses (the page keeps no words of its own, so the two cannot read differently)."""
+    return {"rx": [RECEIVED.words, RECEIVED.colour], **{code: [c.words, c.colour] for code, c in CAUSES.items()}}
+
+
 def scene_message(view: dict[str, Any], mode: str) -> dict[str, Any]:
     """The page's SCENE from a scene view (:func:`hilgate.scene.view.scene_view`, or a trace's ``run``
-    and ``reload`` lines): per link its vehicle, backend kind, channel speed, range, bit rate, FIFO size."""
+    and ``reload`` lines): per link its vehicle, backend kind, channel speed, range, bit rate, FIFO size;
+    and the words and colours of frames' fates."""
     channels = view.get("channels") if isinstance(view.get("channels"), dict) else {}
     links: dict[str, Any] = {}
     raw_links = view.get("links") if isinstance(view.get("links"), dict) else {}
@@ -102,7 +111,7 @@ def scene_message(view: dict[str, Any], mode: str) -> dict[str, Any]:
         vehicles.setdefault(link["vehicle"], {"source": "?", "host": None})
     hosts = sorted({link["host"] for link in links.values() if link["host"]})
     return {"class": "SCENE", "mode": mode, "name": _text(view.get("name", "?")), "links": links,
-            "vehicles": vehicles, "hosts": hosts}
+            "vehicles": vehicles, "hosts": hosts, "fates": fates()}
 
 
 def reach_s(link: dict[str, Any] | None, size: int, extent_m: float = UNBOUNDED_REACH_M) -> float:
@@ -118,10 +127,12 @@ def reach_s(link: dict[str, Any] | None, size: int, extent_m: float = UNBOUNDED_
 
 def frame_view(pkt: Any, src: str, dst: str, size: int, txs: Iterable[float],
                outcomes: Iterable[tuple[float, str, str, str | None]], now: float, reach: float,
-               linger: float) -> dict[str, Any] | None:
+               linger: float, kind: str = "data", floor: float = 0.0) -> dict[str, Any] | None:
     """One frame as the page draws it at ``now``, or None when nothing of it is on the picture: its latest
-    transmission up to ``now`` (drawn while ``now - tx <= reach``) and its judgements up to ``now``
-    (``[link, t, ev, cause]``, drawn for ``linger`` after each)."""
+    transmission up to ``now`` (drawn while ``now - tx <= reach``, and in any case while ``now - tx <=
+    floor``: a wave shorter than the time between two pictures, a real modem's 30 ms, must reach the
+    page in one, which draws it in slow motion) and its judgements up to ``now`` (``[link, t, ev, cause]``,
+    drawn for ``linger`` after each)."""
     tx = None
     for t in txs:
         if t <= now and (tx is None or t > tx):
@@ -132,13 +143,16 @@ def frame_view(pkt: Any, src: str, dst: str, size: int, txs: Iterable[float],
         if t <= now:
             shown.append([link, round(t, 6), ev, cause])
             recent = recent or now - t <= linger
-    flying = tx is not None and now - tx <= reach
+    flying = tx is not None and now - tx <= max(reach, floor)
     if not (flying or recent):
         return None
     if len(shown) > MAX_OUTCOMES:
         shown = shown[-MAX_OUTCOMES:]
-    return {"id": _text(pkt), "src": src, "dst": dst, "size": size,
+    view = {"id": _text(pkt), "src": src, "dst": dst, "size": size,
             "tx": None if tx is None else round(tx, 6), "reach_s": round(reach, 6), "out": shown}
+    if kind != "data":  # an acknowledgement, RTS or CTS: the page draws it only when asked to
+        view["kind"] = kind
+    return view
 
 
 def extent_m(positions: Iterable[Any]) -> float:
@@ -155,10 +169,10 @@ def extent_m(positions: Iterable[Any]) -> float:
 
 
 class _Frame:
-    __slots__ = ("pkt", "src", "dst", "size", "txs", "outcomes", "last")
+    __slots__ = ("pkt", "src", "dst", "size", "txs", "outcomes", "last", "kind")
 
-    def __init__(self, pkt: Any, src: str, dst: str, size: int, t: float):
-        self.pkt, self.src, self.dst, self.size = pkt, src, dst, size
+    def __init__(self, pkt: Any, src: str, dst: str, size: int, t: float, kind: str = "data"):
+        self.pkt, self.src, self.dst, self.size, self.kind = pkt, src, dst, size, kind
         self.txs: list[float] = []
         self.outcomes: list[tuple[float, str, str, str | None]] = []
         self.last = t
@@ -181,10 +195,10 @@ class Flight:
         self.frames.clear()
         self.errors.clear()
 
-    def _frame(self, pkt: Any, src: str, dst: str, size: int, t: float) -> _Frame:
+    def _frame(self, pkt: Any, src: str, dst: str, size: int, t: float, kind: str = "data") -> _Frame:
         frame = self.frames.get(pkt)
         if frame is None:
-            frame = self.frames[pkt] = _Frame(pkt, src, dst, size, t)
+            frame = self.frames[pkt] = _Frame(pkt, src, dst, size, t, kind)
             if len(self.frames) > self.max_frames:
                 self.frames.popitem(last=False)
         frame.last = t
@@ -197,18 +211,19 @@ class Flight:
         errors.append([round(t, 3), cause, detail])
 
     def frame(self, ev: str, t: float, link: str, pkt: Any, src: str, dst: str, size: int,
-              cause: str | None) -> None:
-        """A simulated modem's event (``enq``, ``drop``, ``tx``, ``rx``, ``err``) of data frame ``pkt``."""
+              cause: str | None, kind: str = "data") -> None:
+        """A simulated modem's event (``enq``, ``drop``, ``tx``, ``rx``, ``err``) of frame ``pkt`` (a data
+        frame, or a control frame of ``kind``: its losses are no link's errors)."""
         if ev == "enq":
             return  # queued: the FIFO's fill shows it; the frame is drawn from its transmission
-        frame = self._frame(pkt, src, dst, size, t)
+        frame = self._frame(("c", pkt) if kind != "data" else pkt, src, dst, size, t, kind)
         if ev == "tx":
             frame.txs.append(t)
             del frame.txs[:-4]
         else:
             frame.outcomes.append((t, link, ev, cause))
             del frame.outcomes[:-MAX_OUTCOMES]
-            if cause is not None:
+            if cause is not None and kind == "data":
                 self._error(link, t, cause, f"from {src}")
 
     def line(self, record: dict[str, Any]) -> None:
@@ -233,19 +248,22 @@ class Flight:
                 frame = self._frame(f"{link}#{self._real}", _text(src) if src is not None else "?", link, size, t)
                 frame.outcomes.append((t, link, "rx", None))
 
-    def visible(self, now: float, linger: float = LINGER_S) -> list[dict[str, Any]]:
+    def visible(self, now: float, linger: float = LINGER_S, floor: float = 0.0) -> list[dict[str, Any]]:
         """The frames on the picture at ``now``, newest first (at most ``MAX_FRAMES``); the oldest frames,
-        once nothing of them can be drawn any more, are forgotten."""
+        once nothing of them can be drawn any more, are forgotten.  ``floor``: model seconds a wave is
+        sent in any case (:func:`frame_view`)."""
         frames, links, extent = self.frames, self.links, self.extent_m
         while frames:
             frame = frames[next(iter(frames))]
-            if now - frame.last <= reach_s(links.get(frame.src), frame.size, extent) + linger + STALE_S:
+            if now - frame.last <= max(reach_s(links.get(frame.src), frame.size, extent), floor) + linger + STALE_S:
                 break
             frames.popitem(last=False)
         out = []
         for frame in reversed(frames.values()):
-            view = frame_view(frame.pkt, frame.src, frame.dst, frame.size, frame.txs, frame.outcomes, now,
-                              reach_s(links.get(frame.src), frame.size, extent), linger)
+            pkt = frame.pkt[1] if frame.kind != "data" else frame.pkt
+            view = frame_view(f"{frame.kind}:{pkt}" if frame.kind != "data" else pkt, frame.src, frame.dst,
+                              frame.size, frame.txs, frame.outcomes, now,
+                              reach_s(links.get(frame.src), frame.size, extent), linger, frame.kind, floor)
             if view is not None:
                 out.append(view)
                 if len(out) >= MAX_FRAMES:

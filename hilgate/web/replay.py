@@ -22,6 +22,7 @@ from collections import defaultdict
 from typing import Any
 
 from ..report.tracedata import Trace
+from .events import trace_events
 from .picture import ERRORS_KEPT, LINGER_S, MAX_FLIGHT_S, MAX_FRAMES, extent_m, frame_view, reach_s, scene_message
 
 __all__ = ["Replay", "SPEEDS", "MIN_SPEED", "MAX_SPEED"]
@@ -35,7 +36,7 @@ picture would otherwise hold 200 s of traffic)."""
 
 
 class _Packet:
-    __slots__ = ("pkt", "src", "dst", "size", "txs", "outcomes")
+    __slots__ = ("pkt", "src", "dst", "size", "txs", "outcomes", "kind")
 
 
 class Replay:
@@ -54,6 +55,7 @@ class Replay:
         self.link_times: dict[str, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
         self.flow_times: dict[tuple[str, str], dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
         self.errors: dict[str, list[tuple[float, str, str]]] = defaultdict(list)
+        self.causes: dict[str, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
         self.fifo = {link: _sorted_pairs(points) for link, points in trace.fifo.items()}
         self.poses = {vehicle: _sorted_pairs(points) for vehicle, points in trace.poses.items()}
         self.extent_m = extent_m(spot for _, spots in self.poses.values() for spot in spots)
@@ -61,28 +63,33 @@ class Replay:
         self.hosts: dict[str, list[tuple[float, str]]] = defaultdict(list)
         for t, host, state in sorted(trace.hosts, key=lambda h: h[0]):
             self.hosts[host].append((t, state))
+        losses = [(t, link, cause) for link, causes in self.causes.items() for cause, times in causes.items()
+                  for t in times]
+        self.events = trace_events(self.scenes, sorted(trace.hosts, key=lambda h: h[0]), self.poses, losses)
 
     # -- the index --------------------------------------------------------------------------------
 
     def _index(self, trace: Trace) -> None:
-        for packet in trace.packets.values():
+        for packet in [*trace.packets.values(), *trace.control.values()]:
             p = _Packet()
-            p.pkt, p.src, p.dst, p.size = packet.pkt, packet.src, packet.dst, packet.size
+            p.pkt, p.src, p.dst, p.size, p.kind = packet.pkt, packet.src, packet.dst, packet.size, packet.kind
             p.txs = sorted(packet.t_tx)
             p.outcomes = sorted(packet.outcomes, key=lambda o: o[0])
             index = len(self.packets)
             self.packets.append(p)
-            flow = self.flow_times[(p.src, p.dst)]
-            flow["sent"].extend(p.txs)
-            self.link_times[p.src]["tx"].extend(p.txs)
-            for t, link, ev, cause in p.outcomes:
-                if ev == "rx":
-                    flow["received"].append(t)
-                    self.link_times[link]["rx"].append(t)
-                else:
-                    flow["lost:" + (cause or "?")].append(t)
-                    self.link_times[link]["drops" if ev == "drop" else "lost"].append(t)
-                    self.errors[link].append((t, cause or "?", f"from {p.src}"))
+            if p.kind == "data":  # control frames are drawn, never counted
+                flow = self.flow_times[(p.src, p.dst)]
+                flow["sent"].extend(p.txs)
+                self.link_times[p.src]["tx"].extend(p.txs)
+                for t, link, ev, cause in p.outcomes:
+                    if ev == "rx":
+                        flow["received"].append(t)
+                        self.link_times[link]["rx"].append(t)
+                    else:
+                        flow["lost:" + (cause or "?")].append(t)
+                        self.link_times[link]["drops" if ev == "drop" else "lost"].append(t)
+                        self.causes[link][cause or "?"].append(t)
+                        self.errors[link].append((t, cause or "?", f"from {p.src}"))
             times = p.txs + [o[0] for o in p.outcomes]
             if not times:
                 continue
@@ -93,7 +100,7 @@ class Replay:
             for bucket in range(math.floor(begin / BUCKET_S), math.floor(finish / BUCKET_S) + 1):
                 self.buckets[bucket].append(index)
             self.end = max(self.end, max(times))
-        for table in (*self.link_times.values(), *self.flow_times.values()):
+        for table in (*self.link_times.values(), *self.flow_times.values(), *self.causes.values()):
             for times in table.values():
                 times.sort()
         for errors in self.errors.values():
@@ -108,20 +115,21 @@ class Replay:
     def linger(self, speed: float) -> float:
         return min(MAX_LINGER_S, max(LINGER_S, LINGER_S * speed))
 
-    def state(self, t: float, speed: float = 1.0, playing: bool = False) -> dict[str, Any]:
-        """The page's STATE at model time ``t`` (played at ``speed``× when ``playing``)."""
+    def state(self, t: float, speed: float = 1.0, playing: bool = False, floor: float = 0.0) -> dict[str, Any]:
+        """The page's STATE at model time ``t`` (played at ``speed``× when ``playing``; ``floor``: the model
+        seconds between two pictures, in which every transmission is sent whatever its wave's length)."""
         t = min(max(t, self.start), self.end)
         scene = self.scene_at(t)
         linger = self.linger(speed)
         return {"class": "STATE", "t": round(t, 6), "rate": speed if playing else 0.0, "playing": playing,
                 "speed": speed, "start": self.start, "end": round(self.end, 6), "linger_s": linger,
                 "vehicles": self._vehicles(scene, t), "links": self._links(scene, t), "hosts": self._hosts(scene, t),
-                "frames": self._frames(scene, t, linger), "flows": self._flows(t)}
+                "frames": self._frames(scene, t, linger, floor), "flows": self._flows(t)}
 
-    def _frames(self, scene: dict, t: float, linger: float) -> list[dict]:
+    def _frames(self, scene: dict, t: float, linger: float, floor: float = 0.0) -> list[dict]:
         seen: set[int] = set()
         chosen = []
-        for bucket in range(math.floor((t - linger) / BUCKET_S), math.floor(t / BUCKET_S) + 1):
+        for bucket in range(math.floor((t - max(linger, floor)) / BUCKET_S), math.floor(t / BUCKET_S) + 1):
             for index in self.buckets.get(bucket, ()):
                 if index not in seen:
                     seen.add(index)
@@ -130,8 +138,9 @@ class Replay:
         links = scene["links"]
         for index in sorted(chosen, reverse=True):
             p = self.packets[index]
-            view = frame_view(p.pkt, p.src, p.dst, p.size, p.txs, p.outcomes, t,
-                              reach_s(links.get(p.src), p.size, self.extent_m), linger)
+            pkt = p.pkt if p.kind == "data" else f"{p.kind}:{p.pkt}"
+            view = frame_view(pkt, p.src, p.dst, p.size, p.txs, p.outcomes, t,
+                              reach_s(links.get(p.src), p.size, self.extent_m), linger, p.kind, floor)
             if view is not None:
                 out.append(view)
         out.sort(key=lambda f: -(f["tx"] if f["tx"] is not None else f["out"][-1][1]))
@@ -150,9 +159,10 @@ class Replay:
                     position = [a + (b - a) * w for a, b in zip(position, spots[i])]
             elif times:  # before its first sample: where it starts
                 position = spots[0]
+            lost = i > 0 and spots[i - 1] is None  # the daemon sampled no position: a stale live pose dropped
             out.append({"name": name, "source": vehicle["source"],
                         "position": None if position is None else [round(c, 4) for c in position],
-                        "age_s": None if age is None else round(age, 3)})
+                        "age_s": None if age is None else round(age, 3), "stale": "stale" if lost else None})
         return out
 
     def _links(self, scene: dict, t: float) -> list[dict]:
@@ -166,6 +176,8 @@ class Replay:
             out.append({"id": link_id, "backend": link["backend"], "kind": link["kind"], "state": "up",
                         "ready": None, "fifo_bytes": fifo_levels[i - 1] if i else 0,
                         **{key: bisect_right(times.get(key, ()), t) for key in ("tx", "rx", "drops", "lost")},
+                        "causes": {cause: n for cause, stamps in sorted(self.causes.get(link_id, {}).items())
+                                   if (n := bisect_right(stamps, t))},
                         "errors": [[round(e[0], 3), e[1], e[2]] for e in errors[max(0, j - ERRORS_KEPT):j]]})
         return out
 

@@ -17,10 +17,13 @@ scripts are public (no secret in them); the WebSocket gives nothing before the p
 holds the daemon's token (the TCP GLI's file, readable by the daemon's group) by the TCP GLI's own
 challenge: a fresh nonce, answered with HMAC-SHA256(token, nonce), so the token never crosses the
 network.  The page gets the token once, from the address's fragment (``#token=…``, which browsers never
-send to a server) or typed in, and keeps it for the tab only (sessionStorage).  WebSockets from pages
-of other origins are refused (a web site the operator visits cannot even start the challenge), and at
-most ``max_pages`` pages and ``MAX_CONNECTIONS`` connections are served at once; one that has not
-proved the token within ``AUTH_TIMEOUT_S`` is closed.
+send to a server) or typed in, and keeps it for the tab only (sessionStorage).  A request for a name
+that is not the view's is refused (:mod:`.hosts`: DNS rebinding), WebSockets from pages of other
+origins too (a web site the operator visits cannot even start the challenge); what is said before the
+proof names no file.  Connections that have not proved the token are bounded per address and in all,
+make room for a newcomer, and are closed ``auth_timeout_s`` after they connected (:mod:`.door`); at
+most ``max_pages`` pages are served at once.  Static files are the folder's own, by name; the log
+shows no request's query (a token given as ``?token=`` stays out of it).
 """
 
 from __future__ import annotations
@@ -34,14 +37,19 @@ import threading
 import time
 from typing import Any, Callable
 
+from .door import WebDoor, request_line
+from .hosts import HostNames
+
 __all__ = ["MissingTornado", "WebServer", "parse_web", "MAX_PAGES"]
 
 log = logging.getLogger(__name__)
 
 STATIC = os.path.join(os.path.dirname(os.path.abspath(__file__)), "static")
 MAX_PAGES = 8
-MAX_CONNECTIONS = 64
-AUTH_TIMEOUT_S = 20.0
+AUTH_TIMEOUT_S = 5.0
+"""From the connection on, to prove the token (a request, an upgrade, one round trip)."""
+TOKEN_HINT = "the daemon's token (`hilgate view` on its host prints the address with it)"
+"""What a page that has not proved the token is told to give: where to get it, but no path."""
 MAX_MESSAGE = 4096
 """A page's messages are a proof or a player command: tens of bytes."""
 REPLAY_TICK_S = 0.05
@@ -51,7 +59,10 @@ MISSING = ("the web view needs tornado, an optional extra: pip install 'hilgate[
 
 class MissingTornado(OSError):
     """tornado is not installed; the message says how to install it (an OSError: the command's one-line
-    error, as for a port in use)."""
+    error, as for a port in use).  Exit status 2, a configuration error: under the systemd unit
+    (``RestartPreventExitStatus=2``) a restart every 2 s cannot install it."""
+
+    exit_status = 2
 
 
 def parse_web(value: str) -> tuple[str, int]:
@@ -92,13 +103,17 @@ class WebServer:
     pictures come from :meth:`publish`)."""
 
     def __init__(self, host: str, port: int, check: Any, replay: Any = None, max_pages: int = MAX_PAGES,
-                 token_hint: str = ""):
+                 token_hint: str = TOKEN_HINT, token_file: str = "", auth_timeout_s: float = AUTH_TIMEOUT_S):
         tornado = _tornado()
         self.check = check
         self.replay = replay
         self.mode = "live" if replay is None else "replay"
         self.max_pages = max_pages
-        self.token_hint = token_hint
+        self.token_hint = token_hint  # said to pages without the token: no path
+        self.token_file = token_file  # said only over the control socket (hilgate status: the daemon's group)
+        self.auth_timeout_s = auth_timeout_s
+        self.hosts = HostNames(host)
+        self.door: WebDoor | None = None      # made on the server's thread, with its loop
         self.pages: set[Any] = set()          # authenticated WebSockets (the server's thread only)
         self.connections: set[Any] = set()    # every WebSocket, authenticated or not
         self.clients = 0
@@ -137,6 +152,12 @@ class WebServer:
             self._scheduled = True
             self._ioloop.add_callback(self._fan_out)
 
+    def status(self) -> dict[str, Any]:
+        """What the door refused, by cause, and how many connections wait to prove the token."""
+        if self.door is None:
+            return {"refused": {}, "waiting": 0}
+        return self.door.status()
+
     def close(self) -> None:
         if self._ioloop is not None and self._thread is not None:
             self._ioloop.add_callback(self._stop)
@@ -161,11 +182,12 @@ class WebServer:
         tornado = _tornado()
         self._stopped = asyncio.Event()
         self._ioloop = tornado.ioloop.IOLoop.current()
+        self.door = WebDoor(self._ioloop, self.auth_timeout_s)
         app = tornado.web.Application(_handlers(self, tornado), websocket_max_message_size=MAX_MESSAGE,
                                       websocket_ping_interval=10, websocket_ping_timeout=30,
-                                      compress_response=False)
-        server = _bounded_server(tornado)(app, idle_connection_timeout=60, body_timeout=10,
-                                          max_header_size=16384, max_body_size=MAX_MESSAGE)
+                                      compress_response=False, log_function=_log_request)
+        server = _door_server(tornado, self.door)(app, idle_connection_timeout=60, body_timeout=10,
+                                                  max_header_size=16384, max_body_size=MAX_MESSAGE)
         server.add_sockets(self.sockets)
         self._ready.set()
         await self._stopped.wait()
@@ -197,6 +219,8 @@ class WebServer:
         self.pages.add(page)
         self.clients = len(self.pages)
         log.info("web view: a page connected from %s (%d now)", page.peer, self.clients)
+        # WELCOME first: a page (or a client) reads what follows as the welcomed page's, whatever the scene's timing
+        page.send_json({"class": "WELCOME", "mode": self.mode})
         if self.replay is None:
             if self._scene is not None:
                 page.send_text(self._scene_text or json.dumps(self._scene), force=True)
@@ -212,25 +236,51 @@ class WebServer:
             log.info("web view: a page left (%d now)", self.clients)
 
 
-def _bounded_server(tornado: Any) -> Any:
-    class BoundedServer(tornado.httpserver.HTTPServer):
-        """At most ``MAX_CONNECTIONS`` connections at once: the next is closed at once."""
-
-        streams: set = set()
+def _door_server(tornado: Any, door: WebDoor) -> Any:
+    class DoorServer(tornado.httpserver.HTTPServer):
+        """Every connection comes through the door: a stranger until its page proves the token."""
 
         def handle_stream(self, stream: Any, address: Any) -> None:
-            self.streams = {s for s in self.streams if not s.closed()}
-            if len(self.streams) >= MAX_CONNECTIONS:
-                stream.close()
-                return
-            self.streams.add(stream)
+            door.arrive(stream, str(address[0]) if isinstance(address, tuple) and address else "")
             super().handle_stream(stream, address)
 
-    return BoundedServer
+    return DoorServer
+
+
+def _log_request(handler: Any) -> None:
+    """tornado's access log line, without the request's query (:func:`.door.request_line`)."""
+    status = handler.get_status()
+    level = logging.INFO if status < 400 else logging.WARNING if status < 500 else logging.ERROR
+    log.log(level, "%d %s %.2fms", status, request_line(handler.request), 1000.0 * handler.request.request_time())
 
 
 def _handlers(server: WebServer, tornado: Any) -> list:
     web = tornado.web
+    static_files = frozenset(name for name in os.listdir(STATIC)
+                             if not name.startswith(".") and os.path.isfile(os.path.join(STATIC, name)))
+
+    class Guarded:
+        """What every handler of the view does first: answer only to the view's own names, and log a
+        failure without the request's query."""
+
+        def prepare(self) -> None:
+            host = self.request.headers.get("Host")
+            if not server.hosts.allows(host):
+                server.door.refuse("host", self.request.remote_ip,
+                                   f"a request for {host[:100]!r}, not a name of this view (DNS rebinding?)")
+                raise web.HTTPError(403, reason="Not a name of this view")
+
+        def write_error(self, status_code: int, **kwargs: Any) -> None:
+            self.set_header("Content-Type", "text/plain; charset=utf-8")
+            if status_code == 403 and not server.hosts.allows(self.request.headers.get("Host")):
+                self.finish(f"this view answers to {server.hosts.describe()}\n")
+            else:
+                self.finish(f"{status_code} {self._reason}\n")
+
+        def log_exception(self, typ: Any, value: Any, tb: Any) -> None:
+            if isinstance(value, web.HTTPError):
+                return  # answered with its status, which the access log says
+            log.error("web view: %s failed", request_line(self.request), exc_info=(typ, value, tb))
 
     def harden(handler: Any) -> None:
         handler.set_header("X-Content-Type-Options", "nosniff")
@@ -240,7 +290,7 @@ def _handlers(server: WebServer, tornado: Any) -> list:
                            "default-src 'self'; connect-src 'self'; img-src 'self' data:; "
                            "style-src 'self'; script-src 'self'; frame-ancestors 'none'")
 
-    class Page(web.RequestHandler):
+    class Page(Guarded, web.RequestHandler):
         def set_default_headers(self) -> None:
             harden(self)
             self.set_header("Cache-Control", "no-store")
@@ -250,12 +300,28 @@ def _handlers(server: WebServer, tornado: Any) -> list:
                 self.set_header("Content-Type", "text/html; charset=utf-8")
                 self.write(handle.read())
 
-    class Static(web.StaticFileHandler):
+    class Static(Guarded, web.StaticFileHandler):
+        """The folder's own files, by name: nothing else is even looked up (a path with a NUL byte was
+        an HTTP 500 with a traceback)."""
+
         def set_default_headers(self) -> None:
             harden(self)
 
-    class Socket(tornado.websocket.WebSocketHandler):
+        def parse_url_path(self, url_path: str) -> str:
+            if url_path not in static_files:
+                raise web.HTTPError(404)
+            return url_path
+
+    class Socket(Guarded, tornado.websocket.WebSocketHandler):
         """One page: HELLO with a nonce, its AUTH, then pictures (and, for a trace, its player's commands)."""
+
+        door_stream: Any = None  # its connection, the door's key (once open)
+
+        def check_origin(self, origin: str) -> bool:
+            if super().check_origin(origin):
+                return True
+            server.door.refuse("origin", self.request.remote_ip, f"a WebSocket from a page of {origin[:100]!r}")
+            return False
 
         def open(self) -> None:
             self.peer = self.request.remote_ip
@@ -264,17 +330,10 @@ def _handlers(server: WebServer, tornado: Any) -> list:
             self.pending: Any = None   # the last picture's write, while it has not gone out
             self.behind = False
             self.player: Any = None
+            self.door_stream = self.ws_connection.stream
             server.connections.add(self)
-            if len(server.connections) > MAX_CONNECTIONS:
-                self.close(1013, "too many connections")
-                return
-            self.send_json({"class": "HELLO", "mode": server.mode, "nonce": self.nonce.hex(),
-                            "token_hint": server.token_hint})
-            self.timeout = tornado.ioloop.IOLoop.current().call_later(AUTH_TIMEOUT_S, self._too_slow)
-
-        def _too_slow(self) -> None:
-            if not self.authed:
-                self.close(1008, "no proof of the token")
+            server.door.opened(self.door_stream, self)
+            self.send_json({"class": "HELLO", "mode": server.mode, "nonce": self.nonce.hex()})
 
         def send_json(self, obj: dict) -> None:
             self.send_text(json.dumps(obj), force=True)
@@ -299,18 +358,17 @@ def _handlers(server: WebServer, tornado: Any) -> list:
             kind = request.get("class") if isinstance(request, dict) else None
             if not self.authed:
                 if kind != "AUTH" or not server.check.verify(self.nonce, request.get("proof")):
-                    log.warning("web view: a page from %s did not prove the token; closed", self.peer)
-                    self.send_json({"class": "ERROR", "error": "the token's proof is wrong: give the token of "
-                                                               + (server.token_hint or "the daemon")})
+                    server.door.refuse("auth", self.peer, "a page did not prove the token")
+                    self.send_json({"class": "ERROR", "error": f"the token's proof is wrong: give {server.token_hint}"})
                     self.close(1008, "wrong proof")
                     return
                 self.authed = True
-                tornado.ioloop.IOLoop.current().remove_timeout(self.timeout)
+                server.door.proved(self.door_stream)
                 if not server._welcome(self):
+                    server.door.refuse("pages", self.peer, f"{server.max_pages} pages are served already")
                     self.send_json({"class": "ERROR", "error": f"too many pages at once ({server.max_pages})"})
                     self.close(1013, "too many pages")
                     return
-                self.send_json({"class": "WELCOME", "mode": server.mode})
                 if server.replay is not None:
                     self.player = Player(server.replay, self, tornado)
                 return
@@ -322,6 +380,8 @@ def _handlers(server: WebServer, tornado: Any) -> list:
         def on_close(self) -> None:
             if self.player is not None:
                 self.player.stop()
+            if self.door_stream is not None:
+                server.door.leave(self.door_stream)
             server._gone(self)
 
     return [(r"/", Page), (r"/static/(.*)", Static, {"path": STATIC}), (r"/ws", Socket)]
@@ -340,6 +400,7 @@ class Player:
         self.playing = False
         self.last = clock()
         page.send_json(replay.scene_at(self.t))
+        page.send_json({"class": "EVENTS", "events": replay.events, "start": replay.start, "end": replay.end})
         self.scene = replay.scene_at(self.t)
         self.timer = tornado.ioloop.PeriodicCallback(self.tick, REPLAY_TICK_S * 1000)
         self.timer.start()
@@ -384,7 +445,8 @@ class Player:
         if scene is not self.scene:
             self.scene = scene
             self.page.send_json(scene)
-        self.page.send_text(json.dumps(self.replay.state(self.t, self.speed, self.playing)), force=force)
+        floor = 2 * REPLAY_TICK_S * self.speed  # every transmission since the last picture
+        self.page.send_text(json.dumps(self.replay.state(self.t, self.speed, self.playing, floor)), force=force)
 
     def stop(self) -> None:
         self.timer.stop()
