@@ -5,7 +5,9 @@ same run.
 
 - Preparation: the issue's shallow case (100 m of water, a summer profile, sand, 12 kHz): a 51 × 501
   TL grid and 26 × 101 arrivals, for one source depth and for the default eleven, from an empty cache
-  (BELLHOP is pelagic in ``.venv-bellhop``: ``make .venv-bellhop/.installed``).
+  (BELLHOP is pelagic in ``.venv-bellhop``: ``make .venv-bellhop/.installed``), with a fan of 1 001 beams
+  as the figures before issue 38 had: the fan found by convergence (``beams: auto``, the default) takes
+  16 to 32 times the beams here, and what that costs is measured by ``docs/water_examples.py``.
 - Per arrival, alone: the step the medium takes for a moving pair, d = |a − b|, the delay, the PER,
   with the physical model (Thorp, 15·log r) and with the BELLHOP lookup (``BellhopPath.at`` then
   ``Reception.per``), alternated, 5 repeats of 200 000 arrivals.
@@ -40,7 +42,7 @@ from hilgate.scene import load_scene_text  # noqa: E402
 
 SUMMER = ((0.0, 1521.0), (15.0, 1520.0), (25.0, 1510.0), (40.0, 1500.0), (100.0, 1498.0))
 SHALLOW = Water(depth_m=100.0, sound_speed=SUMMER, bottom=SEDIMENTS["sand"], range_m=5000.0, ranges=501, depths=51,
-                source_depths=1, arrival_ranges=101, arrival_depths=26)
+                source_depths=1, arrival_ranges=101, arrival_depths=26, beams=1001)
 
 SCENE = """\
 name: bench
@@ -63,6 +65,7 @@ WATER = """    water:
       depth_m: 100
       sound_speed: [[0, 1521], [15, 1520], [25, 1510], [40, 1500], [100, 1498]]
       bottom: sand
+      beams: 1001
       grid: {{range_m: 5000, ranges: {ranges}, depths: {depths}, source_depths: {sources}}}"""
 FULL = {"ranges": 501, "depths": 51, "sources": 11, "arrival_ranges": 101, "arrival_depths": 26, "arrivals": 200_000,
         "repeats": 5, "sim_repeats": 3, "sim_s": 100.0}

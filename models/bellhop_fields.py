@@ -2,9 +2,10 @@
 
 BELLHOP (run by ``hilgate/channel/``, never imported) gives, per frequency, on a grid of source
 depths × receiver depths × ranges: the transmission loss, and from its arrivals the delay of the first
-arrival within ``threshold_db`` of the strongest and the RMS delay spread.  :class:`Fields` holds one
-frequency's grids as flat lists of floats with uniform axes, so a lookup is a few multiplications and
-eight list reads (trilinear in source depth, receiver depth and range), not a numpy call: that is the
+arrival within ``threshold_db`` of the strongest, that arrival's slopes (``hilgate/channel/delays.py``)
+and the RMS delay spread.  :class:`Fields` holds one frequency's grids as flat lists of floats with
+uniform axes, so a lookup is a few multiplications and a dozen list reads (TL trilinear in source
+depth, receiver depth and range; the delay from the nearest grid point), not a numpy call: that is the
 whole cost an arrival adds.
 
 A path (one sender, one receiver) is bound once (:meth:`BellhopChannel.bind`): the fields of the
@@ -15,7 +16,10 @@ depth), into the physical model's SNR → BER → PER chain.  A static pair asks
 
 What is interpolated is the part the straight line does not explain: TL − 20·log10 R and the delay
 − R/c̄ (R the slant distance, c̄ the mean sound speed), which stay smooth where the field bends sharply
-near the source's depth at short range; the lookup adds the straight line back.  Outside the grid:
+near the source's depth at short range; the lookup adds the straight line back.  The delay is not
+interpolated between grid points: which arrival is the first jumps from one point to the next, and a
+blend of two is the delay of no path.  It is the nearest grid point's first arrival, followed to the
+query along its own slopes (the same path at the neighbouring points).  Outside the grid:
 depths are clamped to it; nearer than its first range the residual of the first range is used (TL
 then falls spherically to 1 m, the delay to zero); beyond its last range TL goes on with 15·log r and
 Thorp's absorption and the delay at the mean speed.  A receiver in a shadow (no
@@ -70,21 +74,33 @@ class _Axis:
         i = int(f)
         return i, f - i
 
+    def nearest(self, x: float) -> tuple[int, float]:
+        """The grid point nearest ``x`` (clamped to the axis) and how far ``x`` (clamped) is from it."""
+        x = self.x0 if x < self.x0 else self.last if x > self.last else x
+        i = int((x - self.x0) / self.step + 0.5) if self.n > 1 else 0
+        i = self.n - 1 if i > self.n - 1 else i
+        return i, x - (self.x0 + i * self.step)
+
 
 class Fields:
     """One frequency's fields on one grid (see the module's doc).  ``tl``, ``first`` and ``spread``
     are nested sequences [source][depth][range] (numpy arrays are fine: they are flattened here);
     ``first`` and ``spread`` may be on a coarser grid of their own (``arrival_depths``,
-    ``arrival_ranges``)."""
+    ``arrival_ranges``); ``first_slopes`` are the slopes of the first arrival's residual delay along
+    receiver depth, range and source depth on that grid (s/m; none: the nearest point's delay, flat).
+    ``fan``: the beams BELLHOP traced and how much doubling to them moved the TL at 99.9 % of the grid
+    and at most (dB, NaN when the fan was given), as the preparation reports them."""
 
     __slots__ = ("frequency_hz", "sources", "depths", "ranges", "a_depths", "a_ranges", "tl", "first", "spread",
-                 "first_on_tl",
+                 "first_dz", "first_dr", "first_ds", "fan",
                  "mean_speed", "alpha_db_per_m", "_tl_strides", "_a_strides")
 
     def __init__(self, frequency_hz: float, sources: Sequence[float], depths: Sequence[float],
                  ranges: Sequence[float], tl: Any, first: Any, spread: Any, mean_speed_mps: float,
-                 arrival_depths: Sequence[float] | None = None, arrival_ranges: Sequence[float] | None = None):
+                 arrival_depths: Sequence[float] | None = None, arrival_ranges: Sequence[float] | None = None,
+                 first_slopes: tuple[Any, Any, Any] | None = None, fan: tuple[int, float, float] | None = None):
         self.frequency_hz = float(frequency_hz)
+        self.fan = fan
         self.sources = _Axis(sources)
         self.depths = _Axis(depths)
         self.ranges = _Axis(ranges)
@@ -104,13 +120,12 @@ class Fields:
         self.first = _flat(first - _slant(sources, self.a_depths_values(arrival_depths, depths),
                                           self.a_depths_values(arrival_ranges, ranges)) / self.mean_speed,
                            (self.sources.n, self.a_depths.n, self.a_ranges.n), "first")
-        self.spread = _flat(spread, (self.sources.n, self.a_depths.n, self.a_ranges.n), "spread")
-        # the delay's residual resampled onto the TL grid: an arrival then locates its place once for both
-        self.first_on_tl = _flat(_resample(np.asarray(self.first).reshape(self.sources.n, self.a_depths.n,
-                                                                          self.a_ranges.n),
-                                           self.a_depths_values(arrival_depths, depths),
-                                           self.a_depths_values(arrival_ranges, ranges), depths, ranges),
-                                 (self.sources.n, self.depths.n, self.ranges.n), "first")
+        a_shape = (self.sources.n, self.a_depths.n, self.a_ranges.n)
+        self.spread = _flat(spread, a_shape, "spread")
+        if first_slopes is None:
+            first_slopes = (np.zeros(a_shape),) * 3
+        self.first_dz, self.first_dr, self.first_ds = (_flat(np.asarray(g, dtype=np.float64), a_shape, "first's slope")
+                                                       for g in first_slopes)
         self.alpha_db_per_m = thorp_db_per_km(self.frequency_hz / 1000.0) / 1000.0
         self._tl_strides = (self.depths.n * self.ranges.n, self.ranges.n)
         self._a_strides = (self.a_depths.n * self.a_ranges.n, self.a_ranges.n)
@@ -158,15 +173,15 @@ class Fields:
         return self._at((grid,), strides, depths, ranges, zs, zr, r)[0]
 
     def tl_and_delay(self, r: float, zs: float, zr: float) -> tuple[float, float]:
-        """:meth:`tl_db` and :meth:`delay_s` at once, the grid located once (what an arrival asks)."""
+        """:meth:`tl_db` and :meth:`delay_s` at once (what an arrival asks)."""
         ranges = self.ranges
         if r > ranges.last:
             return self.tl_db(r, zs, zr), self.delay_s(r, zs, zr)
-        residual, first = self._at((self.tl, self.first_on_tl), self._tl_strides, self.depths, ranges, zs, zr, r)
+        residual = self._at((self.tl,), self._tl_strides, self.depths, ranges, zs, zr, r)[0]
         slant = math.hypot(r, zr - zs)
         spherical = 20.0 * math.log10(slant) if slant > 1.0 else 0.0
         tl = residual + spherical
-        return (TL_CAP if tl > TL_CAP else 0.0 if tl < 0.0 else tl), slant / self.mean_speed + first
+        return (TL_CAP if tl > TL_CAP else 0.0 if tl < 0.0 else tl), self.delay_s(r, zs, zr)
 
     def tl_db(self, r: float, zs: float, zr: float) -> float:
         """Transmission loss (dB) at horizontal range ``r`` from a source at depth ``zs`` to a receiver
@@ -181,30 +196,29 @@ class Fields:
         residual = self._lookup(self.tl, self._tl_strides, self.depths, ranges, zs, zr, r)
         return min(max(residual + spherical, 0.0), TL_CAP)
 
+    def _followed(self, zs: float, zr: float, r: float) -> float:
+        """The residual delay of the nearest grid point's first arrival, followed to (``zs``, ``zr``,
+        ``r``) along its slopes (clamped to the grid)."""
+        i, ds = self.sources.nearest(zs)
+        j, dz = self.a_depths.nearest(zr)
+        k, dr = self.a_ranges.nearest(r)
+        si, sj = self._a_strides
+        at = i * si + j * sj + k
+        return self.first[at] + dz * self.first_dz[at] + dr * self.first_dr[at] + ds * self.first_ds[at]
+
     def delay_s(self, r: float, zs: float, zr: float) -> float:
         """The first arrival's delay (s) at (``r``, ``zs``, ``zr``)."""
         ranges = self.a_ranges
-        straight = math.hypot(r, zr - zs) / self.mean_speed
         if r > ranges.last:
-            edge = self._lookup(self.first, self._a_strides, self.a_depths, ranges, zs, zr, ranges.last)
+            edge = self._followed(zs, zr, ranges.last)
             return edge + math.hypot(ranges.last, zr - zs) / self.mean_speed + (r - ranges.last) / self.mean_speed
-        return straight + self._lookup(self.first, self._a_strides, self.a_depths, ranges, zs, zr, r)
+        return math.hypot(r, zr - zs) / self.mean_speed + self._followed(zs, zr, r)
 
     def spread_s(self, r: float, zs: float, zr: float) -> float:
         """The RMS delay spread (s) of the arrivals that count there (the edge value beyond the grid)."""
         ranges = self.a_ranges
         return self._lookup(self.spread, self._a_strides, self.a_depths, ranges, zs, zr,
                             min(max(r, ranges.x0), ranges.last))
-
-
-def _resample(values: "np.ndarray", depths: Sequence[float], ranges: Sequence[float],
-              onto_depths: Sequence[float], onto_ranges: Sequence[float]) -> "np.ndarray":
-    """``values`` [source][depth][range] linearly interpolated onto other depth and range axes (clamped)."""
-    out = np.empty((values.shape[0], len(onto_depths), len(onto_ranges)))
-    for s, plane in enumerate(values):
-        by_depth = np.array([np.interp(onto_depths, depths, plane[:, k]) for k in range(plane.shape[1])]).T
-        out[s] = np.array([np.interp(onto_ranges, ranges, row) for row in by_depth])
-    return out
 
 
 def _slant(sources: Sequence[float], depths: Sequence[float], ranges: Sequence[float]) -> "np.ndarray":

@@ -17,7 +17,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-__all__ = ["Bottom", "SEDIMENTS", "SURFACES", "RUNS", "Water", "mackenzie_speed", "munk_speed"]
+__all__ = ["Bottom", "SEDIMENTS", "SURFACES", "RUNS", "Water", "mackenzie_speed", "munk_speed", "munk_profile",
+           "NEAR_BOUNDARY_M", "AUTO_BEAMS"]
 
 
 @dataclass(frozen=True)
@@ -69,6 +70,30 @@ def munk_speed(depth_m: float, axis_m: float = 1300.0, scale_m: float = 1300.0, 
     return c_axis * (1.0 + epsilon * (eta - 1.0 + math.exp(-eta)))
 
 
+MUNK_STEP_M = 50.0
+"""The tabulation of :func:`munk_profile`: BELLHOP interpolates c linearly between rows, and at 50 m
+the chords of Munk's curve are within 0.06 m/s of it over 5 000 m (the Toolbox's own Munk cases
+tabulate every 250 m)."""
+
+
+def munk_profile(bottom_m: float) -> tuple[tuple[float, float], ...]:
+    """Munk's profile (:func:`munk_speed`, canonical parameters) tabulated from the surface to
+    ``bottom_m`` in equal steps of at most :data:`MUNK_STEP_M`: what ``sound_speed: munk`` means."""
+    n = max(1, math.ceil(bottom_m / MUNK_STEP_M))
+    return tuple((bottom_m * i / n, munk_speed(bottom_m * i / n)) for i in range(n + 1))
+
+
+NEAR_BOUNDARY_M = 2.0
+"""An incoherent field's receivers stay this far from the surface and the bottom (a tenth of the water
+in water shallower than 20 m; half a layer where layers are thicker): BELLHOP's geometric beams within
+their own width of a boundary lose part of themselves there and converge only as that width shrinks,
+while the incoherent field (intensities summed, the surface's image included) is there what it is a
+little deeper.  A modem nearer a boundary takes the field at this depth (spreading from its own)."""
+
+AUTO_BEAMS = "auto"
+"""``beams``: the fan is found by convergence (``hilgate/channel/beams.py``)."""
+
+
 @dataclass(frozen=True)
 class Water:
     """What a BELLHOP channel needs besides the frequency (which comes from each sender's modem).
@@ -92,7 +117,7 @@ class Water:
     source_depths: int = 11
     arrival_ranges: int = 101      # the arrivals' grid (delay and spread vary slowly: a coarser one)
     arrival_depths: int = 26
-    beams: int = 1001              # the fan's beams (0: BELLHOP chooses; in shallow water it chooses too many)
+    beams: int | str = AUTO_BEAMS  # the fan's beams: auto (by convergence), or a number (0: BELLHOP chooses)
     run: str = "incoherent"
     threshold_db: float = 20.0
     frequency_khz: float = 10.0    # for senders whose modem has no acoustic front end
@@ -120,12 +145,37 @@ class Water:
         step = self.depth_m / self.source_depths
         return [(i + 0.5) * step for i in range(self.source_depths)]
 
+    @property
+    def boundary_margin_m(self) -> float:
+        """How far an incoherent run's receivers stay from the surface and the bottom (at least):
+        :data:`NEAR_BOUNDARY_M`, or a tenth of water shallower than 20 m."""
+        return min(NEAR_BOUNDARY_M, self.deepest_m / 10.0)
+
+    def bottom_at(self, r: float) -> float:
+        """The bottom's depth at range ``r`` from a sender: ``depth_m``, or the bathymetry linear between
+        its rows and level beyond them (as BELLHOP reads the ``.bty`` hilgate writes)."""
+        points = sorted(self.bathymetry)
+        if not points:
+            return self.depth_m
+        if r <= points[0][0]:
+            return points[0][1]
+        for (r0, d0), (r1, d1) in zip(points, points[1:]):
+            if r <= r1:
+                return d0 + (d1 - d0) * (r - r0) / (r1 - r0)
+        return points[-1][1]
+
     def receiver_grid(self, n: int | None = None) -> list[float]:
         """Receiver depths: ``depths`` (or ``n``) points at the centres of equal layers from the
-        surface to the deepest bottom."""
+        surface to the deepest bottom; in an incoherent run, in equal steps from :data:`NEAR_BOUNDARY_M`
+        below the surface to as far above the deepest bottom, where the layers are thinner than twice
+        that (coherent runs keep the surface's interference there: Lloyd's mirror)."""
         n = self.depths if n is None else n
-        step = self.deepest_m / n
-        return [(i + 0.5) * step for i in range(n)]
+        layer = self.deepest_m / n
+        margin = max(layer / 2.0, self.boundary_margin_m) if self.run == "incoherent" else 0.0
+        if margin <= layer / 2.0 or n < 2:
+            return [(i + 0.5) * layer for i in range(n)]
+        step = (self.deepest_m - 2.0 * margin) / (n - 1)
+        return [margin + i * step for i in range(n)]
 
     def range_grid(self, n: int | None = None) -> list[float]:
         """Receiver ranges: ``ranges`` (or ``n``) steps of ``range_m / n`` (no column at 0, where a

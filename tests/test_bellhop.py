@@ -330,9 +330,9 @@ def test_simulated_per_through_the_lookup_is_the_analytic_per_at_the_looked_up_s
     ("{depth_m: 100, sound_speed: [[0, 1500], [200, 1490]]}", "channels.ac.water.sound_speed", "below the bottom"),
     ("{depth_m: 100, sound_speed: [[0, 1500], [0, 1490]]}", "channels.ac.water.sound_speed[1]", "rows go outwards"),
     ("{depth_m: 100, sound_speed: [[0, 900]]}", "channels.ac.water.sound_speed[0][1]", "at least 1300"),
-    ("{depth_m: 100, sound_speed: [[0, 1500]], bottom: mud}", "channels.ac.water.bottom", "must be one of clay"),
-    ("{depth_m: 100, sound_speed: [[0, 1500]], botom: sand}", "channels.ac.water.botom", "did you mean 'bottom'"),
-    ("{depth_m: 100, sound_speed: [[0, 1500]], grid: {ranges: 100000, depths: 10000}}", "channels.ac.water.grid.ranges",
+    ("{depth_m: 100, sound_speed: 1500, bottom: mud}", "channels.ac.water.bottom", "must be one of clay"),
+    ("{depth_m: 100, sound_speed: 1500, botom: sand}", "channels.ac.water.botom", "did you mean 'bottom'"),
+    ("{depth_m: 100, sound_speed: 1500, grid: {ranges: 100000, depths: 10000}}", "channels.ac.water.grid.ranges",
      "more than"),
     ("{depth_m: 100, temperature_c: [[0, 12]], sound_speed: [[0, 1500]]}", "channels.ac.water.temperature_c",
      "not both"),
@@ -372,11 +372,11 @@ def test_a_missing_program_is_one_clear_error(tmp_path):
 
 
 def test_the_cache_is_keyed_by_what_the_fields_depend_on(program, tmp_path):
-    from hilgate.channel.runner import field_key
+    from hilgate.channel.runner import cache_file, field_key
     water = Water(depth_m=50.0, sound_speed=((0.0, 1500.0),), ranges=5, depths=5, source_depths=1,
                   arrival_ranges=5, arrival_depths=5)
     prepare_fields(water, [10000.0], program=program, cache=str(tmp_path))
-    assert os.listdir(tmp_path) == [field_key(water, 10000.0) + ".npz"]
+    assert [str(tmp_path / name) for name in os.listdir(tmp_path)] == [cache_file(str(tmp_path), water, 10000.0)]
     # from the cache: a program that cannot run is not asked
     prepare_fields(water, [10000.0], program=Program(("/nonexistent",), "x"), cache=str(tmp_path))
     changed = Water(depth_m=50.0, sound_speed=((0.0, 1490.0),), ranges=5, depths=5, source_depths=1,
@@ -446,12 +446,12 @@ def test_a_failing_program_is_one_line_from_the_command(tmp_path, monkeypatch, c
 
 
 def test_a_cached_field_that_does_not_fit_is_computed_again(program, tmp_path):
-    from hilgate.channel.runner import field_key
+    from hilgate.channel.fieldcache import encode
+    from hilgate.channel.runner import cache_file
     water = Water(depth_m=50.0, sound_speed=((0.0, 1500.0),), ranges=5, depths=5, source_depths=1,
                   arrival_ranges=5, arrival_depths=5)
-    path = tmp_path / (field_key(water, 10000.0) + ".npz")
-    with open(path, "wb") as fh:
-        np.savez(fh, tl=np.full((1, 2, 2), np.nan))  # wrong keys and shapes, as a hostile or broken file
+    path = tmp_path / os.path.basename(cache_file(str(tmp_path), water, 10000.0))
+    path.write_bytes(encode({"tl": np.full((1, 2, 2), np.nan)}))  # wrong keys and shapes: another version's
     fields = prepare_fields(water, [10000.0], program=program, cache=str(tmp_path))[0]
     assert fields.tl_db(50.0, 25.0, 25.0) > 0.0
     path.write_bytes(b"not a zip")

@@ -29,10 +29,11 @@ def _list(values: list[float]) -> str:
 
 
 def env_text(water: Water, frequency_hz: float, kind: str, title: str = "hilgate",
-             sources: list[float] | None = None) -> str:
+             sources: list[float] | None = None, beams: int | None = None, run: str | None = None) -> str:
     """The ``.env`` text of one BELLHOP run: transmission loss on the water's grid (``kind`` =
     :data:`TL_RUN`) or the arrivals on its arrival grid (:data:`ARRIVALS_RUN`, written as ASCII), for
-    the water's source depths or ``sources``."""
+    the water's source depths or ``sources``, with a fan of ``beams`` (default: the water's, 0 when it
+    is to be found by convergence) and, for TL, the ``run`` (default: the water's)."""
     deepest = water.deepest_m
     top = "R" if water.surface == "rigid" else "V"
     # C: c-linear interpolation; W: attenuation in dB/wavelength; T: Thorp volume attenuation
@@ -56,9 +57,11 @@ def env_text(water: Water, frequency_hz: float, kind: str, title: str = "hilgate
     lines += [str(len(sources)), _list(sources)]
     lines += [str(len(receivers)), _list(receivers)]
     lines += [str(len(ranges)), _list([r / 1000.0 for r in ranges])]
-    run = RUN_LETTERS[water.run] if kind == TL_RUN else "A"
-    lines.append(f"'{run}B'")
-    lines.append(str(water.beams))
+    letter = RUN_LETTERS[run or water.run] if kind == TL_RUN else "A"
+    lines.append(f"'{letter}B'")
+    if beams is None:
+        beams = water.beams if isinstance(water.beams, int) else 0
+    lines.append(str(beams))
     lines.append(f"{_num(-ANGLE_DEG)} {_num(ANGLE_DEG)} /")
     lines.append(f"0.0 {_num(deepest * 1.1)} {_num(water.range_m * 1.02 / 1000.0)}")
     return "\n".join(lines) + "\n"

@@ -7,15 +7,18 @@ program is, in this order: ``--bellhop``/``HILGATE_BELLHOP`` (a command; the fil
 Acoustics Toolbox's ``bellhop.exe`` on the PATH, or this checkout's ``.venv-bellhop`` (pelagic, ``make
 .venv-bellhop``) running ``tools/bellhop_run.py``.
 
-What a run gives is reduced at once to the grids a lookup needs (TL; first-arrival delay and delay
-spread) and cached as ``HASH.npz`` under ``$HILGATE_CACHE`` (default ``~/.cache/hilgate/bellhop``),
-where HASH is the SHA-256 of everything the fields depend on: the environment and bathymetry files
-exactly as BELLHOP reads them, the arrival threshold and this reduction's version.  A changed profile,
-bottom, grid or frequency is a new hash; an old file is never reused for it.
+What a run gives is reduced at once to the grids a lookup needs (TL; the first arrival's delay and its
+slopes, ``delays.py``; the delay spread) and cached as ``HASH.fields`` (``fieldcache.py``: checksummed)
+under ``$HILGATE_CACHE`` (default ``~/.cache/hilgate/bellhop``), where HASH is the SHA-256 of everything
+the fields depend on: the environment and bathymetry files exactly as BELLHOP reads them, the arrival
+threshold, how the fan is chosen (``beams.py``) and this reduction's version.  A changed profile, bottom,
+grid or frequency is a new hash; an old file is never reused for it.  A damaged file (truncated, a bit
+flipped) is one warning, and the fields are computed again and the file replaced.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import logging
 import os
@@ -30,16 +33,20 @@ from typing import Callable, Iterable
 import numpy as np
 
 from ..models.bellhop_fields import TL_CAP, Fields
-from ..models.environment import Water
-from .arrfile import first_and_spread, read_arr
+from ..models.environment import AUTO_BEAMS, Water
+from .arrfile import read_arr
+from .beams import MOST_BEAMS, SHARE, TOLERANCE_DB, VERSION as BEAMS_RULE, Choice, choose_beams, judged_sources
+from .delays import DelayReduction
 from .envfile import ARRIVALS_RUN, TL_RUN, bty_text, env_text
-from .shdfile import FieldFileError, read_shd
+from .fieldcache import CacheFileError, decode, encode
+from .shdfile import FieldFileError, ShadeFile, read_shd
 
-__all__ = ["BellhopError", "Program", "find_program", "cache_dir", "field_key", "prepare_fields", "Progress"]
+__all__ = ["BellhopError", "Program", "find_program", "cache_dir", "field_key", "cache_file", "prepare_fields",
+           "Progress"]
 
 log = logging.getLogger(__name__)
 
-REDUCTION = 2
+REDUCTION = 4
 """The version of what the cache holds (bump it when the reduction changes)."""
 RUN_TIMEOUT_S = 3600.0
 MAX_OUTPUT_BYTES = 2 * 1024 ** 3
@@ -99,9 +106,11 @@ def cache_dir() -> str:
 def field_key(water: Water, frequency_hz: float) -> str:
     """The hash that names one frequency's fields: what BELLHOP reads, and how it is reduced."""
     h = hashlib.sha256()
+    fan = (f"beams by convergence {BEAMS_RULE} {TOLERANCE_DB!r} {SHARE!r} {MOST_BEAMS}" if water.beams == AUTO_BEAMS
+           else "beams as given")
     for part in (f"hilgate-fields-{REDUCTION}", env_text(water, frequency_hz, TL_RUN),
                  env_text(water, frequency_hz, ARRIVALS_RUN), bty_text(water) if water.bathymetry else "",
-                 repr(water.threshold_db), repr(water.surface_z_m)):
+                 repr(water.threshold_db), repr(water.surface_z_m), fan):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()
@@ -134,58 +143,150 @@ def _run(program: Program, workdir: str, name: str, env: str, bty: str | None, s
         return fh.read()
 
 
-def compute(water: Water, frequency_hz: float, program: Program, workdir: str,
-            step: Callable[[str], None] | None = None) -> dict[str, np.ndarray]:
-    """Run BELLHOP at one frequency (TL for every source depth at once, then the arrivals one source
-    depth at a time: an arrivals file holds every path, tens of megabytes per source depth in shallow
-    water) and reduce its output to the lookup's grids as it comes."""
-    bty = bty_text(water) if water.bathymetry else None
-    khz = f"{frequency_hz / 1000:g} kHz"
+class Steps:
+    """The runs of a preparation, for the progress bar: ``steps(what)`` before each run; ``more(n)`` when
+    more runs turn out to be needed (a fan that has not converged yet)."""
+
+    def __init__(self, progress: Progress | None):
+        self.progress = progress
+        self.done = 0
+        self.total = 0
+
+    def more(self, n: int) -> None:
+        self.total += n
+
+    def __call__(self, what: str) -> None:
+        if self.progress is not None:
+            self.progress(self.done, max(self.total, self.done + 1), what)
+        self.done += 1
+
+    def end(self) -> None:
+        if self.progress is not None:
+            self.progress(self.done, self.done, "done")
+
+
+def _shade(program: Program, workdir: str, text: str, bty: str | None) -> ShadeFile:
     try:
-        if step is not None:
-            step(f"{khz}: transmission loss")
-        shade = read_shd(_run(program, workdir, "tl", env_text(water, frequency_hz, TL_RUN), bty, ".shd"))
-        firsts, spreads = [], []
-        sources = water.source_grid()
-        for n, zs in enumerate(sources):
-            if step is not None:
-                step(f"{khz}: arrivals from {zs:g} m ({n + 1}/{len(sources)})")
-            text = _run(program, workdir, "arr", env_text(water, frequency_hz, ARRIVALS_RUN, sources=[zs]), bty,
-                        ".arr").decode("latin-1")
-            arrivals = read_arr(text)
-            del text
-            first, spread = first_and_spread(arrivals, water.threshold_db)
-            firsts.append(first[0])
-            spreads.append(spread[0])
+        return read_shd(_run(program, workdir, "tl", text, bty, ".shd"))
     except FieldFileError as exc:
         raise BellhopError(f"BELLHOP ({program}) wrote a file hilgate cannot read: {exc}") from None
-    tl = shade.transmission_loss_db()
+
+
+def _fan(water: Water, frequency_hz: float, program: Program, workdir: str, bty: str | None,
+         steps: Steps) -> Choice:
+    """The fan found by convergence (``beams.py``), judged on incoherent TL whatever the water's run."""
+    judge = dataclasses.replace(water, run="incoherent")
+    sources = water.source_grid()
+    judged = judged_sources(len(sources))
+    khz = f"{frequency_hz / 1000:g} kHz"
+    tried = [0]
+
+    def trace(beams: int) -> np.ndarray:
+        tried[0] += 1
+        if tried[0] > 2:
+            steps.more(len(judged))
+        planes = []
+        for i in judged:
+            steps(f"{khz}: transmission loss with {beams} beams from {sources[i]:g} m")
+            text = env_text(judge, frequency_hz, TL_RUN, sources=[sources[i]], beams=beams)
+            planes.append(_shade(program, workdir, text, bty).transmission_loss_db()[0])
+        return np.stack(planes)
+
+    return choose_beams(trace, judge, [sources[i] for i in judged], TL_CAP, BellhopError)
+
+
+def compute(water: Water, frequency_hz: float, program: Program, workdir: str,
+            steps: Steps | None = None) -> dict[str, np.ndarray]:
+    """Run BELLHOP at one frequency and reduce its output to the lookup's grids as it comes: the fan
+    (found by convergence unless the water gives it), the TL (every source depth in one run for a given
+    fan; one run per source depth for a converged one, whose many beams would exceed a program's limits
+    in one), then the arrivals one source depth at a time (an arrivals file holds every path, tens of
+    megabytes per source depth in shallow water)."""
+    steps = steps or Steps(None)
+    bty = bty_text(water) if water.bathymetry else None
+    khz = f"{frequency_hz / 1000:g} kHz"
+    sources = water.source_grid()
+    auto = water.beams == AUTO_BEAMS
+    judged = judged_sources(len(sources)) if auto else []
+    reused = judged if auto and water.run == "incoherent" else []
+    steps.more((2 * len(judged) + len(sources) - len(reused)) if auto else 1)
+    steps.more(len(sources))
+    choice = _fan(water, frequency_hz, program, workdir, bty, steps) if auto else None
+    beams = choice.beams if choice is not None else int(water.beams)
+    if choice is None:
+        steps(f"{khz}: transmission loss")
+        shade = _shade(program, workdir, env_text(water, frequency_hz, TL_RUN), bty)
+        tl, depths, ranges = shade.transmission_loss_db(), shade.receiver_depths, shade.ranges
+        source_depths = shade.source_depths
+    else:
+        planes, source_depths = [], []
+        for i, zs in enumerate(sources):
+            if i in reused:
+                planes.append(choice.tl[reused.index(i)])
+            else:
+                steps(f"{khz}: transmission loss with {beams} beams from {zs:g} m")
+                shade = _shade(program, workdir, env_text(water, frequency_hz, TL_RUN, sources=[zs], beams=beams),
+                               bty)
+                planes.append(shade.transmission_loss_db()[0])
+            source_depths.append(zs)
+        tl, source_depths = np.stack(planes), np.asarray(source_depths)
+        depths, ranges = np.asarray(water.receiver_grid()), np.asarray(water.range_grid())
+    try:
+        delays = DelayReduction(sources, water.threshold_db, water.mean_speed_mps)
+        for n, zs in enumerate(sources):
+            steps(f"{khz}: arrivals from {zs:g} m ({n + 1}/{len(sources)})")
+            text = _run(program, workdir, "arr", env_text(water, frequency_hz, ARRIVALS_RUN, sources=[zs],
+                                                          beams=beams), bty, ".arr").decode("latin-1")
+            arrivals = read_arr(text)
+            del text
+            delays.add(arrivals)
+    except FieldFileError as exc:
+        raise BellhopError(f"BELLHOP ({program}) wrote a file hilgate cannot read: {exc}") from None
     tl[~np.isfinite(tl) | (tl > TL_CAP)] = TL_CAP
-    first, spread = np.stack(firsts), np.stack(spreads)
-    zs = np.asarray(sources)[:, None, None]
-    zr = arrivals.receiver_depths[None, :, None]
-    r = arrivals.ranges[None, None, :]
-    straight = np.hypot(r, zr - zs) / water.mean_speed_mps
-    first = np.where(np.isfinite(first), first, np.broadcast_to(straight, first.shape))
-    spread = np.where(np.isfinite(spread), spread, 0.0)
-    return {"frequency_hz": np.array(frequency_hz), "sources": shade.source_depths, "depths": shade.receiver_depths,
-            "ranges": shade.ranges, "tl": tl, "arrival_depths": arrivals.receiver_depths,
-            "arrival_ranges": arrivals.ranges, "first": first, "spread": spread}
+    change = np.nan if choice is None or choice.change_db is None else choice.change_db
+    largest = np.nan if choice is None or choice.largest_db is None else choice.largest_db
+    return {"frequency_hz": np.array(frequency_hz), "sources": source_depths, "depths": depths,
+            "ranges": ranges, "tl": tl, "arrival_depths": delays.depths, "arrival_ranges": delays.ranges,
+            "beams": np.array(beams), "beams_change_db": np.array(change), "beams_largest_db": np.array(largest),
+            **delays.result()}
 
 
 def to_fields(arrays: dict[str, np.ndarray], water: Water) -> Fields:
     return Fields(float(arrays["frequency_hz"]), arrays["sources"], arrays["depths"], arrays["ranges"],
                   arrays["tl"], arrays["first"], arrays["spread"], water.mean_speed_mps,
-                  arrays["arrival_depths"], arrays["arrival_ranges"])
+                  arrays["arrival_depths"], arrays["arrival_ranges"],
+                  (arrays["first_dz"], arrays["first_dr"], arrays["first_ds"]),
+                  fan=(int(arrays["beams"]), float(arrays["beams_change_db"]), float(arrays["beams_largest_db"])))
+
+
+def cache_file(cache: str, water: Water, frequency_hz: float) -> str:
+    """Where the fields of ``water`` at ``frequency_hz`` are cached in the directory ``cache``."""
+    return os.path.join(cache, field_key(water, frequency_hz) + ".fields")
 
 
 def _load(path: str) -> dict[str, np.ndarray] | None:
+    """The cached arrays, or None (and one warning) when the file cannot be believed."""
     try:
-        with np.load(path, allow_pickle=False) as data:
-            return {name: data[name] for name in data.files}
-    except (OSError, ValueError, KeyError, EOFError) as exc:
+        with open(path, "rb") as fh:
+            data = fh.read(MAX_OUTPUT_BYTES + 1)
+        if len(data) > MAX_OUTPUT_BYTES:
+            raise CacheFileError(f"larger than {MAX_OUTPUT_BYTES} bytes")
+        return decode(data)
+    except (OSError, CacheFileError) as exc:
         log.warning("cached BELLHOP fields %s unreadable (%s): computing them again", path, exc)
         return None
+
+
+def _store(path: str, arrays: dict[str, np.ndarray]) -> None:
+    """Write the cache file whole or not at all (a reader never sees half of it)."""
+    fd, tmp = tempfile.mkstemp(dir=os.path.dirname(path), suffix=".fields.tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(encode(arrays))
+        os.replace(tmp, path)
+    except BaseException:
+        os.unlink(tmp)
+        raise
 
 
 def prepare_fields(water: Water, frequencies: Iterable[float], *, program: Program | None = None,
@@ -196,7 +297,7 @@ def prepare_fields(water: Water, frequencies: Iterable[float], *, program: Progr
     found: dict[float, Fields] = {}
     missing = []
     for hz in wanted:
-        path = os.path.join(cache, field_key(water, hz) + ".npz")
+        path = cache_file(cache, water, hz)
         arrays = _load(path) if os.path.exists(path) else None
         fields = None
         if arrays is not None:
@@ -211,26 +312,15 @@ def prepare_fields(water: Water, frequencies: Iterable[float], *, program: Progr
     if missing:
         program = program or find_program()
         os.makedirs(cache, mode=0o700, exist_ok=True)
-        runs = len(missing) * (1 + water.source_depths)
-        done = [0]
-
-        def step(what: str) -> None:
-            if progress is not None:
-                progress(done[0], runs, what)
-            done[0] += 1
-
+        steps = Steps(progress)
         for hz in missing:
             with tempfile.TemporaryDirectory(prefix="hilgate-bellhop-") as workdir:
-                arrays = compute(water, hz, program, workdir, step)
-            path = os.path.join(cache, field_key(water, hz) + ".npz")
-            fd, tmp = tempfile.mkstemp(dir=cache, suffix=".npz.tmp")
-            with os.fdopen(fd, "wb") as fh:
-                np.savez(fh, **arrays)
-            os.replace(tmp, path)
-            log.info("BELLHOP fields at %g Hz cached in %s", hz, path)
+                arrays = compute(water, hz, program, workdir, steps)
+            path = cache_file(cache, water, hz)
+            _store(path, arrays)
+            log.info("BELLHOP fields at %g Hz (%d beams) cached in %s", hz, int(arrays["beams"]), path)
             found[hz] = to_fields(arrays, water)
-        if progress is not None:
-            progress(runs, runs, "done")
+        steps.end()
     return [found[hz] for hz in wanted]
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 
 from .options import add_scene_args
 
@@ -32,8 +33,21 @@ def run(args: argparse.Namespace) -> int:
         print(f"{args.scene}: no channel has water: nothing to prepare")
         return 0
     program = find_program(args.bellhop) if args.bellhop else None
-    ready_channels(watery, scene.links, program=program, progress=bar())
+    ready = ready_channels(watery, scene.links, program=program, progress=bar())
     for name, channel in watery.items():
         hz = ", ".join(f"{f / 1000:g}" for f in sorted(frequencies_of(channel, scene.links)))
-        print(f"channel {name}: BELLHOP fields at {hz} kHz ready in {cache_dir()}")
+        fans = "; ".join(_fan_line(fields) for fields in ready[name].propagation.fields)
+        print(f"channel {name}: BELLHOP fields at {hz} kHz ready in {cache_dir()} ({fans})")
     return 0
+
+
+def _fan_line(fields) -> str:
+    """How many beams a field was traced with, and how converged (``hilgate/channel/beams.py``)."""
+    khz = f"{fields.frequency_hz / 1000:g} kHz"
+    if fields.fan is None:
+        return khz
+    beams, change, largest = fields.fan
+    if math.isnan(change):  # the scene gave the fan
+        return f"{khz}: {beams} beams as given" if beams else f"{khz}: as many beams as BELLHOP chose"
+    return (f"{khz}: {beams} beams; doubling to them moved the TL by {change:.2f} dB or less at 99.9 % of the "
+            f"grid, {largest:.2f} dB at most")

@@ -144,7 +144,6 @@ def run_fit(trace: str, scene_path: str | None = None, model: str = "power", lin
     return FitResult(model, fit, block, params, data, size)
 
 
-
 def _starting_links(trace: str, chosen: Any, scene_path: str | None,
                     overrides: tuple[str, ...]) -> tuple[dict[str, LinkInfo] | None, bool]:
     """The links at the run's start and whether to follow the trace's scene lines: ``--scene`` for the whole

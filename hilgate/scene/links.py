@@ -128,7 +128,6 @@ WIDE_MAX = 0xFFFE
 broadcast address on every channel, wide or not, so it is never a modem's address."""
 
 
-
 def _channels(f: Fields, channels: dict[str, Any]) -> tuple[str, str]:
     """The link's transmit and receive channels: ``channel``, or ``tx_channel`` and ``rx_channel``, or the
     scene's only channel."""

@@ -26,6 +26,7 @@ from .overrides import apply_override
 from .plugins import Plugin, PluginError, load_plugin
 from .ros2 import check_ros2_names, ros2_spec
 from .specs import CameraSpec, Scene, VehicleSpec
+from .in_water import check_modems_in_water
 from .water import water_spec
 from .vehicles import camera_spec, check_camera_references, vehicle_spec
 from .yaml_nodes import Node, SceneError, load_file, load_text
@@ -83,6 +84,7 @@ def _validate(root: Node | None, file: str, plugins: Sequence[str] = (), preset_
     context = {"channels": channels, "vehicles": vehicles}
     links = {lid: link_spec(lid, lnode, join_path("links", lid), context, ctx) for lid, lnode in link_nodes.items()}
     links = assign_addresses(links, link_nodes)
+    check_modems_in_water(channels, f.child("vehicles"), links)
     hosts, links, vehicles, cameras = resolve_hosts(links, vehicles, cameras, link_nodes, root)
     apps_node = f.child("apps")
     apps = () if apps_node is None or apps_node.value is None else app_specs(apps_node, ctx.plugins, links)
@@ -107,7 +109,6 @@ def _validate(root: Node | None, file: str, plugins: Sequence[str] = (), preset_
         trace_poses = tf.get("poses_s", number(0), 1.0) or None
     return Scene(name, seed, duration, channels, vehicles, links, flows, trace_file, file, cameras, trace_poses,
                  hosts, zenoh, apps, ros2)
-
 
 
 def _channels(f: Fields) -> dict[str, Channel]:
