@@ -33,5 +33,6 @@ def test_every_command_and_every_driver_key_is_in_the_reference():
         assert f"### `hilgate {name}`" in commands
     keys = (REPO / "docs" / "scene-keys.md").read_text(encoding="utf-8")
     for name, driver in DRIVERS.items():
+        line = next(line for line in keys.splitlines() if line.startswith(f"- `{name}`: "))
         for key, _, _ in scene_options(driver):
-            assert f"| `{name}` | `{key}` |" in keys
+            assert f"`{key}` (" in line

@@ -72,8 +72,8 @@ def _options_table(parser: argparse.ArgumentParser, seen: dict[tuple[str, str], 
         if first != parser.prog and action.option_strings:
             again.setdefault(first, []).append(f"`{argument}`")
         else:
-            rows.append(f"| `{argument}` | {text} |")
-    lines = ["| argument | what it does |", "|---|---|", *rows, ""] if rows else []
+            rows.append(f"- `{argument}`" + (f": {text}" if text else ""))
+    lines = [*rows, ""] if rows else []
     for first, arguments in again.items():
         lines += [f"Also {', '.join(arguments)}, as for `{first}`.", ""]
     return lines
@@ -121,14 +121,19 @@ def _keys(keys: Iterable[str]) -> str:
     return ", ".join(f"`{key}`" for key in keys)
 
 
+def _number(value: float) -> str:
+    """4000000 as ``4000000``, not ``4e+06``; 0.1 as ``0.1``."""
+    return str(int(value)) if float(value).is_integer() else f"{value:g}"
+
+
 def _bounds(minimum: Any, maximum: Any, above: Any = None) -> str:
     parts = []
     if above is not None:
-        parts.append(f"> {above:g}")
+        parts.append(f"> {_number(above)}")
     if minimum is not None:
-        parts.append(f"≥ {minimum:g}")
+        parts.append(f"≥ {_number(minimum)}")
     if maximum is not None:
-        parts.append(f"≤ {maximum:g}")
+        parts.append(f"≤ {_number(maximum)}")
     return ", ".join(parts)
 
 
@@ -184,31 +189,34 @@ def scene_keys_page() -> str:
              "| where | keys |", "|---|---|"]
     lines += [f"| {place} | {_keys(keys)} |" for place, keys in places]
     lines += ["", "## MAC parameters (`links.<id>.mac`)", "",
-              "`protocol:` names the MAC; each takes these keys besides it.", "",
-              "| protocol | key | kind | default | bounds | note |", "|---|---|---|---|---|---|"]
+              "`protocol:` names the MAC; each takes these keys besides it (kind, default, bounds).", ""]
     for name in sorted(MACS):
         params = MACS[name].PARAMETERS
-        if not params:
-            lines.append(f"| `{name}` | | | | | no parameters |")
-        for key, param in params.items():
-            lines.append(f"| `{name}` | `{key}` | {param.kind} | {_value(param.default)} | "
-                         f"{_bounds(param.minimum, param.maximum)} | {_cell(param.doc)} |")
+        described = [_described(key, param.kind, _value(param.default), _bounds(param.minimum, param.maximum),
+                                param.doc) for key, param in params.items()]
+        lines.append(f"- `{name}`: " + ("; ".join(described) if described else "no parameters"))
     lines += ["", "## Driver options (`links.<id>` with `backend:`)", "",
-              "A real modem's link takes its driver's keys; a required one has no default.", "",
-              "| backend | key | kind | default | check |", "|---|---|---|---|---|"]
+              "A real modem's link takes its driver's keys (kind, default or required, check).", ""]
     for name, driver in DRIVERS.items():
         defaults = {f.name: f.default for f in fields(driver.options)}
+        described = []
         for key, check, required in scene_options(driver):
             default = "required" if required else _value(defaults[key]) if defaults[key] is not MISSING else "computed"
-            lines.append(f"| `{name}` | `{key}` | {check.kind} | {default} | {_check(check)} |")
+            described.append(_described(key, check.kind, default, _check(check)))
+        lines.append(f"- `{name}`: " + "; ".join(described))
     lines += ["", "## Emulated devices (`links.<id>.emulate`)", "",
-              "`protocol:` names the device; `pty:` or `tcp:` where it is; besides, each takes:", "",
-              "| protocol | key | kind | default | check |", "|---|---|---|---|---|"]
+              "`protocol:` names the device, `pty:` or `tcp:` where it is; besides, each takes:", ""]
     for name, driver in DRIVERS.items():
-        for key, check, default in emulator_options(driver):
-            shown = "required" if default is MISSING else _value(default)
-            lines.append(f"| `{name}` | `{key}` | {check.kind} | {shown} | {_check(check)} |")
+        described = [_described(key, check.kind, "required" if default is MISSING else _value(default), _check(check))
+                     for key, check, default in emulator_options(driver)]
+        if described:
+            lines.append(f"- `{name}`: " + "; ".join(described))
     return "\n".join(lines) + "\n"
+
+
+def _described(key: str, kind: str, default: str, *notes: str) -> str:
+    """``key`` (kind, default, notes…) as one item of a list."""
+    return f"`{key}` (" + ", ".join(part for part in (kind, default, *map(_cell, notes)) if part) + ")"
 
 
 def _check(check: Any) -> str:
