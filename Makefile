@@ -26,7 +26,7 @@ PIP_ARGS     ?=
 PURGE        ?=
 EXTRAS       ?= web
 
-.PHONY: run test sim bench fuzz paper install uninstall clean
+.PHONY: run test sim bench soak fuzz paper install uninstall clean
 
 $(BIN)/python:
 	@echo "make: creating $(VENV), a Python environment of this checkout's own"
@@ -116,6 +116,15 @@ bench: $(VENV)/.installed-test
 	NS3_PYTHON='$(NS3_PYTHON)' $(BIN)/python benchmarks/run_all.py --out bench.out
 	$(BIN)/python benchmarks/readme_bench.py bench.out docs/performance.md
 	$(BIN)/python benchmarks/readme_bench.py bench.out docs/compiled-hot-path.md --only pass_cost.py gli_roundtrip.py multihost.py
+
+# The soak (benchmarks/soak.py, docs/performance.md "Soak"): two daemons of one scene (network namespaces as
+# root, else loopback), 50 links at 100 frames/s for an hour, a reload every minute, daemon B restarted every
+# ten minutes: the daemons' memory slope and an account of every frame.  Not part of `make test` (which runs
+# a minute and a half of it); `nohup make soak > soak.out &` and wait an hour.  SOAK_ARGS="--keep DIR" keeps
+# the traces and the applications' logs (about 200 MB).
+SOAK_ARGS ?=
+soak: $(VENV)/.installed-test
+	$(BIN)/python benchmarks/soak.py --minutes 60 --reload-every 60 --restart-every 600 $(SOAK_ARGS)
 
 clean:
 	rm -rf $(VENV) $(BELLHOP_VENV) build *.egg-info .pytest_cache

@@ -207,7 +207,9 @@ class Daemon:
     a privilege away, as a host would not grant it)."""
 
     def __init__(self, tmp_path, scene_text: str, links: list[str], *args: str, env: dict | None = None,
-                 runtime: str | None = None, queue_budget_unlimited: bool = False, preexec=None):
+                 runtime: str | None = None, queue_budget_unlimited: bool = False, preexec=None,
+                 launch: tuple[str, ...] = ()):
+        """``launch``: a command the daemon runs under (``ip netns exec NAME``: tests/netns_kit.py)."""
         self.tmp = tmp_path
         self.links = links
         self.scene = tmp_path / "scene.yaml"
@@ -220,7 +222,7 @@ class Daemon:
         self.notify.bind(self.notify_path)
         self.log = open(tmp_path / "daemon.log", "w+")
         self._start = dict(
-            args=[sys.executable, "-m", "hilgate", "-v", "run", str(self.scene), "--runtime-dir", self.runtime,
+            args=[*launch, sys.executable, "-m", "hilgate", "-v", "run", str(self.scene), "--runtime-dir", self.runtime,
                   "--trace", str(self.trace), "--summary", str(self.summary), "--no-status-line", *args],
             stdout=self.log, stderr=subprocess.STDOUT, env=dict(os.environ, NOTIFY_SOCKET=self.notify_path, **(env or {})),
             preexec_fn=_in_order(_unlimited_queue_budget if queue_budget_unlimited else None, preexec))

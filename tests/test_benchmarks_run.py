@@ -60,6 +60,16 @@ WITH_DAEMONS = {
                           [r"ns-3: not run \(", r"run 1, +same CPU, +bare: lateness at the application p50 ",
                            r"run 1, +same CPU, hilgate: lateness at the application p50 .* daemon CPU ",
                            r" +same CPU: bare .* hilgate .* ns-3 not run; ratio hilgate / bare "]),
+    # a minute and a half of `make soak`'s hour: reloads every 20 s, one restart of B; it exits 1 when a
+    # frame is unexplained, delivered twice or out of order (so this asserts the account balances)
+    "soak": (["benchmarks/soak.py", "--minutes", "1.5", "--reload-every", "20", "--restart-every", "45",
+              "--sample-every", "5"],
+             [r"soak: .* at 100 frames/s, a reload every 20 s, B restarted every 45 s; ",
+              r"reloads: \d+ \(\d+ refused or unanswered\); restarts of B: 1; ",
+              r"memory of daemon A \(one run, \d+ samples\): RSS .* slope ",
+              r"memory of daemon B \(run 2, ", r"restart of B: down .* s after",
+              r"account: sent \d+ = delivered \d+ \+ lost \d+ \(.*\) \+ unexplained 0; delivered twice 0, out of order 0; ",
+              r"account balanced: "]),
     # four conditions (quiet/busy x normal/--realtime); as root the instrument and --realtime are real time
     "realtime_load": (["benchmarks/realtime_load.py", "--seconds", "1", "--bare-seconds", "1", "--nodes", "2",
                        "--rate", "10", "--apps", "1", "--repeats", "1", "--placement", "same", "--hogs", "1",

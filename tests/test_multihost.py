@@ -439,7 +439,7 @@ links:
 def test_an_insecure_network_is_asked_for_warned_about_and_still_checks_what_it_hears(tmp_path):
     """``insecure: true``: plain TCP, a warning at start; a peer without credentials then reaches the
     daemon, and what it forges (a host nobody named, a host speaking for another, times a day away,
-    garbage, strangers' tokens) is counted or ignored, never a traceback.  Without ``insecure`` or
+    garbage, strangers' tokens, reports of what it heard) is counted or ignored, never a traceback.  Without ``insecure`` or
     credentials the same scene does not start."""
     import json as json_
 
@@ -448,6 +448,7 @@ def test_an_insecure_network_is_asked_for_warned_about_and_still_checks_what_it_
     from hilgate.core.backend import AppFrame
     from hilgate.core.packets import packet_class
     from hilgate.daemon.netcodec import encode_transmission
+    from hilgate.daemon.netledger import encode_report
     from hilgate.models.frame import Frame
 
     prefix = f"hilgate-test-{uuid.uuid4().hex[:8]}"
@@ -486,9 +487,16 @@ links:
             publishers["B"].put(encode_transmission("B", time.time_ns(), 1, frame, 86400.0, 0.1, None))  # a day ahead
             publishers["B"].put(b"\x00\x00\x00\x05garbage")                                   # not a message
             publishers["A"].put(encode_transmission("B", time.time_ns(), 2, frame, 0.0, 0.1, None))  # A speaking for B
-            counters = wait_until(lambda: (lambda c: c if len(c) >= 4 else None)(host.status()["network"]["counters"]),
-                                  what="the counters")
-            assert counters == {"foreign_sender": 1, "out_of_time": 1, "bad_message": 1, "forged": 1}
+            # reports of what a host heard (hilgate/daemon/netledger.py): of a host nobody named, not one, and
+            # one under B's key that says it is A's; none settles anything
+            report = encode_report("Z", "zz", "s", 1, 1, 5, [[1, 5]], [], False)
+            session.put(f"{prefix}/ack/Z/A", report)
+            session.put(f"{prefix}/ack/B/A", b"[[[[")
+            session.put(f"{prefix}/ack/B/A", report.replace(b'"h":"Z"', b'"h":"A"'))
+            want = {"foreign_sender": 2, "out_of_time": 1, "bad_message": 2, "forged": 2}
+            counters = wait_until(lambda: (lambda c: c if sum(c.values()) >= sum(want.values()) else None)(
+                host.status()["network"]["counters"]), what="the counters")
+            assert counters == want
             assert {v["host"] for v in host.status()["network"]["hosts"]} == {"B"}  # no stranger
             token.undeclare()
         finally:

@@ -220,6 +220,18 @@ def test_the_replay_window_takes_each_number_once_per_session():
     assert window.admit("s2", 200, 10_000_000_002) == 1
 
 
+def test_a_daemon_that_starts_while_another_host_runs_hears_its_numbers_without_a_gap():
+    """Its window was not there for the numbers before the first it hears: before, a restarted host
+    counted every message the other had sent since its own start as a gap (traced net_gap, n in the
+    thousands), and past MAX_JUMP (16.7 million messages: two days at 100 a second) refused them all."""
+    window = ReplayWindow()
+    assert window.admit("s1", 100, 5000) == 0
+    assert window.admit("s1", 100, 5002) == 1  # from there on, gaps are gaps
+    late = ReplayWindow()
+    assert late.admit("s1", 100, ReplayWindow.MAX_JUMP + 10) == 0
+    assert late.admit("s1", 100, ReplayWindow.MAX_JUMP + 11) == 0
+
+
 def test_a_forged_session_of_a_later_epoch_leaves_the_hosts_own_session_heard():
     """Issue 37: a thief with the host's key puts one message of a session a nanosecond newer.  The
     host's own session (its daemon alive) goes on; a session whose daemon is gone does not."""
@@ -264,3 +276,19 @@ def test_a_restarted_host_is_heard_whatever_epoch_was_forged():
     assert window.admit("restarted", 500, 1) == "replay"  # (its token not heard yet)
     assert window.admit("restarted", 500, 1, alive=True) == 0  # its daemon holds the host's token: heard
     assert [window.admit("restarted", 500, n, alive=True) for n in (2, 3)] == [0, 0]
+
+
+def test_a_session_that_started_before_the_window_listened_is_heard_from_its_first_number():
+    """Sessions side by side (issue 37) and a daemon that starts while the others run (issue 36): a
+    forged message heard first must not leave the host's own session, older than the window, counted
+    from 0 (a gap of every earlier number, past MAX_JUMP all refused)."""
+    window = ReplayWindow(since_ns=1000)
+    assert window.admit("forged", 1500, 1) == 0
+    far = ReplayWindow.MAX_JUMP + 10
+    assert window.admit("honest", 500, far, alive=True) == 0  # started before the window listened
+    assert window.admit("honest", 500, far + 2, alive=True) == 1  # from there on, gaps are gaps
+    assert window.admit("honest", 500, far - 5, alive=True) == 0  # late, within the window: taken once
+    assert window.admit("honest", 500, 3, alive=True) == "replay"  # before its first number heard
+    # a session that started after the window listened was heard from its start: what it skipped is a gap
+    assert window.admit("restarted", 2000, 5, alive=True) == 4
+    assert window.admit("later", 3000, ReplayWindow.MAX_JUMP + 5, alive=True) == "bad_message"

@@ -555,7 +555,10 @@ links:
         got = []
         while len(got) < len(payloads):
             message = ls.recv(timeout=60)
-            assert message is not None, f"{len(got)} of 40 arrived\n{daemon.output()[-3000:]}"
+            if message is None:
+                daemon.stop()
+                lost = [ev for ev in daemon.trace_events() if ev["ev"] in ("drop", "err")]
+                raise AssertionError(f"{len(got)} of 40 arrived; traced {lost}\n{daemon.output()[-3000:]}")
             got.append(message.data)
     assert got == payloads
     daemon.stop()

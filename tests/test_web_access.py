@@ -43,8 +43,9 @@ def web_daemon(daemon_of, *args: str):
     return daemon, port, read_token(os.path.join(daemon.runtime, "tcp.token"))
 
 
-async def _page(port: int, token: bytes | None, headers: dict | None = None) -> list:
-    """A page's WebSocket: its HELLO, then (with ``token``) its proof and the answer or the close."""
+async def _page(port: int, token: bytes | None, headers: dict | None = None, count: int = 2) -> list:
+    """A page's WebSocket: its HELLO, then (with ``token``) its proof and the answer or the close (and
+    what follows, up to ``count`` messages)."""
     from tornado.httpclient import HTTPRequest
     from tornado.websocket import websocket_connect
 
@@ -52,7 +53,7 @@ async def _page(port: int, token: bytes | None, headers: dict | None = None) -> 
     connection = await asyncio.wait_for(websocket_connect(request), HANG_GUARD_S)
     try:
         messages = []
-        for _ in range(2):
+        for _ in range(count):
             text = await asyncio.wait_for(connection.read_message(), HANG_GUARD_S)
             if text is None:
                 messages.append({"closed": connection.close_code, "reason": connection.close_reason})
@@ -92,6 +93,17 @@ def raw_request(port: int, target: str, host: str, extra: str = "") -> tuple[int
 def upgrade(origin: str) -> str:
     return ("Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Version: 13\r\n"
             f"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nOrigin: {origin}\r\n")
+
+
+def test_a_page_is_welcomed_before_it_is_told_the_scene(daemon_of):
+    """The answer to the proof comes first, whatever the daemon has sent the view: a page that came once
+    the scene was known was told the scene before it was welcomed (a client reading the answer saw
+    SCENE; the red team's operator was kept out 3 times in 8 under load)."""
+    daemon, port, token = web_daemon(daemon_of)
+    first = asyncio.run(_page(port, token, count=3))
+    assert [m.get("class") for m in first[:2]] == ["HELLO", "WELCOME"]
+    wait_until(lambda: [m.get("class") for m in asyncio.run(_page(port, token, count=3))][2:] == ["SCENE"])
+    assert [m.get("class") for m in asyncio.run(_page(port, token, count=3))] == ["HELLO", "WELCOME", "SCENE"]
 
 
 # -- strangers at the door ---------------------------------------------------------------------------

@@ -2,8 +2,8 @@
 
 The router talks to a backend only through :class:`Backend`; adding a modem type means adding its
 driver module in ``drivers/`` and one row in the driver table (:mod:`hilgate.drivers.table`), not
-touching the router.  A backend outlives nothing: on a reload that changes the backend kind, the router closes the old one and opens
-the new one behind the same GLI endpoints.
+touching the router.  A backend outlives nothing: on a reload that changes the backend kind, the
+router closes the old one and opens the new one behind the same GLI endpoints.
 """
 
 from __future__ import annotations
@@ -36,6 +36,9 @@ class AppFrame:
     """``(frame, delivered, one_way_tau_s)`` when its acknowledgement came back or the last retry failed."""
     airtime_s: float | None = None
     """Seconds on air when the sending modem decides it (a Micro-Modem's rate), not the link's bit rate."""
+    pkt: int | None = None
+    """The id of the frame on air that brought it (the trace's ``pkt``), once a simulated modem delivered
+    it: the GLI's losses on delivery name it, as the medium's do."""
     on_dropped: Callable[["AppFrame", str], Any] | None = field(default=None, repr=False)
     """``(frame, cause)`` when the backend drops it before the air (a full FIFO, a modem down): a sender
     that promised its application a fate (a UnetStack door's ``DatagramFailureNtf``) keeps the promise."""

@@ -46,9 +46,10 @@ log = logging.getLogger(__name__)
 
 DEFAULT_PRIORITY = 10
 """``--realtime`` without ``--realtime-priority``: see the module's docstring."""
+# (SCHED_BATCH, SCHED_IDLE and SCHED_RESET_ON_FORK are Linux's; Python names them only where the platform has them)
 POLICIES = {os.SCHED_OTHER: "SCHED_OTHER", os.SCHED_FIFO: "SCHED_FIFO", os.SCHED_RR: "SCHED_RR",
-            getattr(os, "SCHED_BATCH", 3): "SCHED_BATCH", getattr(os, "SCHED_IDLE", 5): "SCHED_IDLE"}
-RESET_ON_FORK = getattr(os, "SCHED_RESET_ON_FORK", 0x40000000)
+            getattr(os, "SCHED_BATCH", 3): "SCHED_BATCH", getattr(os, "SCHED_IDLE", 5): "SCHED_IDLE"}  # (see above)
+RESET_ON_FORK = getattr(os, "SCHED_RESET_ON_FORK", 0x40000000)  # (Linux's; see above)
 CAP_IPC_LOCK, CAP_SYS_NICE = 14, 23
 MCL_CURRENT, MCL_FUTURE, MCL_ONFAULT = 1, 2, 4
 RT_RUNTIME = "/proc/sys/kernel/sched_rt_runtime_us"
@@ -164,11 +165,13 @@ def _realtime(priority: int) -> tuple[int, str | None]:
     try:
         os.sched_setscheduler(0, os.SCHED_RR | RESET_ON_FORK, os.sched_param(chosen))
     except (OSError, AttributeError) as exc:
+        # (an AttributeError, where the platform has no sched_setscheduler, has neither strerror nor errno)
         why = getattr(exc, "strerror", None) or str(exc)
         budget = _cgroup_rt_budget()
-        if getattr(exc, "errno", None) == errno.EPERM and budget is not None and budget[1] == 0:
+        refused = getattr(exc, "errno", None) == errno.EPERM  # (as above: an AttributeError has no errno)
+        if refused and budget is not None and budget[1] == 0:
             why += f" (this process's cgroup has no real-time budget: {budget[0]} is 0)"
-        elif getattr(exc, "errno", None) == errno.EPERM:
+        elif refused:
             why += f" (CAP_SYS_NICE {'held' if capable else 'lacking'}, RLIMIT_RTPRIO {_limit_text(limit)})"
         return 0, f"SCHED_RR priority {chosen} refused: {why}"
     if chosen != priority:

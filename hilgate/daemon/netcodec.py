@@ -366,6 +366,12 @@ class ReplayWindow:
       declare), so a host restarted after a forged session of a later epoch is heard, and the messages
       of a start whose daemon is gone are replays of the past.  A known session's message with another
       epoch is none of it (``bad_message``).
+    - **A session first heard** starts at the number heard when it started before this window listened
+      (its epoch before ``since_ns``), and so does the first session the window hears at all: this
+      daemon was not there for the numbers before (it started, or the host came into its scene, while
+      that host ran), and counting them all as a gap was a lie (net_gap by the thousand), past
+      :data:`MAX_JUMP` a refusal of every message.  Judged per session, not by the window's first
+      message: a forged session heard first leaves the host's own session started at its number.
     - **Runs** of numbers within a session are followed side by side too (:data:`RUNS`): a number up to
       :data:`WINDOW` ahead of a run moves it (Zenoh's gaps); one further ahead starts a run of its own
       instead of moving the honest one, which goes on undisturbed: one forged number costs the host at
@@ -381,12 +387,13 @@ class ReplayWindow:
     SESSIONS = 4
     RUNS = 4
 
-    __slots__ = ("sessions", "newest", "resync")
+    __slots__ = ("sessions", "newest", "resync", "since_ns")
 
-    def __init__(self) -> None:
+    def __init__(self, since_ns: int = 0) -> None:
         self.sessions: dict[str, _Session] = {}  # (in the order last heard: the first is forgotten first)
         self.newest: int | None = None  # the newest epoch heard: the host's latest start
         self.resync = False
+        self.since_ns = since_ns  # (UNIX ns) since when this window hears the host's messages
 
     def admit(self, session: str, epoch_ns: int, number: int, alive: bool = False) -> str | int:
         """``"replay"``, ``"bad_message"`` (a jump too far, an epoch not its session's), or the count of
@@ -399,10 +406,16 @@ class ReplayWindow:
         if known is None:
             if newest is not None and epoch_ns == newest and not alive:
                 return "replay"  # a second start beside the newest
-            known = _Session(epoch_ns)
+            if newest is None or epoch_ns < self.since_ns:  # its numbers before were not for this window
+                known, verdict = _Session(epoch_ns, number), 0
+            else:
+                known, verdict = _Session(epoch_ns), None
         elif known.epoch_ns != epoch_ns:
             return "bad_message"
-        verdict = known.admit(number, self.resync, self.WINDOW, self.MAX_JUMP, self.RUNS)
+        else:
+            verdict = None
+        if verdict is None:
+            verdict = known.admit(number, self.resync, self.WINDOW, self.MAX_JUMP, self.RUNS)
         if isinstance(verdict, str):
             return verdict  # (a session only refused is not remembered: it takes no honest one's place)
         sessions.pop(session, None)
@@ -417,13 +430,14 @@ class ReplayWindow:
 
 class _Session:
     """One session's runs of numbers, each ``[highest, seen]`` (bit i of ``seen``: number highest - i was
-    heard), the one moved last at the end.  A session starts with a run at 0 (numbers count from 1)."""
+    heard), the one moved last at the end.  A session starts with a run at 0 (numbers count from 1), or
+    at the number first heard when the window was not there for those before (``first``)."""
 
     __slots__ = ("epoch_ns", "runs")
 
-    def __init__(self, epoch_ns: int):
+    def __init__(self, epoch_ns: int, first: int = 0):
         self.epoch_ns = epoch_ns
-        self.runs: list[list[int]] = [[0, 1]]
+        self.runs: list[list[int]] = [[first, 1]]
 
     def admit(self, number: int, resync: bool, window: int, max_jump: int, most: int) -> str | int:
         runs = self.runs

@@ -21,8 +21,8 @@ carries its sender's exact position.  Static vehicles are computed everywhere.
 
 **Faults.** A daemon holds liveliness tokens for its host and each of its links; a host that dies or
 is cut off loses them within the Zenoh lease (``lease_s``), its links show ``down`` here and frames
-addressed to them are traced and counted ``host_down``.  A second daemon with the same host name or
-link is refused at start.
+addressed to them are traced and counted ``host_down``; what was on its way when it went is settled by
+the hosts' reports (:mod:`.netledger`).  A second daemon with the same host name or link is refused at start.
 
 **Who says what.** Every key a host writes carries its name, so that Zenoh's access control (built
 from the lab's credentials, :mod:`hilgate.gli.zenoh_auth`) lets each host publish, answer and hold
@@ -52,6 +52,7 @@ from typing import Any, Callable
 from .access import AccessError
 from .netcodec import (MAX_TRANSMISSION, NetError, ReplayWindow, decode_pose, decode_transmission, encode_pose,
                        encode_transmission, to_local)
+from .netsettle import Settlement
 from ..core.inbox import Inbox
 from ..gli.zenoh_auth import Identity, session_config
 from ..gli.zenoh_door import WatchedPublisher, ZenohDoor
@@ -87,7 +88,7 @@ def zenoh_config(spec: Any, identity: Identity | None, connect: list[str] | tupl
     return session_config(listen=list(listen or spec.listen), connect=[*spec.connect, *connect],
                           identity=identity, prefix=spec.prefix, multicast_scouting=spec.multicast_scouting,
                           lease_s=spec.lease_s, config_file=spec.config,
-                          size_filter=[f"{spec.prefix}/tx/**", f"{spec.prefix}/pose/**"])
+                          size_filter=[f"{spec.prefix}/tx/**", f"{spec.prefix}/pose/**", f"{spec.prefix}/ack/**"])
 
 
 class HostView:
@@ -96,7 +97,7 @@ class HostView:
     __slots__ = ("name", "up", "zids", "links", "heard", "gaps", "late", "late_max", "delay_sum", "delay_max",
                  "window", "pose_t")
 
-    def __init__(self, name: str):
+    def __init__(self, name: str, since_ns: int = 0):
         self.name = name
         self.zids: set[str] = set()
         self.up = False
@@ -107,7 +108,7 @@ class HostView:
         self.late_max = 0.0
         self.delay_sum = 0.0
         self.delay_max = 0.0
-        self.window = ReplayWindow()
+        self.window = ReplayWindow(since_ns)  # (since_ns: when this daemon began to hear that host)
         self.pose_t: dict[str, float] = {}  # vehicle → the measurement time of its latest pose
 
     def status(self) -> dict[str, Any]:
@@ -148,6 +149,9 @@ class Network:
         self._entities: list[Any] = []
         self._status_cache = b"{}"
         self.zid: str | None = None  # this daemon's Zenoh id, once open() joined
+        self.settlement = Settlement(self)  # what became of the frames between this host and the others
+        self._alives: Inbox | None = None
+        self._listening = False  # (the subscriber of the others' transmissions is declared)
 
     # -- set-up ---------------------------------------------------------------------------------
 
@@ -167,6 +171,11 @@ class Network:
         while wanted and time.monotonic() < deadline and not list(session.info.peers_zid()):
             time.sleep(0.02)  # connecting to the listed peers: liveliness answers need them
         return ZenohDoor(session, self.prefix, self.host, self.scheduler.post)
+
+    def _listening_since(self) -> int:
+        """Now on the UNIX clock (ns), once this daemon hears the others' transmissions (else later than
+        any start: a host's session first heard then started before this daemon heard it)."""
+        return self.epoch_ns + round(self.scheduler.now() * 1e9) if self._listening else 1 << 63
 
     def _alive(self, *parts: str) -> str:
         return "/".join((self.prefix, "alive", *parts))
@@ -214,12 +223,15 @@ class Network:
         self.apply(scene)
         liveliness = session.liveliness()
         put = zenoh.SampleKind.PUT
-        alive = Inbox(post, self._on_alives, INBOX_DEPTH, batch=INBOX_BATCH)
+        alive = self._alives = Inbox(post, self._on_alives, INBOX_DEPTH, batch=INBOX_BATCH)
         self._entities.append(liveliness.declare_subscriber(
             f"{self.prefix}/alive/**", lambda s: alive.put((str(s.key_expr), "PUT" if s.kind == put else "DELETE")),
             history=True))
         transmissions = session.declare_subscriber(f"{self.prefix}/tx/**", zenoh.handlers.FifoChannel(FIFO_DEPTH))
         self._entities.append(transmissions)
+        self._listening = True
+        for view in self.hosts.values():  # (what a host sent before now was not for this daemon)
+            view.window.since_ns = self._listening_since()
         handover = Inbox(post, self._on_transmissions, TX_DEPTH, TX_BYTES, TX_TOTAL_BYTES, batch=INBOX_BATCH)
         threading.Thread(target=self._drain, args=(transmissions.handler, handover), name="network-tx",
                          daemon=True).start()
@@ -233,6 +245,7 @@ class Network:
         self._entities.append(session.declare_subscriber(f"{self.prefix}/pose/**", on_pose))
         status_key = f"{self.prefix}/status/{self.host}"  # (the answer under this host's own key: the ACL's)
         self._entities.append(session.declare_queryable(status_key, lambda q: q.reply(status_key, self._status_cache)))
+        self._entities += self.settlement.start()
         world = self.router.world
         world.medium.tap = self._on_air
         self._poses_every(1.0 / self.spec.pose_rate_hz)
@@ -243,9 +256,10 @@ class Network:
         self.scene = scene
         mine = self._mine(scene)
         self.remote_links = {link.id: link.host for link in scene.links.values() if link.id not in mine}
+        self.settlement.apply(scene, mine)
         for name in scene.hosts:
-            if name != self.host:
-                self.hosts.setdefault(name, HostView(name))
+            if name != self.host and name not in self.hosts:
+                self.hosts[name] = HostView(name, self._listening_since())
         liveliness = self.session.liveliness()
         for link_id in [key for key in self._tokens if key != "host" and key not in mine]:
             self._tokens.pop(link_id).undeclare()
@@ -273,6 +287,7 @@ class Network:
             if view is None:
                 return
             (view.zids.add if kind == "PUT" else view.zids.discard)(zid)
+            self.settlement.alive(host, view.zids)
             up = bool(view.zids)
             if up != view.up:
                 view.up = up
@@ -289,14 +304,19 @@ class Network:
             zids = view.links.setdefault(link, set())
             (zids.add if kind == "PUT" else zids.discard)(zid)
 
+    def catch_up_liveliness(self) -> None:
+        """Take the liveliness changes that wait for the loop now: Zenoh may already send a host that came
+        back what is published (its subscriber is matched on Zenoh's thread, its token reaches the loop
+        after), and it must not be taken for down meanwhile."""
+        alives = self._alives
+        while alives is not None and alives.turns:  # (a batch at a time: every change waiting)
+            alives._drain()
+
     def link_state(self, link_id: str) -> str:
         """``up``/``down`` of a link another host serves (its token is alive or not)."""
         host = self.remote_links.get(link_id)
         view = self.hosts.get(host) if host else None
         return "up" if view is not None and view.up and view.links.get(link_id) else "down"
-
-    def host_down(self, link_id: str) -> bool:
-        return link_id in self.remote_links and self.link_state(link_id) == "down"
 
     # -- transmissions ---------------------------------------------------------------------------
 
@@ -320,11 +340,13 @@ class Network:
                 allowed_destination=zenoh.Locality.REMOTE))
         self._remember(self.sent, (frame.src_link, frame.id), frame)
         if not publisher.matching:
+            self.settlement.on_air(sender, frame, None)
             return
         self.number += 1
         publisher.put(encode_transmission(self.host, self.epoch_ns, self.number, frame, t, duration,
                                           sender.pose.position(t), self.zid))
         self.counters["published"] += 1
+        self.settlement.on_air(sender, frame, self.number)
 
     def _drain(self, handler: Any, handover: Inbox) -> None:
         """The others' transmissions, from Zenoh's queue to the loop's (``handover``: one queue per host,
@@ -381,6 +403,7 @@ class Network:
         modem = world.modems.get(frame.src_link)
         if modem is None or modem.radio.listens or self.remote_links.get(frame.src_link) != message.host:
             self.counters["foreign_sender"] += 1  # not a link the scene gives that host: ignored
+            self.settlement.refused(message)
             return
         now = self.scheduler.now()
         t = to_local(message.t, message.epoch_ns, self.epoch_ns)
@@ -389,6 +412,7 @@ class Network:
         # t makes up for it)
         if abs(now - t) > TIME_WINDOW_S or message.epoch_ns - self.epoch_ns > (now + TIME_WINDOW_S) * 1e9:
             self.counters["out_of_time"] += 1
+            self.settlement.refused(message)
             return
         # Only now, the message known good in every other way, may it move the replay window (a message
         # refused above moved it before issue 37: one forged epoch made the host's every frame a replay)
@@ -406,6 +430,8 @@ class Network:
             mine = self.sent.get(message.ref_key) if message.ref_key[0] not in self.remote_links else None
             frame.ref = mine or self.heard.get(message.ref_key) or frame.ref
         self._remember(self.heard, (frame.src_link, frame.id), frame)
+        if not self.settlement.hear(message, modem, t, now):
+            return  # (reported as never heard: its sender traced it)
         view.heard += 1
         delay = now - t
         view.delay_sum += delay
@@ -524,7 +550,7 @@ class Network:
                  for link_id, host in sorted(self.remote_links.items())]
         return {"host": self.host, "zid": self.zid, "epoch_ns": self.epoch_ns if self._entities else None,
                 "hosts": [view.status() for _, view in sorted(self.hosts.items())], "remote_links": links,
-                "counters": dict(self.counters)}
+                "counters": {**self.counters, **self.settlement.counters()}, "unsettled": self.settlement.unsettled()}
 
     def query_status(self, answer: Callable[[list[dict[str, Any]]], Any], timeout: float = 1.5) -> None:
         """Ask every daemon (this one too) for its status; ``answer`` gets the list on the loop.  The
@@ -560,6 +586,7 @@ class Network:
                                          "vehicles": local["vehicles"]}, default=str).encode()
 
     def close(self) -> None:
+        self.settlement.close(joined=self.session is not None and bool(self._entities))
         for entity in self._entities + list(self._publishers.values()) + list(self._pose_publishers.values()):
             try:
                 entity.undeclare()

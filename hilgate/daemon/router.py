@@ -308,11 +308,6 @@ class RoutedLink:
                 and self.router.addressed_to_nobody(self.spec.params.tx_channel, frame.dst)):
             # it still goes on air (and may spoil others' frames), but nobody will ever take it
             self.lost("no_receiver", len(frame.real), ev="err", src=self.id, dst=f"addr:{frame.dst}")
-        network = self.router.network
-        if network is not None and frame.dst != BROADCAST:
-            target = self.router.link_name(self.spec.params.tx_channel, frame.dst)
-            if network.host_down(target):  # it still goes on air here, but its host is gone
-                self.lost("host_down", len(frame.real), ev="err", src=self.id, dst=target)
         backend.send(frame)
         if sender is not None and sender is self._sole_assumer:
             modem = backend.sim_modem
@@ -380,12 +375,12 @@ class RoutedLink:
                 kept = True
             elif outcome != ABSENT:
                 lost = True
-                self.lost(outcome, len(frame.real))
+                self.lost(outcome, len(frame.real), **_pkt(frame))
         if not taken:
             if kept:
                 self.unread_kept += 1  # waits in the queue for an application that starts late
             elif not lost:  # an application's own loss (app_full, client_slow) is counted once, as that
-                self.lost("no_reader", len(frame.real))
+                self.lost("no_reader", len(frame.real), **_pkt(frame))
         if frame.on_delivered is not None and frame.dst == self.address:
             frame.on_delivered(frame, self)
 
@@ -463,6 +458,11 @@ class RoutedLink:
         if self.lock is not None:
             self.lock.release()
             self.lock = None
+
+
+def _pkt(frame: AppFrame) -> dict[str, int]:
+    """The frame's id on air, for a loss's trace line, when a simulated modem delivered it."""
+    return {} if frame.pkt is None else {"pkt": frame.pkt}
 
 
 class Router:

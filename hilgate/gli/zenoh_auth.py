@@ -40,6 +40,9 @@ MAX_MESSAGE_BYTES = 1 << 20
 a hilgate message is at most a few tens of kB (a host's status with hundreds of links, ~200 kB), and a
 larger one is dropped by Zenoh before any of it reaches Python."""
 
+RECONNECT_MAX_MS = 1000
+"""The longest wait between two attempts to reach a ``connect`` endpoint again (Zenoh's default grows to
+4 s): a link that comes back is used within about a second (measured: tests/test_host_faults.py)."""
 SIZE_FILTER_BYTES = 1 << 17
 """Messages on the keys a session names as bounded (transmissions, poses, GLI SENDs) longer than this
 are dropped by Zenoh's ``low_pass_filter`` as they arrive; hilgate's own checks (64 kB) count those
@@ -123,9 +126,9 @@ def _allow(rule_id: str, messages: list[str], keys: list[str], flow: str = "ingr
 def acl(prefix: str, identity: Identity) -> dict[str, Any]:
     """Zenoh's ``access_control`` for a session of ``identity``: what it lets in from each peer.
 
-    A host H may: publish under ``tx/H``, ``pose/H``, ``link/H``; answer ``status/H`` and ``link/H``
-    queries; hold liveliness tokens under ``alive/H``; subscribe to and query the others' transmissions,
-    poses, statuses and tokens.  An application A may (on daemons) only put SENDs under
+    A host H may: publish under ``tx/H``, ``pose/H``, ``link/H``, ``ack/H``; answer ``status/H`` and
+    ``link/H`` queries; hold liveliness tokens under ``alive/H``; subscribe to and query the others'
+    transmissions, poses, reports, statuses and tokens.  An application A may (on daemons) only put SENDs under
     ``link/*/*/send/A``, subscribe to links' ``recv``, ``state`` and its own ``error/A``, and query
     ``info`` and ``command/A``; on an application's session only hosts' link keys get in.  Anything
     else from anyone (another application, a certificate of a name the manifest does not list) is
@@ -138,8 +141,9 @@ def acl(prefix: str, identity: Identity) -> dict[str, Any]:
     for i, host in enumerate(identity.hosts):
         if identity.role == "host":
             granted = [
-                (["put", "delete"], [f"{p}/tx/{host}/**", f"{p}/pose/{host}/**", f"{p}/link/{host}/**"]),
-                (["declare_subscriber"], [f"{p}/tx/**", f"{p}/pose/**", f"{p}/link/{host}/**"]),
+                (["put", "delete"], [f"{p}/tx/{host}/**", f"{p}/pose/{host}/**", f"{p}/link/{host}/**",
+                                     f"{p}/ack/{host}/**"]),
+                (["declare_subscriber"], [f"{p}/tx/**", f"{p}/pose/**", f"{p}/link/{host}/**", f"{p}/ack/**"]),
                 (["declare_queryable", "reply"], [f"{p}/status/{host}", f"{p}/link/{host}/**"]),
                 (["query"], [f"{p}/status/**"]),
                 (["liveliness_token"], [f"{p}/alive/{host}/**"]),
@@ -177,7 +181,7 @@ def session_config(*, listen: list[str] | tuple[str, ...], connect: list[str] | 
                    lease_s: float | None = None, config_file: str | None = None,
                    size_filter: list[str] | tuple[str, ...] = ()) -> Any:
     """The Zenoh configuration of a daemon's or an application's session: peer mode, multicast scouting
-    off unless asked, the endpoints, the lease; with an identity TLS-only, mutual, and the ACL of
+    off unless asked, the endpoints, the lease, reconnection at least every second; with an identity TLS-only, mutual, and the ACL of
     :func:`acl` (``tcp/`` endpoints are read as ``tls/``); without one, plain TCP."""
     import zenoh
 
@@ -190,6 +194,8 @@ def session_config(*, listen: list[str] | tuple[str, ...], connect: list[str] | 
     config.insert_json5("listen/endpoints", json.dumps(list(listen)))
     if connect:
         config.insert_json5("connect/endpoints", json.dumps(list(dict.fromkeys(connect))))
+    if json.loads(config.get_json("connect/retry") or "null") is None:  # (a configuration file's stays)
+        config.insert_json5("connect/retry", json.dumps({"period_max_ms": RECONNECT_MAX_MS}))
     if lease_s is not None:
         config.insert_json5("transport/link/tx/lease", str(int(lease_s * 1000)))
         config.insert_json5("transport/link/tx/keep_alive", "4")

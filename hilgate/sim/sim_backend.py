@@ -109,6 +109,7 @@ class SimBackend(Backend):
     def _deliver(self, frame: Frame) -> None:
         # Frames of built-in flows carry no application payload: they are background traffic.
         if isinstance(frame.app_frame, AppFrame) and self.on_receive is not None:
+            frame.app_frame.pkt = frame.id
             self.on_receive(frame.app_frame)
 
     def status(self) -> dict[str, Any]:

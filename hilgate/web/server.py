@@ -222,6 +222,8 @@ class WebServer:
         self.pages.add(page)
         self.clients = len(self.pages)
         log.info("web view: a page connected from %s (%d now)", page.peer, self.clients)
+        # WELCOME first: a page (or a client) reads what follows as the welcomed page's, whatever the scene's timing
+        page.send_json({"class": "WELCOME", "mode": self.mode})
         if self.replay is None:
             if self._scene is not None:
                 page.send_text(self._scene_text or json.dumps(self._scene), force=True)
@@ -370,7 +372,6 @@ def _handlers(server: WebServer, tornado: Any) -> list:
                     self.send_json({"class": "ERROR", "error": f"too many pages at once ({server.max_pages})"})
                     self.close(1013, "too many pages")
                     return
-                self.send_json({"class": "WELCOME", "mode": server.mode})
                 if server.replay is not None:
                     self.player = Player(server.replay, self, tornado)
                 return
