@@ -75,7 +75,6 @@ class MavlinkSource(ReaderThread):
         self.heartbeat = heartbeat
         self.heartbeat_period = 1.0 / heartbeat_hz
         self.messages = 0
-        self.connected = False
         super().__init__(f"mavlink-{name}")
         self._last_local = -math.inf
         self._asked = False
@@ -90,14 +89,12 @@ class MavlinkSource(ReaderThread):
                 log.warning("mavlink %s: cannot open %s (%s); retrying", self.name, self.url, exc)
                 self._stop.wait(2.0)
                 continue
-            self.connected = True
             try:
                 self._serve(connection)
             except Exception as exc:
                 log.warning("mavlink %s: %s; reconnecting", self.name, exc)
                 self._stop.wait(1.0)
             finally:
-                self.connected = False
                 try:
                     connection.close()
                 except Exception:
