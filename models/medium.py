@@ -37,7 +37,8 @@ from typing import TYPE_CHECKING, Any, Iterable
 
 from .air import Air, Quiet
 from .frame import BROADCAST
-from .propagation import Propagation, StraightLine
+from .propagation import Propagation
+from .propagations import PROPAGATIONS, implied
 
 NO_POSE = "no_pose"
 """The cause of a frame that cannot be judged because the sender or a receiver has no position (a live
@@ -52,8 +53,9 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class Channel:
-    """A shared medium.  Its ``propagation`` gives every path's delay and loss model (``propagation.py``);
-    a scene's channel is a :class:`~.propagation.StraightLine` at ``speed_mps`` after ``min_delay_s``."""
+    """A shared medium.  Its ``propagation`` gives every path's delay and loss model (``propagation.py``),
+    made by the model the channel names (``model``, the scene's ``propagation:``; ``propagations.py``): by
+    default a :class:`~.propagation.StraightLine` at ``speed_mps`` after ``min_delay_s``."""
 
     name: str
     speed_mps: float
@@ -62,11 +64,15 @@ class Channel:
     """The channel's water (``environment.Water``) when the scene gives one: BELLHOP's fields then
     decide every path's delay and loss (its propagation becomes a ``bellhop_fields.BellhopChannel``
     once the fields are ready: ``hilgate.channel.prepare``)."""
-    propagation: Propagation = field(default=None, compare=False)  # type: ignore[assignment]  # (None: the straight line)
+    propagation: Propagation = field(default=None, compare=False)  # type: ignore[assignment]  # (None: the model's)
+    model: str = ""
+    """The name of its propagation model (``propagations.PROPAGATIONS``); "": the one its water implies."""
 
     def __post_init__(self) -> None:
+        if not self.model:
+            object.__setattr__(self, "model", implied(self.water))
         if self.propagation is None:
-            object.__setattr__(self, "propagation", StraightLine(self.speed_mps, self.min_delay_s))
+            object.__setattr__(self, "propagation", PROPAGATIONS[self.model].make(self))
 
 
 class _Neighbour:
@@ -236,7 +242,7 @@ class Medium:
         if quiet is not None:
             for radio in radios:
                 position = radio.pose.position(0.0) if radio.pose.static else None
-                if position is None or not isinstance(self.channels[radio.tx_channel].propagation, StraightLine):
+                if position is None or not self.channels[radio.tx_channel].propagation.distance_only:
                     continue
                 quiet.add_sender(radio, position)
                 if radio.listens and not radio.judges_all:
