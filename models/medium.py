@@ -299,15 +299,15 @@ class Medium:
                 if sender_position is None:
                     sender_position = sender.pose.position(t)
                     if sender_position is None:  # a vehicle without a pose is heard by nobody
-                        missed += self._heard_by_nobody(neighbours[neighbours.index(nb):], frame, dst)
+                        missed += _heard_by_nobody(neighbours[neighbours.index(nb):], frame, dst)
                         break
-                path = self._moving_path(nb, sender_position, t, frame, dst)
+                path = _moving_path(nb, sender_position, t, frame, dst)
                 if path is None:
                     missed += 1
                     continue
                 d, start, loss = path
             if nb.refused is not None:
-                missed += self._refused(nb, frame, t, start, duration, d, loss, dst)
+                missed += _refused(nb, frame, t, start, duration, d, loss, dst)
                 continue
             nb.radio.arrive(frame, t, start, start + duration, d, loss)
         self.arrivals += len(neighbours) - missed + quiet_count
@@ -340,46 +340,46 @@ class Medium:
             return sorted(neighbours + extra, key=lambda nb: order[nb.radio]), quiet_count - len(judging)
         return extra, quiet_count - len(judging)
 
-    @staticmethod
-    def _heard_by_nobody(rest: list[_Neighbour], frame: "Frame", dst: int) -> int:
-        """The sender has no pose: every radio that would have judged the frame is told why it could not
-        (``no_pose``); all of ``rest`` are missed."""
-        for other in rest:
-            if dst == BROADCAST or other.radio.address == dst:
-                other.radio.unreachable(frame, NO_POSE)
-        return len(rest)
 
-    @staticmethod
-    def _moving_path(nb: _Neighbour, here: "tuple[float, ...]", t: float, frame: "Frame",
-                     dst: int) -> tuple[float, float, Any] | None:
-        """A moving pair at ``t`` with the sender at ``here``: (distance, the arrival's start, its loss
-        model), or None when the frame cannot reach the receiver (no pose, out of range: said to the
-        radio that would have judged it)."""
-        radio = nb.radio
-        there = radio.pose.position(t)
-        if there is None:
-            if dst == BROADCAST or radio.address == dst:  # it cannot be judged: said, with why
-                radio.unreachable(frame, NO_POSE)
-            return None
-        d = math.dist(here, there)
-        if d < nb.rmin or d > nb.rmax:
-            if radio.address == dst:
-                radio.unreachable(frame)
-            return None
-        if nb.positional:  # the water between these two positions, looked up once for this arrival
-            loss, tau = nb.water_between(here, there)
-            return d, t + tau, loss
-        return d, t + nb.delay(d, here, there), nb
+def _heard_by_nobody(rest: list[_Neighbour], frame: "Frame", dst: int) -> int:
+    """The sender has no pose: every radio that would have judged the frame is told why it could not
+    (``no_pose``); all of ``rest`` are missed."""
+    for other in rest:
+        if dst == BROADCAST or other.radio.address == dst:
+            other.radio.unreachable(frame, NO_POSE)
+    return len(rest)
 
-    @staticmethod
-    def _refused(nb: _Neighbour, frame: "Frame", t: float, start: float, duration: float, d: float, loss: Any,
-                 dst: int) -> int:
-        """A receiver that refuses the sender: outside its band it hears nothing (1: missed); a modulation
-        it does not decode is interference only (0)."""
-        radio = nb.radio
-        if not nb.interferes:
-            if radio.address == dst:
-                radio.unreachable(frame, nb.refused)
-            return 1
-        radio.arrive_refused(frame, t, start, start + duration, d, loss, nb.refused)
-        return 0
+
+def _moving_path(nb: _Neighbour, here: "tuple[float, ...]", t: float, frame: "Frame",
+                 dst: int) -> tuple[float, float, Any] | None:
+    """A moving pair at ``t`` with the sender at ``here``: (distance, the arrival's start, its loss
+    model), or None when the frame cannot reach the receiver (no pose, out of range: said to the
+    radio that would have judged it)."""
+    radio = nb.radio
+    there = radio.pose.position(t)
+    if there is None:
+        if dst == BROADCAST or radio.address == dst:  # it cannot be judged: said, with why
+            radio.unreachable(frame, NO_POSE)
+        return None
+    d = math.dist(here, there)
+    if d < nb.rmin or d > nb.rmax:
+        if radio.address == dst:
+            radio.unreachable(frame)
+        return None
+    if nb.positional:  # the water between these two positions, looked up once for this arrival
+        loss, tau = nb.water_between(here, there)
+        return d, t + tau, loss
+    return d, t + nb.delay(d, here, there), nb
+
+
+def _refused(nb: _Neighbour, frame: "Frame", t: float, start: float, duration: float, d: float, loss: Any,
+             dst: int) -> int:
+    """A receiver that refuses the sender: outside its band it hears nothing (1: missed); a modulation
+    it does not decode is interference only (0)."""
+    radio = nb.radio
+    if not nb.interferes:
+        if radio.address == dst:
+            radio.unreachable(frame, nb.refused)
+        return 1
+    radio.arrive_refused(frame, t, start, start + duration, d, loss, nb.refused)
+    return 0
