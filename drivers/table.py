@@ -370,7 +370,6 @@ DRIVERS: dict[str, Driver] = {driver.name: driver for driver in (
            "hilgate.drivers.unet_emulator:UnetEmulator", emulator_options=UnetEmulatorOptions, limits=UNET_LIMITS,
            reach=(Reach("tcp", (("modem_host", "127.0.0.1"), ("port", "{where}"))),)),
 )}
-merge_entry_points("hilgate.drivers", DRIVERS, lambda row: isinstance(row, Driver))  # a lab's own modems
 
 
 def limits_for(modem: str, limits: ModemLimits | None) -> ModemLimits | None:
@@ -437,3 +436,7 @@ def emulator_for(protocol: str) -> type:
     if reference is None:
         raise KeyError(f"backend {protocol!r} has no emulator")
     return resolve(reference)
+
+
+# last: a plug-in's row module imports this one (its row class, its options), complete by now
+merge_entry_points("hilgate.drivers", DRIVERS, lambda row: isinstance(row, Driver))  # a lab's own modems

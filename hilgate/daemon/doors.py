@@ -109,7 +109,6 @@ DOORS: dict[str, DoorRow] = {row.name: row for row in (
     DoorRow("ros2", "ROS 2", "hilgate.daemon.doors:_ros2"),
     DoorRow("zenoh", "the network of hosts", "hilgate.daemon.doors:_network"),
 )}
-merge_entry_points("hilgate.doors", DOORS, lambda row: isinstance(row, DoorRow))  # a lab's own doors
 
 
 def open_doors(setting: DoorSetting) -> list[Any]:
@@ -121,3 +120,7 @@ def open_doors(setting: DoorSetting) -> list[Any]:
         if door is not None:
             doors.append(door)
     return doors
+
+
+# last: a plug-in's row module imports this one (its row class, its options), complete by now
+merge_entry_points("hilgate.doors", DOORS, lambda row: isinstance(row, DoorRow))  # a lab's own doors

@@ -48,9 +48,12 @@ POSE_SOURCES: dict[str, PoseSourceRow] = {row.name: row for row in (
     PoseSourceRow("aruco", "ArUco marker", "hilgate.scene.live_poses:aruco_pose", None),
     PoseSourceRow("ros2", "ROS 2 topic", "hilgate.scene.ros2:ros2_pose", "hilgate.ros2.poses:start_pose_feed"),
 )}
-merge_entry_points("hilgate.pose_sources", POSE_SOURCES, lambda row: isinstance(row, PoseSourceRow))
 
 
 def check_live(kind: str, node: Any, path: str) -> Any:
     """The checked keys of a vehicle's ``kind`` source (a row of the table)."""
     return resolve(POSE_SOURCES[kind].check)(node, path)
+
+
+# last: a plug-in's row module imports this one (its row class, its options), complete by now
+merge_entry_points("hilgate.pose_sources", POSE_SOURCES, lambda row: isinstance(row, PoseSourceRow))
