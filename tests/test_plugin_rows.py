@@ -9,7 +9,9 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
+from daemon_kit import Daemon, unique
 from plugin_kit import LABMODEM, hilgate, installed
 
 LAB_SCENE = """channels: {ac: {speed_mps: 1500}}
@@ -21,10 +23,27 @@ links:
 
 ROWS = {
     "labrows/__init__.py": "",
-    "labrows/door.py": ('from hilgate.daemon.doors import DoorRow\n'
-                        'ROW = DoorRow("labdoor", "the lab\'s door", "labrows.door:open_door")\n'
+    "labrows/door.py": ('import os\n'
+                        'from hilgate.core.door_table import DoorRow\n'
+                        'ROW = DoorRow("labdoor", "the lab\'s door", "labrows.door:open_door", gli=True)\n'
+                        'class LabDoor:\n'
+                        '    def __init__(self, path):\n'
+                        '        self.path = path\n'
+                        '    def open(self, port):\n'
+                        '        if "labdoor" not in port.gli:\n'
+                        '            return None\n'
+                        '        with open(self.path, "a") as out:\n'
+                        '            out.write(f"opened {port.id}\\n")\n'
+                        '        return port.id\n'
+                        '    def update(self, handle, port):\n'
+                        '        return handle\n'
+                        '    def close(self, handle):\n'
+                        '        if handle is None:\n'
+                        '            return  # (a link that does not name this door)\n'
+                        '        with open(self.path, "a") as out:\n'
+                        '            out.write(f"closed {handle}\\n")\n'
                         'def open_door(setting):\n'
-                        '    return None  # (a door this daemon needs none of)\n'),
+                        '    return LabDoor(os.path.join(setting.options.runtime_dir, "labdoor.txt"))\n'),
     "labrows/pose.py": ('from hilgate.scene.pose_table import PoseSourceRow\n'
                         'ROW = PoseSourceRow("labgps", "the lab\'s GPS", "labrows.pose:check", None)\n'
                         'def check(node, path):\n'
@@ -100,9 +119,25 @@ def test_a_plug_in_that_fails_to_load_refuses_the_start_naming_its_package(tmp_p
 
 def test_the_door_and_pose_source_tables_take_the_rows_of_a_package(tmp_path):
     site = installed(tmp_path / "site", "hilgate-labrows", "2.0", GROUPS, ROWS)
-    code = ("from hilgate.daemon.doors import DOORS; from hilgate.scene.pose_table import POSE_SOURCES; "
+    code = ("from hilgate.core.door_table import DOORS; from hilgate.scene.pose_table import POSE_SOURCES; "
             "print(list(DOORS)); print(list(POSE_SOURCES))")
     answer = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=dict(os.environ, PYTHONPATH=str(site)),
                             capture_output=True, text=True, timeout=120)
     assert answer.stdout.splitlines() == ["['mq', 'socket', 'emulate', 'unet', 'ros2', 'zenoh', 'labdoor']",
                                           "['mavlink', 'aruco', 'ros2', 'labgps']"], answer.stderr
+
+
+def test_a_daemon_opens_a_package_door_for_the_links_that_name_it(tmp_path):
+    site = installed(tmp_path / "site", "hilgate-labrows", "2.0", GROUPS, ROWS)
+    near, far = unique("lab"), unique("other")
+    daemon = Daemon(tmp_path, "channels: {ac: {speed_mps: 1500}}\nvehicles: {a: {pose: {static: [0, 0, 1]}}}\n"
+                              f"links:\n  {near}: {{vehicle: a, address: 1, gli: [socket, labdoor]}}\n"
+                              f"  {far}: {{vehicle: a, address: 2, gli: [socket]}}\n",
+                    [near, far], env={"PYTHONPATH": str(site)})
+    try:
+        daemon.wait_for("READY=1")
+        daemon.stop()
+        opened = (Path(daemon.runtime) / "labdoor.txt").read_text().splitlines()
+    finally:
+        daemon.close()
+    assert opened == [f"opened {near}", f"closed {near}"]

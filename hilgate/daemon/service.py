@@ -258,7 +258,7 @@ class Daemon:
     def status(self) -> dict[str, Any]:
         status = {**self.router.status(), "cameras": self.live.status(),
                   "scheduling": current(self.scheduling.asked, self.scheduling.notes).as_dict()}  # (the loop's thread)
-        ros2 = self.ros2.status()
+        ros2 = self.ros2.status() if self.ros2 is not None else None
         if ros2 is not None:  # only once the daemon is on ROS 2
             status["ros2"] = {**ros2, "poses_in": self.live.ros2_status()}
         if self.tcp_listener is not None:  # what the TCP GLI refused, by cause; how many wait to authenticate
