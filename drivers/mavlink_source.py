@@ -213,3 +213,16 @@ class Feedback:
     def close(self) -> None:
         self.scheduler.cancel(self.timer)
         self.connection.close()
+
+
+def start_pose_feed(setting: Any, params: dict) -> MavlinkSource:
+    """The ``mavlink`` row of the pose-source table (:mod:`hilgate.scene.pose_table`): a vehicle's
+    autopilot read on a thread of its own, each measurement posted to the loop."""
+    from .mavlink_identity import Identity
+
+    heartbeat = dict(params["heartbeat"] or ())
+    identity = Identity(heartbeat["system_id"], heartbeat["component_id"]) if heartbeat else None
+    source = MavlinkSource(setting.vehicle, params["url"], setting.posting("mavlink"), params["system_id"],
+                           params["origin"], params["message_rates"], identity, heartbeat.get("rate_hz", 1.0))
+    source.start()
+    return source

@@ -335,6 +335,7 @@ class BellhopChannel:
     (``fields``: one :class:`Fields` per frequency the scene's senders use)."""
 
     positional = True  # (propagation.Propagation: each arrival is looked up at both ends' positions)
+    distance_only = False  # (the water between two places depends on their depths, not only their distance)
 
     def __init__(self, water: "Water", fields: Sequence[Fields], min_delay_s: float = 0.0):
         if not fields:

@@ -53,11 +53,11 @@ SEAMS = {
     LossModel: ["hilgate.models.errormodel:ErrorModel", "hilgate.models.physical:PhysicalErrorModel",
                 "hilgate.models.bellhop_fields:BellhopPath", "hilgate.models.bellhop_fields:ArrivalLoss",
                 "hilgate.models.path:Unheard",
-                "hilgate.models.path:Undecodable", "hilgate.models.medium:_Neighbour"],
+                "hilgate.models.path:Undecodable", "hilgate.models.neighbours:_Neighbour"],
     SinrLossModel: ["hilgate.models.physical:PhysicalErrorModel", "hilgate.models.path:Undecodable",
                     "hilgate.models.bellhop_fields:BellhopPath", "hilgate.models.bellhop_fields:ArrivalLoss",
                     "hilgate.models.path:Unheard",
-                    "hilgate.models.medium:_Neighbour"],
+                    "hilgate.models.neighbours:_Neighbour"],
 }
 SEAMS[Propagation] = ["hilgate.models.propagation:StraightLine", "hilgate.models.bellhop_fields:BellhopChannel"]
 BACKENDS = ["hilgate.sim.sim_backend:SimBackend", "hilgate.drivers.evologics:EvologicsBackend",
