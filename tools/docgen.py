@@ -153,7 +153,8 @@ def scene_keys_page() -> str:
     from hilgate.scene.flow_spec import FLOW_KEYS
     from hilgate.scene.hosts import ZENOH_KEYS
     from hilgate.scene.links import FIRMWARE_KEYS, OWN_KEYS
-    from hilgate.scene.load import CHANNEL_KEYS, TOP_KEYS
+    from hilgate.scene.channels import CHANNEL_KEYS
+    from hilgate.scene.load import TOP_KEYS
     from hilgate.scene.modem_limits import LIMIT_KEYS
     from hilgate.scene.physics import ACOUSTIC_KEYS, ERROR_KEYS
     from hilgate.scene.presets import MODEM_KEYS
