@@ -55,7 +55,6 @@ class M64Backend(ModemBackend):
         self.sending: AppFrame | None = None   # the frame whose packets those are
         self.modem_queue = 0
         self.fresh = True  # the next datagram is the first since a (re)start: it begins with a frame end
-        self.last_losses: int | None = None
         self._open_port()
 
     @property
@@ -226,7 +225,6 @@ class M64Backend(ModemBackend):
         if not (received.isdigit() and lost.isdigit()):
             return
         self.event("modem_stats", link_up=link == "y", pkt_cnt=int(received), pkt_loss_cnt=int(lost), ber=ber)
-        self.last_losses = int(lost)
 
     # -- bytes in --------------------------------------------------------------------------------------
 

@@ -75,7 +75,6 @@ class MavlinkSource(ReaderThread):
         self.heartbeat = heartbeat
         self.heartbeat_period = 1.0 / heartbeat_hz
         self.messages = 0
-        self.connected = False
         super().__init__(f"mavlink-{name}")
         self._last_local = -math.inf
         self._asked = False
@@ -90,14 +89,12 @@ class MavlinkSource(ReaderThread):
                 log.warning("mavlink %s: cannot open %s (%s); retrying", self.name, self.url, exc)
                 self._stop.wait(2.0)
                 continue
-            self.connected = True
             try:
                 self._serve(connection)
             except Exception as exc:
                 log.warning("mavlink %s: %s; reconnecting", self.name, exc)
                 self._stop.wait(1.0)
             finally:
-                self.connected = False
                 try:
                     connection.close()
                 except Exception:
@@ -216,3 +213,16 @@ class Feedback:
     def close(self) -> None:
         self.scheduler.cancel(self.timer)
         self.connection.close()
+
+
+def start_pose_feed(setting: Any, params: dict) -> MavlinkSource:
+    """The ``mavlink`` row of the pose-source table (:mod:`hilgate.scene.pose_table`): a vehicle's
+    autopilot read on a thread of its own, each measurement posted to the loop."""
+    from .mavlink_identity import Identity
+
+    heartbeat = dict(params["heartbeat"] or ())
+    identity = Identity(heartbeat["system_id"], heartbeat["component_id"]) if heartbeat else None
+    source = MavlinkSource(setting.vehicle, params["url"], setting.posting("mavlink"), params["system_id"],
+                           params["origin"], params["message_rates"], identity, heartbeat.get("rate_hz", 1.0))
+    source.start()
+    return source

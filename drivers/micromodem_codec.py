@@ -65,7 +65,7 @@ RATES = {
 RATE_SOURCES = {0: "libumutil.h TXR_80_FSK", 1: "libumutil.h TXR_250_SPRD", 2: "libumutil.h TXR_500_SPRD",
                 3: "libumutil.h TXR_1200_SPRD", 4: "libumutil.h TXR_1300_RBC", 5: "libumutil.h TXR_5300_RBC",
                 6: "WHOI's Micro-Modem page (rate 6: 490 bps, 2.95 s packet, 3.25 s signal)"}
-"""Where each rate's bit rate comes from (docs/modems.md prints the table from these)."""
+"""Where each rate's bit rate comes from (docs/conformance-micromodem.md prints the table from these)."""
 CI_AIRTIME_S = 32 * 8 / 80.0 / 4
 """An FSK cycle-init minipacket before a rate-0 packet (hilgate's estimate: a quarter of an FSK frame)."""
 MINIPACKET_S = 0.5

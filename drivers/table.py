@@ -20,7 +20,8 @@ adding a modem type means adding one options class and one row here, and its dri
 
 Why here, and why by name: the scene loader must know every driver's keys to validate any scene
 (also in the reload worker and in ``hilgate check``), yet must not import the drivers to do so —
-they import pyserial and the codecs, and open ports.  This module imports only the standard library;
+they import pyserial and the codecs, and open ports.  This module imports only the standard library
+and :mod:`hilgate.core.tables` (which adds the rows of installed packages: ``hilgate.drivers`` entry points);
 driver and emulator classes are named as ``"module:attr"`` strings and imported only when the daemon
 opens a link.  Declarations inside each driver module would force that import; a table inside
 ``hilgate/scene`` would make the daemon and the drivers depend on the loader's internals.  The checks
@@ -30,9 +31,10 @@ imports only the core, and the scene turns the data into its own checkers.
 
 from __future__ import annotations
 
-import importlib
 from dataclasses import MISSING, Field, dataclass, field, fields
 from typing import Any, Callable, Iterator
+
+from hilgate.core.tables import merge_entry_points, resolve
 
 __all__ = [
     "Option", "Driver", "Reach", "BY_PTY", "DRIVERS", "ModemLimits", "MODES", "SEND_AS", "limits_for", "EvologicsOptions", "S100Options", "S100EmulatorOptions", "option", "from_link", "scene_options", "emulator_options",
@@ -410,11 +412,6 @@ def emulated_protocols() -> tuple[str, ...]:
     return tuple(name for name, driver in DRIVERS.items() if driver.emulator)
 
 
-def _resolve(reference: str) -> Any:
-    module, _, attr = reference.partition(":")
-    return getattr(importlib.import_module(module), attr)  # (by name: the table names the opener as module:attribute)
-
-
 def open_backend(spec: Any, scheduler: Any, trace: Callable[[dict], Any]) -> Any:
     """The backend of a real-modem link (a validated ``LinkSpec``), opened: its driver module is
     imported now, its options are the scene's (``spec.options``) plus those filled from the link."""
@@ -429,7 +426,7 @@ def open_backend(spec: Any, scheduler: Any, trace: Callable[[dict], Any]) -> Any
         elif SPEC in f.metadata:
             # by name: the field's metadata names the spec's attribute
             options.setdefault(f.name, limits_for(spec.backend, getattr(spec, f.metadata[SPEC], None)))
-    return _resolve(driver.backend)(spec.id, spec.params.address, packet_class(spec.packet),
+    return resolve(driver.backend)(spec.id, spec.params.address, packet_class(spec.packet),
                                     driver.options(**options), scheduler, trace)
 
 
@@ -438,4 +435,8 @@ def emulator_for(protocol: str) -> type:
     reference = DRIVERS[protocol].emulator
     if reference is None:
         raise KeyError(f"backend {protocol!r} has no emulator")
-    return _resolve(reference)
+    return resolve(reference)
+
+
+# last: a plug-in's row module imports this one (its row class, its options), complete by now
+merge_entry_points("hilgate.drivers", DRIVERS, lambda row: isinstance(row, Driver))  # a lab's own modems

@@ -35,7 +35,8 @@ from .frame import BROADCAST
 from .path import front_of
 
 if TYPE_CHECKING:
-    from .medium import Channel, _Neighbour
+    from .medium import Channel
+    from .neighbours import _Neighbour
     from .radio import Radio
 
 _UNKNOWN = object()
@@ -139,7 +140,7 @@ class Quiet:
 
     def pair(self, sender: "Radio", receiver: "Radio") -> "_Neighbour":
         """The path of a quiet pair, made on first use."""
-        from .medium import _Neighbour
+        from .neighbours import _Neighbour
 
         nb = self.pairs.get((sender, receiver))
         if nb is None:

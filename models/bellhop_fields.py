@@ -10,7 +10,7 @@ whole cost an arrival adds.
 
 A path (one sender, one receiver) is bound once (:meth:`BellhopChannel.bind`): the fields of the
 sender's frequency and the receiver's loss model bound to the sender (``path.py``).  Each arrival
-then asks :meth:`BellhopPath.at` with the ends' positions for a :class:`Reception` (TL, delay, spread
+then asks :meth:`BellhopPath.at` with the ends' positions for an :class:`ArrivalLoss` (TL, delay, spread
 there) that is the arrival's loss model: received level = SL − TL(range, source depth, receiver
 depth), into the physical model's SNR → BER → PER chain.  A static pair asks once.
 
@@ -42,7 +42,7 @@ if TYPE_CHECKING:
     from .path import PathEnd
     from .trajectories import Vec3
 
-__all__ = ["Fields", "BellhopChannel", "BellhopPath", "Reception", "TL_CAP", "path_frequency_hz"]
+__all__ = ["Fields", "BellhopChannel", "BellhopPath", "ArrivalLoss", "TL_CAP", "path_frequency_hz"]
 
 TL_CAP = 250.0
 """Transmission loss (dB) where BELLHOP finds no sound (a shadow, a surface node): nothing decodes."""
@@ -245,7 +245,7 @@ def _flat(values: Any, shape: tuple[int, int, int], name: str) -> list[float]:
     return flat
 
 
-class Reception:
+class ArrivalLoss:
     """One arrival's loss model: what the path's ends see at the geometry it was sent in (TL, delay,
     spread), with the error model's interface (``per``, ``rx_power``, ``per_sinr``; ``d`` is
     ignored: the geometry is already in)."""
@@ -302,7 +302,7 @@ class BellhopPath:
         self.surface_z = surface_z
         self.constant_zero = False
 
-    def at(self, a: "Vec3", b: "Vec3") -> Reception:
+    def at(self, a: "Vec3", b: "Vec3") -> ArrivalLoss:
         """The reception of a frame sent from ``a`` to ``b`` (scene positions, z down): O(1)."""
         r = math.hypot(b[0] - a[0], b[1] - a[1])
         zs = a[2] - self.surface_z
@@ -310,7 +310,7 @@ class BellhopPath:
         fields = self.fields
         spread = fields.spread_s(r, zs, zr) if self.spread_limit is not None else 0.0  # asked only where it counts
         tl, delay = fields.tl_and_delay(r, zs, zr)
-        return Reception(self, tl, delay, spread)
+        return ArrivalLoss(self, tl, delay, spread)
 
     # without positions (hilgate check's scan over distance): both ends at the grid's middle depth
     def per(self, d: float, size: int) -> float:
@@ -322,7 +322,7 @@ class BellhopPath:
     def per_sinr(self, d: float, size: int, interference: float) -> float:
         return self._level(d).per_sinr(d, size, interference)
 
-    def _level(self, d: float) -> Reception:
+    def _level(self, d: float) -> ArrivalLoss:
         z = self.surface_z + (self.fields.sources.x0 + self.fields.sources.last) / 2.0
         return self.at((0.0, 0.0, z), (d, 0.0, z))
 
@@ -335,6 +335,7 @@ class BellhopChannel:
     (``fields``: one :class:`Fields` per frequency the scene's senders use)."""
 
     positional = True  # (propagation.Propagation: each arrival is looked up at both ends' positions)
+    distance_only = False  # (the water between two places depends on their depths, not only their distance)
 
     def __init__(self, water: "Water", fields: Sequence[Fields], min_delay_s: float = 0.0):
         if not fields:

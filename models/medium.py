@@ -8,6 +8,10 @@ decides collisions (``radio.py``).  Distances between vehicles that never move, 
 probability on such a path, are computed once per pair; that is what keeps the hot path O(1) per
 arrival.
 
+The lists a transmission walks are the neighbour index's (``neighbours.py``, rebuilt when the topology
+changes); the medium keeps the caches asked per transmission (out-of-range addressees, the moving grid,
+pairs asked for their delay alone).
+
 With a limited range, a transmission visits only modems that can be in range: static pairs beyond it
 are never listed (the lists are built from a grid of static positions, cells as wide as the range),
 and a sender with many moving neighbours finds them through a grid of where they were a moment ago,
@@ -37,7 +41,9 @@ from typing import TYPE_CHECKING, Any, Iterable
 
 from .air import Air, Quiet
 from .frame import BROADCAST
-from .propagation import Propagation, StraightLine
+from .neighbours import QUIET_MIN, Neighbours, _cell, _cell_size, _near, _Neighbour, _Roaming, quiet_index
+from .propagation import Propagation
+from .propagations import PROPAGATIONS, implied
 
 NO_POSE = "no_pose"
 """The cause of a frame that cannot be judged because the sender or a receiver has no position (a live
@@ -47,13 +53,13 @@ if TYPE_CHECKING:
     from .clock import Clock
     from .frame import Frame
     from .radio import Radio
-    from .trajectories import Vec3
 
 
 @dataclass(frozen=True)
 class Channel:
-    """A shared medium.  Its ``propagation`` gives every path's delay and loss model (``propagation.py``);
-    a scene's channel is a :class:`~.propagation.StraightLine` at ``speed_mps`` after ``min_delay_s``."""
+    """A shared medium.  Its ``propagation`` gives every path's delay and loss model (``propagation.py``),
+    made by the model the channel names (``model``, the scene's ``propagation:``; ``propagations.py``): by
+    default a :class:`~.propagation.StraightLine` at ``speed_mps`` after ``min_delay_s``."""
 
     name: str
     speed_mps: float
@@ -62,93 +68,15 @@ class Channel:
     """The channel's water (``environment.Water``) when the scene gives one: BELLHOP's fields then
     decide every path's delay and loss (its propagation becomes a ``bellhop_fields.BellhopChannel``
     once the fields are ready: ``hilgate.channel.prepare``)."""
-    propagation: Propagation = field(default=None, compare=False)  # type: ignore[assignment]  # (None: the straight line)
+    propagation: Propagation = field(default=None, compare=False)  # type: ignore[assignment]  # (None: the model's)
+    model: str = ""
+    """The name of its propagation model (``propagations.PROPAGATIONS``); "": the one its water implies."""
 
     def __post_init__(self) -> None:
+        if not self.model:
+            object.__setattr__(self, "model", implied(self.water))
         if self.propagation is None:
-            object.__setattr__(self, "propagation", StraightLine(self.speed_mps, self.min_delay_s))
-
-
-class _Neighbour:
-    """A (sender, receiver) pair on the sender's transmit channel, with what can be precomputed.
-
-    It is also the loss model handed with each arrival on this path: the receiver's error model bound
-    to the sender (``path.py``) at the distance, cached per frame size when neither vehicle moves.  A
-    pair whose receiver refuses the sender (``refused``: another band, a modulation it does not decode)
-    never takes the fast path (``reach`` is False).  On a channel whose propagation is ``positional`` (the
-    water's BELLHOP fields) the bound model is looked up at both ends' positions: once for a static pair,
-    at every arrival for a moving one."""
-
-    __slots__ = ("radio", "static", "reach", "d", "tau", "in_range", "rmin", "rmax", "delay", "min_delay",
-                 "per_cache", "model", "power", "refused", "interferes", "positional")
-
-    def __init__(self, sender: "Radio", receiver: "Radio", channel: Channel):
-        self.radio = receiver
-        self.rmin, self.rmax = sender.range_m
-        propagation = channel.propagation
-        self.delay = propagation.delay  # a moving pair asks it at every transmission
-        self.per_cache: dict[int, float] | None = None  # made at the first loss drawn: a million pairs, few draw
-        self.model, self.refused, self.interferes = propagation.bind(sender, receiver)
-        self.positional = propagation.positional  # each arrival's delay and loss from both ends' positions
-        self.min_delay = channel.min_delay_s
-        self.power = -1.0  # received power on a static path, once asked (collisions: sinr)
-        self.static = bool(sender.pose.static and receiver.pose.static)
-        self.d = self.tau = 0.0
-        self.in_range = False
-        if self.static:
-            a = sender.pose.position(0.0)
-            b = receiver.pose.position(0.0)
-            if a is None or b is None:
-                self.in_range = False
-            else:
-                self.d = math.dist(a, b)
-                if self.positional:  # a static pair looks the water up once
-                    self.model, self.tau = self.water_between(a, b)
-                    self.positional = False
-                else:
-                    self.tau = propagation.delay(self.d, a, b)
-                self.in_range = self.rmin <= self.d <= self.rmax
-        self.reach = self.static and self.in_range and self.refused is None  # the common case, tested first
-
-    def water_between(self, a: "Vec3", b: "Vec3") -> tuple[Any, float]:
-        """On a ``positional`` channel: this arrival's loss model at both ends' positions and its delay
-        (the channel's ``min_delay_s`` added), from the fields of this pair's frequency."""
-        loss = self.model.at(a, b)
-        return loss, self.min_delay + loss.delay
-
-    def delay_between(self, d: float, a: "Vec3", b: "Vec3") -> float:
-        """τ of this path with its ends at ``a`` and ``b`` (``d`` apart): what an arrival on it takes,
-        and what every other asker (an emulated modem's ``AT?T``, an acknowledgement, a late remote
-        transmission) is told."""
-        if self.static:
-            return self.tau
-        if self.positional:
-            return self.water_between(a, b)[1]
-        return self.delay(d, a, b)
-
-    def per(self, d: float, size: int) -> float:
-        """Probability that a frame of ``size`` bytes is lost on this path at distance ``d``."""
-        if self.static:
-            cache = self.per_cache
-            if cache is None:
-                cache = self.per_cache = {}
-            per = cache.get(size)
-            if per is None:
-                per = cache[size] = self.model.per(d, size)
-            return per
-        return self.model.per(d, size)
-
-    def rx_power(self, d: float) -> float:
-        """Received power at ``d`` (physical models only: ``collisions: sinr``)."""
-        if self.static:
-            if self.power < 0.0:
-                self.power = self.model.rx_power(d)
-            return self.power
-        return self.model.rx_power(d)
-
-    def per_sinr(self, d: float, size: int, interference: float) -> float:
-        """Loss probability with ``interference`` added to the noise (``collisions: sinr``)."""
-        return self.model.per_sinr(d, size, interference)
+            object.__setattr__(self, "propagation", PROPAGATIONS[self.model].make(self))
 
 
 class Medium:
@@ -210,101 +138,23 @@ class Medium:
         return None
 
     def _rebuild(self) -> None:
-        """Neighbour lists per sender, in attachment order (the order arrivals are handed out, which
-        fixes the order of same-instant events).
-
-        A static pair out of range is left out of the list altogether, so a transmission never visits
-        it; a frame addressed to such a radio still gets its ``range`` error (:meth:`_beyond`).  A
-        static sender with a finite range only looks at the static radios in the grid cells around it
-        (cells as wide as its range: ``_static_grid``), so building the lists is O(n · neighbours),
-        not O(n²)."""
+        """Neighbour lists per sender, in attachment order (``neighbours.py``).  A static pair out of range
+        is left out of the lists altogether, so a transmission never visits it; a frame addressed to such
+        a radio still gets its ``range`` error (:meth:`_beyond`)."""
         radios = self.radios
-        order = self._order = {radio: i for i, radio in enumerate(radios)}
-        moving = [radio for radio in radios if not radio.pose.static]
-        unbounded = [radio for radio in radios if not math.isfinite(radio.pose.max_speed_mps)]
-        moving_unbounded = [radio for radio in unbounded if not radio.pose.static]
-        pools: dict[str, set[Radio]] = {}  # per channel: listening radios with a top speed
-        pooled_static: dict[str, int] = {}  # and how many of them are static
-        for radio in radios:
-            if radio.listens and math.isfinite(radio.pose.max_speed_mps):
-                pools.setdefault(radio.rx_channel, set()).add(radio)
-                pooled_static[radio.rx_channel] = pooled_static.get(radio.rx_channel, 0) + bool(radio.pose.static)
-        grids: dict[float, dict[tuple[int, int, int], list[Radio]]] = {}
-        neighbours = {}
-        quiet = self._quiet = Quiet(self.channels) if self.lazy else None
-        quiet_count: dict[Radio, int] = {}
+        quiet = self._quiet = quiet_index(radios, self.channels) if self.lazy else None
         if quiet is not None:
-            for radio in radios:
-                position = radio.pose.position(0.0) if radio.pose.static else None
-                if position is None or not isinstance(self.channels[radio.tx_channel].propagation, StraightLine):
-                    continue
-                quiet.add_sender(radio, position)
-                if radio.listens and not radio.judges_all:
-                    quiet.add_receiver(radio, position)
             for radio in radios:  # every radio: one may still hear an earlier topology's quiet records
                 radio.air = self.air
-        roam: dict[Radio, _Roaming] = {}
-        for sender in radios:
-            channel = self.channels[sender.tx_channel]
-            rmax = sender.range_m[1]
-            pool: set[Radio] = set()
-            if math.isfinite(rmax):
-                pool = pools.get(sender.tx_channel, set())
-                roamers = len(pool) - (sender in pool)
-                if sender.pose.static:  # its static pairs are listed once, not roaming
-                    roamers = len(pool) - pooled_static.get(sender.tx_channel, 0)
-                if roamers <= ROAMING_MIN:
-                    pool = set()
-            roaming = _Roaming(sender, channel, pool) if pool else None
-            # who to list: the moving grid finds the moving radios with a top speed when it serves
-            # this sender (and every radio with a top speed when the sender itself moves)
-            if sender.pose.static and math.isfinite(rmax):
-                others = moving_unbounded if roaming is not None else moving
-                origin = sender.pose.position(0.0)
-                if origin is None:
-                    candidates = others
-                else:
-                    grid = grids.get(rmax)
-                    if grid is None:
-                        grid = grids[rmax] = _static_grid(radios, rmax)
-                    candidates = _near(grid, origin, _cell_size(rmax))
-                    candidates.extend(others)
-                    candidates.sort(key=order.__getitem__)
-            else:
-                candidates = unbounded if roaming is not None else radios
-            listed = []
-            count = 0
-            if quiet is not None and sender in quiet.senders:  # its quiet receivers are counted, not listed:
-                count, rest = quiet.split(sender, candidates)  # handed an arrival only when they judge
-                if count >= self.quiet_min:
-                    candidates = rest
-                else:  # a sparse sender: its few arrivals are cheaper handed at once
-                    quiet.drop(sender)
-                    count = 0
-            for receiver in candidates:
-                if receiver is sender or receiver.rx_channel != sender.tx_channel or not receiver.listens:
-                    continue
-                if roaming is not None and roaming.covers(receiver):
-                    continue  # found through the moving grid at each transmission
-                nb = _Neighbour(sender, receiver, channel)
-                if not nb.static or nb.in_range:
-                    listed.append(nb)
-            neighbours[sender] = listed
-            if count:
-                quiet_count[sender] = count
-            if roaming is not None:
-                roam[sender] = roaming
-        self._neighbours = neighbours
-        self._quiet_count = quiet_count
+        index = Neighbours(radios, self.channels, quiet, self.quiet_min)
+        self._order = index.order
+        self._neighbours = index.lists
+        self._quiet_count = index.quiet_count
         self._unreachable = {}
-        by_address: dict[int, list[Radio]] = {}
-        for radio in radios:
-            by_address.setdefault(radio.address, []).append(radio)
-        self._by_address = by_address
-        self._roam = roam
+        self._by_address = index.by_address
+        self._roam = index.roam
         self._snap = None
-        reach = [sender.range_m[1] for sender in roam]
-        self._snap_reach = max(max(reach), 1.0) if reach else 0.0
+        self._snap_reach = index.snap_reach
         self._pairs = {}
         self._dirty = False
 
@@ -409,7 +259,10 @@ class Medium:
         return pair
 
     def transmit(self, sender: "Radio", frame: "Frame", t: float, duration: float) -> None:
-        """``frame`` goes on air from ``sender`` at ``t`` for ``duration`` seconds: hand out its arrivals."""
+        """``frame`` goes on air from ``sender`` at ``t`` for ``duration`` seconds: hand out its arrivals.
+
+        (The frame's hot path: the common case, a static pair in range, calls nothing but the receiver's
+        ``arrive``; what is rarer — moving pairs, quiet receivers, refusals — is in methods of its own.)"""
         if self._dirty:
             self._rebuild()
         if self.tap is not None and sender.listens:
@@ -417,10 +270,7 @@ class Medium:
         neighbours = self._neighbours[sender]
         dst = frame.dst_addr
         if self._roam:
-            roaming = self._roam.get(sender)
-            if roaming is not None:
-                here = sender.pose.position(t)
-                neighbours = self._visit(roaming, here, t, frame) if here is not None else self._all(roaming)
+            neighbours = self._roaming_neighbours(sender, frame, t, neighbours)
         if dst != BROADCAST:
             known = self._unreachable.get(sender)
             beyond = known.get(dst) if known is not None else None
@@ -437,137 +287,99 @@ class Medium:
         quiet_count = self._quiet_count.get(sender, 0) if self._quiet_count else 0
         if quiet_count:  # its quiet receivers hear it through the air record; those that judge it get
             # their arrival below, in attachment order with the others
-            quiet = self._quiet
-            air.record(sender, t, duration, dst, quiet)  # type: ignore[arg-type]
-            if dst == BROADCAST:
-                judging = [r for r in quiet.receivers if quiet.tau(sender, r) is not None]  # type: ignore[union-attr]
-            else:
-                judging = [r for r in self._by_address.get(dst, ()) if quiet.tau(sender, r) is not None]  # type: ignore[union-attr]
-            if judging:
-                quiet_count -= len(judging)
-                extra = [quiet.pair(sender, r) for r in judging]  # type: ignore[union-attr]
-                if neighbours:
-                    order = self._order
-                    neighbours = sorted(neighbours + extra, key=lambda nb: order[nb.radio])
-                else:
-                    neighbours = extra
+            neighbours, quiet_count = self._with_judging(sender, t, duration, dst, neighbours, quiet_count)
         sender_position = None
         missed = 0  # neighbours the frame does not reach (counted this way round: they are the few)
         for nb in neighbours:
-            radio = nb.radio
             loss: Any = nb
-            if nb.reach:
-                d = nb.d
-                start = t + nb.tau
-            elif nb.static:  # a listed static pair is in range: this receiver refuses the sender
+            if nb.static:  # in range (a listed static pair is): the common case, or a refusing receiver
                 d = nb.d
                 start = t + nb.tau
             else:
                 if sender_position is None:
                     sender_position = sender.pose.position(t)
-                    if sender_position is None:  # a vehicle without a pose is heard by nobody: every
-                        # radio that would have judged the frame is told why it could not (no_pose)
-                        rest = neighbours[neighbours.index(nb):]
-                        for other in rest:
-                            if dst == BROADCAST or other.radio.address == dst:
-                                other.radio.unreachable(frame, NO_POSE)
-                        missed += len(rest)
+                    if sender_position is None:  # a vehicle without a pose is heard by nobody
+                        missed += _heard_by_nobody(neighbours[neighbours.index(nb):], frame, dst)
                         break
-                receiver_position = radio.pose.position(t)
-                if receiver_position is None:
-                    if dst == BROADCAST or radio.address == dst:  # it cannot be judged: said, with why
-                        radio.unreachable(frame, NO_POSE)
+                path = _moving_path(nb, sender_position, t, frame, dst)
+                if path is None:
                     missed += 1
                     continue
-                d = math.dist(sender_position, receiver_position)
-                if d < nb.rmin or d > nb.rmax:
-                    if radio.address == dst:
-                        radio.unreachable(frame)
-                    missed += 1
-                    continue
-                if nb.positional:  # the water between these two positions, looked up once for this arrival
-                    loss, tau = nb.water_between(sender_position, receiver_position)
-                    start = t + tau
-                else:
-                    start = t + nb.delay(d, sender_position, receiver_position)
+                d, start, loss = path
             if nb.refused is not None:
-                if not nb.interferes:  # outside its band: it hears nothing
-                    if radio.address == dst:
-                        radio.unreachable(frame, nb.refused)
-                    missed += 1
-                    continue
-                radio.arrive_refused(frame, t, start, start + duration, d, loss, nb.refused)
+                missed += _refused(nb, frame, t, start, duration, d, loss, dst)
                 continue
-            radio.arrive(frame, t, start, start + duration, d, loss)
+            nb.radio.arrive(frame, t, start, start + duration, d, loss)
         self.arrivals += len(neighbours) - missed + quiet_count
 
+    def _roaming_neighbours(self, sender: "Radio", frame: "Frame", t: float,
+                            neighbours: list[_Neighbour]) -> list[_Neighbour]:
+        """The neighbours of a sender the moving grid serves, at ``t`` (its listed ones otherwise)."""
+        roaming = self._roam.get(sender)
+        if roaming is None:
+            return neighbours
+        here = sender.pose.position(t)
+        return self._visit(roaming, here, t, frame) if here is not None else self._all(roaming)
 
-def _cell_size(rmax: float) -> float:
-    """A grid cell a little wider than ``rmax``: two points within ``rmax`` of each other are then in
-    the same or adjacent cells, whatever the rounding of the division."""
-    return max(rmax, 1.0) * (1.0 + 1e-9)
-
-
-def _cell(position: tuple[float, ...], size: float) -> tuple[int, int, int]:
-    x, y, z = position[0], position[1], position[2] if len(position) > 2 else 0.0
-    return (math.floor(x / size), math.floor(y / size), math.floor(z / size))
-
-
-def _static_grid(radios: list["Radio"], rmax: float) -> dict[tuple[int, int, int], list["Radio"]]:
-    """The static radios that have a position, by grid cell of side ``_cell_size(rmax)``."""
-    size = _cell_size(rmax)
-    grid: dict[tuple[int, int, int], list[Radio]] = {}
-    for radio in radios:
-        if radio.pose.static:
-            position = radio.pose.position(0.0)
-            if position is not None:
-                grid.setdefault(_cell(position, size), []).append(radio)
-    return grid
-
-
-def _near(grid: dict[tuple[int, int, int], list["Radio"]], origin: tuple[float, ...], size: float) -> list["Radio"]:
-    """The radios in the 27 cells around ``origin``: a superset of those within one cell side."""
-    cx, cy, cz = _cell(origin, size)
-    found: list[Radio] = []
-    for dx in (-1, 0, 1):
-        for dy in (-1, 0, 1):
-            for dz in (-1, 0, 1):
-                cell = grid.get((cx + dx, cy + dy, cz + dz))
-                if cell is not None:
-                    found.extend(cell)
-    return found
+    def _with_judging(self, sender: "Radio", t: float, duration: float, dst: int, neighbours: list[_Neighbour],
+                      quiet_count: int) -> tuple[list[_Neighbour], int]:
+        """A quiet sender's transmission recorded on the air; its quiet receivers that judge the frame
+        (its addressee, or every one for a broadcast) added to the neighbours, in attachment order, and
+        no longer counted as quiet."""
+        quiet = self._quiet
+        self.air.record(sender, t, duration, dst, quiet)  # type: ignore[arg-type]
+        if dst == BROADCAST:
+            judging = [r for r in quiet.receivers if quiet.tau(sender, r) is not None]  # type: ignore[union-attr]
+        else:
+            judging = [r for r in self._by_address.get(dst, ()) if quiet.tau(sender, r) is not None]  # type: ignore[union-attr]
+        if not judging:
+            return neighbours, quiet_count
+        extra = [quiet.pair(sender, r) for r in judging]  # type: ignore[union-attr]
+        if neighbours:
+            order = self._order
+            return sorted(neighbours + extra, key=lambda nb: order[nb.radio]), quiet_count - len(judging)
+        return extra, quiet_count - len(judging)
 
 
-QUIET_MIN = 32
-"""A sender with fewer quiet pairs than this hands them their arrivals at once: every judgment on the
-channel scans the air's records while they live, which costs more than a few arrivals (a sparse ring of
-a thousand modems, each hearing four, would pay for every frame in the air at each judgment)."""
+def _heard_by_nobody(rest: list[_Neighbour], frame: "Frame", dst: int) -> int:
+    """The sender has no pose: every radio that would have judged the frame is told why it could not
+    (``no_pose``); all of ``rest`` are missed."""
+    for other in rest:
+        if dst == BROADCAST or other.radio.address == dst:
+            other.radio.unreachable(frame, NO_POSE)
+    return len(rest)
 
-ROAMING_MIN = 32
-"""A sender with more moving-pair neighbours (with a top speed) than this finds them through the
-moving grid; below it, computing every distance is cheaper than the grid."""
+
+def _moving_path(nb: _Neighbour, here: "tuple[float, ...]", t: float, frame: "Frame",
+                 dst: int) -> tuple[float, float, Any] | None:
+    """A moving pair at ``t`` with the sender at ``here``: (distance, the arrival's start, its loss
+    model), or None when the frame cannot reach the receiver (no pose, out of range: said to the
+    radio that would have judged it)."""
+    radio = nb.radio
+    there = radio.pose.position(t)
+    if there is None:
+        if dst == BROADCAST or radio.address == dst:  # it cannot be judged: said, with why
+            radio.unreachable(frame, NO_POSE)
+        return None
+    d = math.dist(here, there)
+    if d < nb.rmin or d > nb.rmax:
+        if radio.address == dst:
+            radio.unreachable(frame)
+        return None
+    if nb.positional:  # the water between these two positions, looked up once for this arrival
+        loss, tau = nb.water_between(here, there)
+        return d, t + tau, loss
+    return d, t + nb.delay(d, here, there), nb
 
 
-class _Roaming:
-    """The neighbours of ``sender`` that the moving grid serves: the radios of ``pool`` (listening on
-    its channel, with a top speed) other than itself, and for a static sender only the moving ones
-    (its static pairs are listed once).  Their entries are made on first use."""
-
-    __slots__ = ("sender", "channel", "pool", "static", "entries", "addresses")
-
-    def __init__(self, sender: "Radio", channel: Channel, pool: set["Radio"]):
-        self.sender = sender
-        self.channel = channel
-        self.pool = pool
-        self.static = bool(sender.pose.static)
-        self.entries: dict[Radio, _Neighbour] = {}
-        self.addresses: dict[int, list[Radio]] = {}
-
-    def covers(self, radio: "Radio") -> bool:
-        return radio in self.pool and radio is not self.sender and not (self.static and radio.pose.static)
-
-    def entry(self, radio: "Radio") -> _Neighbour:
-        nb = self.entries.get(radio)
-        if nb is None:
-            nb = self.entries[radio] = _Neighbour(self.sender, radio, self.channel)
-        return nb
+def _refused(nb: _Neighbour, frame: "Frame", t: float, start: float, duration: float, d: float, loss: Any,
+             dst: int) -> int:
+    """A receiver that refuses the sender: outside its band it hears nothing (1: missed); a modulation
+    it does not decode is interference only (0)."""
+    radio = nb.radio
+    if not nb.interferes:
+        if radio.address == dst:
+            radio.unreachable(frame, nb.refused)
+        return 1
+    radio.arrive_refused(frame, t, start, start + duration, d, loss, nb.refused)
+    return 0

@@ -36,6 +36,12 @@ class Propagation(Protocol):
     added to it by the medium); the medium asks it once for a static pair, at every arrival for a moving
     one."""
 
+    distance_only: bool
+    """True: :meth:`delay` and the bound loss model depend on the distance alone, never on where the ends
+    are, and the delay grows with the distance.  The medium may then count a dense scene's static pairs
+    that judge nothing instead of listing them (``air.py``'s quiet pairs work their delay out from the
+    distance); a model that is not (a ray-traced channel) has every pair listed."""
+
     def delay(self, d: float, a: "Vec3 | None" = None, b: "Vec3 | None" = None) -> float:
         """Seconds from the sender at ``a`` to the receiver at ``b``, ``d`` metres apart.  Without
         positions (a MAC's timing at its range: ``SimModem.tau_at``) a model that needs them answers
@@ -53,6 +59,7 @@ class StraightLine:
     speed_mps: float
     min_delay_s: float = 0.0
     positional = False
+    distance_only = True
 
     def delay(self, d: float, a: "Vec3 | None" = None, b: "Vec3 | None" = None) -> float:
         return self.min_delay_s + d / self.speed_mps

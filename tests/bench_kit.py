@@ -11,6 +11,7 @@ the near modem, the last for the far one, so an M64 pair is role a and b) or a n
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -70,9 +71,22 @@ def _value(check, default, far: bool):
     return default
 
 
+ROWS = "HILGATE_SUITE_ROWS"
+"""``HILGATE_SUITE_ROWS=NAME[,NAME…]``: the benches of those rows only.  A row an installed package adds is
+a row of the table in that package's venv: the suite runs against it with that venv's interpreter
+(``VENV/bin/python -m pytest tests/test_driver_suite.py``, as ``test_plugin_package.py`` does)."""
+
+
 def benches() -> list[Bench]:
-    """Every way of every row with an emulated modem."""
-    return [Bench(name, reach) for name in sorted(DRIVERS) if DRIVERS[name].emulator for reach in DRIVERS[name].reach]
+    """Every way of every row with an emulated modem (of the rows ``HILGATE_SUITE_ROWS`` names, if set)."""
+    names = sorted(DRIVERS)
+    if os.environ.get(ROWS):
+        names = [name.strip() for name in os.environ[ROWS].split(",")]
+        absent = [name for name in names if name not in DRIVERS]
+        if absent:
+            raise LookupError(f"{ROWS}: no row {', '.join(absent)} in this interpreter's driver table "
+                              f"({', '.join(sorted(DRIVERS))})")
+    return [Bench(name, reach) for name in names if DRIVERS[name].emulator for reach in DRIVERS[name].reach]
 
 
 def bench_params() -> list:

@@ -1,4 +1,5 @@
-"""The conformance tables of docs/modems.md, one per modem family, kept as data that tests check.
+"""The conformance tables of docs/conformance.md and docs/conformance-micromodem.md, one per modem family,
+kept as data that tests check.
 
 Each family's module (``tests/conformance_<family>.py``) lists :class:`Row` s: every command, notification
 and setting of the vendor's public documentation, what the real modem does, what hilgate's emulator does
@@ -6,8 +7,9 @@ and setting of the vendor's public documentation, what the real modem does, what
 library's call exercises it in a test.  ``tests/test_conformance.py`` holds the rows to the code, so the
 document cannot drift from it:
 
-- the tables in docs/modems.md are exactly :func:`render` of the rows (``python tests/conformance_kit.py``
-  writes them there);
+- the tables in the pages are exactly :func:`render` of the rows (``python tests/conformance_kit.py``
+  writes them there; :data:`PAGES` says which page holds which family's: one page would be past the
+  docs' 4 000 words);
 - every entry of the emulator's command table is some row's (``keys``): a command added to an emulator
   without its row fails;
 - a row's ``probe`` sent to the emulated modem gets an answer that matches its ``answer``; a row without a
@@ -25,7 +27,9 @@ import sys
 from dataclasses import dataclass
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-DOCS = os.path.join(os.path.dirname(HERE), "docs", "modems.md")
+DOCS = os.path.join(os.path.dirname(HERE), "docs")
+PAGES = {"evologics": "conformance.md", "s100": "conformance.md", "m64": "conformance.md",
+         "micromodem": "conformance-micromodem.md", "micromodem-rates": "conformance-micromodem.md"}
 FAMILIES = ("evologics", "s100", "m64", "micromodem")
 HEADER = ("| command / notification / setting | real modem | emulator | hilgate's driver | outside library, in a test |\n"
           "|---|---|---|---|---|\n")
@@ -58,7 +62,7 @@ def _cell(text: str) -> str:
 
 
 def render(family: str) -> str:
-    """The family's table in markdown (what docs/modems.md holds between its markers)."""
+    """The family's table in markdown (what its page holds between its markers)."""
     if family in EXTRA:
         return EXTRA[family]()
     return HEADER + "".join("| " + " | ".join(_cell(c) for c in row.cells()) + " |\n" for row in rows(family))
@@ -90,20 +94,27 @@ def documented(text: str, family: str) -> str | None:
     return found.group(1) if found else None
 
 
-def write_docs(path: str = DOCS) -> None:
-    with open(path, encoding="utf-8") as f:
-        text = f.read()
-    for family in BLOCKS:
-        start, end = markers(family)
-        if documented(text, family) is None:
-            raise SystemExit(f"{path}: no markers for {family}: put {start.strip()} and {end.strip()} where its table goes")
-        text = re.sub(re.escape(start) + r".*?" + re.escape(end), lambda _: start + render(family) + end, text,
-                      flags=re.S)
-    with open(path, "w", encoding="utf-8") as f:
-        f.write(text)
+def page(family: str) -> str:
+    """The path of the page that holds ``family``'s table."""
+    return os.path.join(DOCS, PAGES[family])
+
+
+def write_docs() -> None:
+    for path in sorted(set(map(page, BLOCKS))):
+        with open(path, encoding="utf-8") as f:
+            text = f.read()
+        for family in (family for family in BLOCKS if page(family) == path):
+            start, end = markers(family)
+            if documented(text, family) is None:
+                raise SystemExit(f"{path}: no markers for {family}: put {start.strip()} and {end.strip()} where its "
+                                 "table goes")
+            text = re.sub(re.escape(start) + r".*?" + re.escape(end), lambda _: start + render(family) + end, text,
+                          flags=re.S)
+        with open(path, "w", encoding="utf-8") as f:
+            f.write(text)
 
 
 if __name__ == "__main__":
     sys.path.insert(0, HERE)
     write_docs()
-    print(f"wrote the conformance tables of {', '.join(BLOCKS)} into {DOCS}")
+    print(f"wrote the conformance tables of {', '.join(BLOCKS)} into {', '.join(sorted(set(PAGES.values())))}")

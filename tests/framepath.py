@@ -257,7 +257,8 @@ def run_frames(directory: str, passes: int, prepare=None, scene_text: str = SCEN
 if __name__ == "__main__":
     import tempfile
 
-    traced = trace_one_frame(tempfile.mkdtemp(prefix="hilgate-path-"))
+    with tempfile.TemporaryDirectory(prefix="hilgate-path-") as scratch:  # nothing left in $TMPDIR
+        traced = trace_one_frame(scratch)
     for title, calls in (("frame", traced.frame), ("READY", traced.ready)):
         print(f"{title}: {len(calls)} calls in {len(Path.files(calls))} files")
         for number, (file, name) in enumerate(calls, 1):

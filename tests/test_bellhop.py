@@ -272,7 +272,7 @@ def _ready(scene, program, cache):
 
 def test_a_static_pair_is_looked_up_once_and_a_moving_one_per_arrival(program, cache, monkeypatch):
     from hilgate.core.scheduler import VirtualScheduler
-    from hilgate.models.bellhop_fields import BellhopPath, Reception
+    from hilgate.models.bellhop_fields import ArrivalLoss, BellhopPath
     from hilgate.models.observer import NullObserver
     from hilgate.sim.world import World
 
@@ -283,7 +283,7 @@ def test_a_static_pair_is_looked_up_once_and_a_moving_one_per_arrival(program, c
     sender = world.modems["la"].radio
     by_link = {nb.radio.host.id: nb for nb in medium._neighbours[sender]}
     static, moving = by_link["lb"], by_link["lc"]
-    assert isinstance(static.model, Reception) and not static.positional
+    assert isinstance(static.model, ArrivalLoss) and not static.positional
     fields = static.model.path.fields
     assert static.model.tl_db == pytest.approx(fields.tl_db(600.0, 75.0, 75.0))
     assert static.tau == pytest.approx(fields.delay_s(600.0, 75.0, 75.0))

@@ -4,6 +4,9 @@ longer path is a decision, not an accident."""
 
 import os
 import re
+import subprocess
+import sys
+import tempfile
 
 from framepath import Path, trace_one_frame
 
@@ -29,3 +32,15 @@ def test_the_frame_path_and_ready_are_as_long_as_the_architecture_page_says(tmp_
         f"the path is {got_frame[0]} calls in {got_frame[1]} files and READY {got_ready[0]} in {got_ready[1]}; "
         f"docs/architecture.md says {frame} and {ready}: shorten it again, or walk the new path in the page "
         f"(python tests/framepath.py lists it):\n{listing}")
+
+
+def test_the_listing_leaves_nothing_in_the_temporary_folder():
+    """``python tests/framepath.py`` left a ``hilgate-path-*`` folder in $TMPDIR at every run (issue 39).
+    Its $TMPDIR here is a short folder of its own (pytest's are too long for the daemon's Unix sockets)."""
+    script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "framepath.py")
+    with tempfile.TemporaryDirectory(prefix="fp-") as scratch:
+        run = subprocess.run([sys.executable, script], env={**os.environ, "TMPDIR": scratch},
+                             capture_output=True, text=True, timeout=600)
+        assert run.returncode == 0, run.stderr
+        assert "delivered: 1" in run.stdout
+        assert os.listdir(scratch) == []

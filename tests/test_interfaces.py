@@ -52,13 +52,13 @@ SEAMS = {
     Observer: ["hilgate.models.observer:NullObserver", "hilgate.models.observer:EventList",
                "hilgate.sim.recorder:Recorder"],
     LossModel: ["hilgate.models.errormodel:ErrorModel", "hilgate.models.physical:PhysicalErrorModel",
-                "hilgate.models.bellhop_fields:BellhopPath", "hilgate.models.bellhop_fields:Reception",
+                "hilgate.models.bellhop_fields:BellhopPath", "hilgate.models.bellhop_fields:ArrivalLoss",
                 "hilgate.models.path:Unheard",
-                "hilgate.models.path:Undecodable", "hilgate.models.medium:_Neighbour"],
+                "hilgate.models.path:Undecodable", "hilgate.models.neighbours:_Neighbour"],
     SinrLossModel: ["hilgate.models.physical:PhysicalErrorModel", "hilgate.models.path:Undecodable",
-                    "hilgate.models.bellhop_fields:BellhopPath", "hilgate.models.bellhop_fields:Reception",
+                    "hilgate.models.bellhop_fields:BellhopPath", "hilgate.models.bellhop_fields:ArrivalLoss",
                     "hilgate.models.path:Unheard",
-                    "hilgate.models.medium:_Neighbour"],
+                    "hilgate.models.neighbours:_Neighbour"],
 }
 SEAMS[Propagation] = ["hilgate.models.propagation:StraightLine", "hilgate.models.bellhop_fields:BellhopChannel"]
 BACKENDS = ["hilgate.sim.sim_backend:SimBackend", "hilgate.drivers.evologics:EvologicsBackend",

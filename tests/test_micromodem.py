@@ -287,7 +287,7 @@ def test_every_other_acomms_call_a_modem_answers(tmp_path, daemon_of):
 
 
 def test_the_calls_whose_sentences_are_not_emulated_get_the_modems_refusal(tmp_path, daemon_of):
-    """Sweeps, FDP packets and pings, JANUS, statistics requests, hibernation, navigation pings and uplink requests are not emulated (docs/modems.md says each): every such call of ``acomms``
+    """Sweeps, FDP packets and pings, JANUS, statistics requests, hibernation, navigation pings and uplink requests are not emulated (docs/conformance-micromodem.md says each): every such call of ``acomms``
     gets ``$CAERR`` (those that wait for an answer return None at their timeout) and leaves the modem idle."""
     ea, eb = unique("ma"), unique("mb")
     daemon_of(scene(tmp_path, ea, eb), [ea, eb], "--speed", str(SPEED))

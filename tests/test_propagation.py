@@ -21,6 +21,7 @@ class OneSecondMore:
 
     line: StraightLine
     positional = False
+    distance_only = False  # (listed pair by pair, as any model that does not say otherwise)
 
     def delay(self, d, a=None, b=None):
         return 1.0 + self.line.delay(d, a, b)
@@ -97,6 +98,7 @@ class WaterLike:
 
     line: StraightLine
     positional = True
+    distance_only = False
 
     def delay(self, d, a=None, b=None):
         return self.line.delay(d)

@@ -259,8 +259,28 @@ links:
     moved = base + f"ros2: {{namespace: {ns}, domain_id: {(DOMAIN + 1) % 233}}}\n"
     daemon.scene.write_text(moved)
     reply = daemon.control({"class": "RELOAD"})
-    assert reply["ok"] is False and "restart it to change them" in reply["error"]
+    assert reply["ok"] is False and reply["error"].endswith(
+        ": ros2: domain_id, interfaces, peers, namespace and links are fixed while the daemon runs (ROS 2 nodes "
+        "hold its topics): restart it to change them")
+    assert reply["error"].count("ros2:") == 1  # the key once, not "ros2: ros2: …" (issue 39)
     assert daemon.status()["ros2"]["domain_id"] == DOMAIN and daemon.link_status(second)["state"] == "up"
+
+
+def test_a_refused_reload_names_the_ros2_key_once():
+    """The bridge's SceneError puts the key in front of the reason; the reason must not carry it too."""
+    from types import SimpleNamespace
+
+    from hilgate.daemon.ros2_bridge import Ros2Bridge
+    from hilgate.scene import SceneError
+    from hilgate.scene.ros2 import Ros2Spec
+
+    bridge = Ros2Bridge(scheduler=None, router=None, scene_path="lab.yaml")
+    bridge.prepare(SimpleNamespace(uses_ros2=True, ros2=Ros2Spec(domain_id=3)))
+    bridge.node._participant = object()  # joined: the domain is now fixed (no DDS needed to say so)
+    with pytest.raises(SceneError) as refused:
+        bridge.prepare(SimpleNamespace(uses_ros2=True, ros2=Ros2Spec(domain_id=4)))
+    assert str(refused.value) == ("lab.yaml: ros2: domain_id, interfaces, peers, namespace and links are fixed "
+                                  "while the daemon runs (ROS 2 nodes hold its topics): restart it to change them")
 
 
 def test_a_ros_domain_id_that_is_no_domain_is_refused_in_one_line(tmp_path):

@@ -159,7 +159,7 @@ def test_wide_addresses_are_refused_where_8_bits_are_carried(tmp_path):
 
 def moving_scene(seed: int) -> str:
     """48 vehicles crossing a 4 km square at 1-3 m/s, 8 static ones, one that jumps (no top speed);
-    600 m range: every sender has more moving neighbours than the medium's ROAMING_MIN."""
+    600 m range: every sender has more moving neighbours than the neighbour index's ROAMING_MIN."""
     rng = random.Random(seed)
     lines = [f"seed: {seed}", "duration_s: 300", "channels: {ac: {speed_mps: 1500}}", "vehicles:"]
     n = 57
@@ -187,7 +187,7 @@ def moving_scene(seed: int) -> str:
 def test_the_moving_grid_gives_the_trace_of_a_full_scan(seed, monkeypatch):
     """Senders with many moving neighbours visit only those the moving grid puts near them; the
     trace (every arrival, collision, loss and range error) is byte-identical to visiting all."""
-    import hilgate.models.medium as medium_module
+    import hilgate.models.neighbours as neighbours_module  # (the neighbour index decides who roams)
 
     def run() -> tuple[str, int, int]:
         trace = io.StringIO()
@@ -198,7 +198,7 @@ def test_the_moving_grid_gives_the_trace_of_a_full_scan(seed, monkeypatch):
 
     indexed, arrivals, roaming = run()
     assert roaming == 57
-    monkeypatch.setattr(medium_module, "ROAMING_MIN", 10**9)
+    monkeypatch.setattr(neighbours_module, "ROAMING_MIN", 10**9)
     scanned, arrivals_scanned, roaming_scanned = run()
     assert roaming_scanned == 0
     assert indexed == scanned and arrivals == arrivals_scanned

@@ -346,6 +346,28 @@ def test_a_page_without_the_token_gets_nothing_and_pages_of_other_sites_are_refu
     assert refused.value.code == 403
 
 
+def test_a_page_opens_without_a_warning_about_the_ping_settings(tmp_path):
+    """Tornado warned at the first page that ``websocket_ping_timeout`` 30 becomes 10 (issue 39)."""
+    scene = tmp_path / "player.yaml"
+    scene.write_text(PLAYER_SCENE.replace("duration_s: 90", "duration_s: 10"))
+    trace = tmp_path / "trace.jsonl"
+    assert hilgate("sim", str(scene), "--trace", str(trace), "-q").returncode == 0
+    token = tmp_path / "token"
+    token.write_text("p" * 40 + "\n")
+    viewer = subprocess.Popen([sys.executable, "-m", "hilgate", "view", str(trace), "--scene", str(scene),
+                               "--token-file", str(token)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = viewer.stdout.readline()
+        ws = line.split(" at ", 1)[1].split("#")[0].replace("http://", "ws://") + "ws"
+        opened: list = []
+        asyncio.run(_session(ws, opened, answer=lambda nonce: proof(b"p" * 40, bytes.fromhex(nonce)), count=4))
+        assert [m.get("class") for m in opened[:3]] == ["HELLO", "WELCOME", "SCENE"]
+    finally:
+        viewer.send_signal(signal.SIGTERM)
+        _, errors = viewer.communicate(timeout=30)
+    assert "websocket_ping" not in errors, errors
+
+
 def test_the_page_is_served_with_its_own_scripts_only(player):
     from urllib.request import urlopen
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 import email
 import os
 import subprocess
-import sys
 import tarfile
 import zipfile
 from pathlib import Path
@@ -16,22 +15,13 @@ from pathlib import Path
 import pytest
 
 import hilgate
-
-REPO = Path(__file__).resolve().parent.parent
-
-
-def run(argv, cwd, env=None, timeout=900) -> subprocess.CompletedProcess:
-    result = subprocess.run([str(a) for a in argv], cwd=cwd, env=env, capture_output=True, text=True,
-                            stdin=subprocess.DEVNULL, timeout=timeout)
-    assert result.returncode == 0, f"{' '.join(map(str, argv))}:\n{result.stdout[-3000:]}\n{result.stderr[-3000:]}"
-    return result
+from wheel_kit import build_dist, clean_env, fresh_venv, run
 
 
 @pytest.fixture(scope="module")
 def dist(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("dist")
-    # (an isolated build, as a release makes it: pyproject's build requirements from pip's cache or PyPI)
-    result = run([sys.executable, "-m", "build", "--outdir", out, REPO], cwd=out)
+    result = build_dist(out)
     # setuptools' own warnings (a data folder absent from `packages` gave one per file, about 40 lines)
     output = result.stdout + result.stderr
     assert "absent from the `packages`" not in output and "SetuptoolsDeprecationWarning" not in output, output
@@ -40,16 +30,7 @@ def dist(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def venv(dist, tmp_path_factory) -> Path:
-    where = tmp_path_factory.mktemp("venv")
-    run([sys.executable, "-m", "venv", where], cwd=where)
-    wheel = next(dist.glob("hilgate-*.whl"))
-    run([where / "bin" / "python", "-m", "pip", "install", "--quiet", "--disable-pip-version-check", wheel], cwd=where)
-    return where
-
-
-def clean_env(venv: Path) -> dict:
-    """No PYTHONPATH, no checkout: what a user's shell has after pipx or pip installed the wheel."""
-    return {"PATH": f"{venv / 'bin'}:/usr/bin:/bin", "HOME": os.environ.get("HOME", "/"), "LANG": "C.UTF-8"}
+    return fresh_venv(tmp_path_factory.mktemp("venv"), dist)
 
 
 def test_build_makes_a_wheel_and_an_sdist_of_one_version(dist):

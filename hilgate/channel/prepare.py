@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any, Mapping
 
 from ..models.medium import Channel
 from ..models.path import front_of
+from ..models.propagations import PROPAGATIONS
 
 if TYPE_CHECKING:
     from .runner import Program, Progress
@@ -34,12 +35,12 @@ def frequencies_of(channel: Channel, links: Mapping[str, Any]) -> set[float]:
 
 def ready_channels(channels: Mapping[str, Channel], links: Mapping[str, Any], *, program: Program | None = None,
                    cache: str | None = None, progress: Progress | None = None) -> dict[str, Channel]:
-    """``channels`` with every channel that has water given its :class:`BellhopChannel` (its ``propagation``);
-    the others as they are.  Raises :class:`~hilgate.channel.runner.BellhopError` when BELLHOP must
+    """``channels`` with every channel whose model is traced (``propagation: bellhop``, the default with
+    ``water:``) given its :class:`BellhopChannel` (its ``propagation``); the others as they are.  Raises :class:`~hilgate.channel.runner.BellhopError` when BELLHOP must
     run and cannot."""
     ready: dict[str, Channel] = {}
     for name, channel in channels.items():
-        if channel.water is None:
+        if not PROPAGATIONS[channel.model].traced:
             ready[name] = channel
             continue
         if channel.propagation.positional:  # (ready already)

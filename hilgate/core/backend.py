@@ -1,10 +1,9 @@
 """What a link id is routed to: one interface for simulated modems and real modem drivers.
 
-The router talks to a backend only through :class:`Backend`; adding a modem type means adding a
-class here (or in ``drivers/``) and a line in the router's ``backend_factories``, not touching the
-rest of the router.  A backend
-outlives nothing: on a reload that changes the backend kind, the router closes the old one and opens
-the new one behind the same GLI endpoints.
+The router talks to a backend only through :class:`Backend`; adding a modem type means adding its
+driver module in ``drivers/`` and one row in the driver table (:mod:`hilgate.drivers.table`), not
+touching the router.  A backend outlives nothing: on a reload that changes the backend kind, the
+router closes the old one and opens the new one behind the same GLI endpoints.
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""Starts and stops what feeds the pose board in the daemon: MAVLink links, cameras, ROS 2 topics, feedback.
+"""Starts and stops what feeds the pose board in the daemon: the live pose sources of the pose-source table
+(:mod:`hilgate.scene.pose_table`: MAVLink links, ROS 2 topics, a package's own), cameras, feedback.
 
 Each runs in its own thread (or, for feedback, on the loop's timers) and hands measurements to the
 loop with ``scheduler.post``, so the medium reads poses without ever waiting for a device.  A reload
@@ -9,10 +10,13 @@ before they can be opened again).
 from __future__ import annotations
 
 import logging
-from typing import Any, Protocol
+from dataclasses import dataclass
+from typing import Any, Callable, Protocol
 
+from ..core.tables import resolve
 from ..sim.live_vehicle import LiveVehicle
 from ..scene import Scene
+from ..scene.pose_table import POSE_SOURCES
 
 log = logging.getLogger(__name__)
 
@@ -45,12 +49,43 @@ def _feedback_identity(vehicle: Any) -> Any:
     return None
 
 
+Measurement = Callable[[dict, "dict | None", "tuple | None"], None]  # (position, velocity, attitude)
+
+
+@dataclass(frozen=True)
+class FeedSetting:
+    """What a pose source's ``start`` is given for one vehicle: the loop, the daemon's ROS 2 bridge, and
+    the two ways a measurement reaches the vehicle's pose."""
+
+    scheduler: Any
+    ros2: Any
+    vehicle: str
+    pose: LiveVehicle
+
+    def posting(self, source: str) -> Measurement:
+        """For a feed's own thread: each measurement posted to the loop, stamped when the loop applies it."""
+        post, now, pose = self.scheduler.post, self.scheduler.now, self.pose
+
+        def deliver(position: dict, velocity: dict | None, attitude: tuple | None) -> None:
+            post(lambda: pose.update(source, now(), position, velocity, attitude))
+
+        return deliver
+
+    def applying(self, source: str) -> Measurement:
+        """On the loop: each measurement applied now, stamped with the model's time."""
+        now, pose = self.scheduler.now, self.pose
+
+        def apply(position: dict, velocity: dict | None, attitude: tuple | None) -> None:
+            pose.update(source, now(), position, velocity, attitude)
+
+        return apply
+
+
 class LiveSources:
     def __init__(self, scheduler: Any, ros2: Any = None):
         self.scheduler = scheduler
         self.ros2 = ros2  # the daemon's Ros2Bridge: the participant ``ros2`` poses are read on
-        self.ros2_sources: list[PoseFeed] = []
-        self.mavlink: list[PoseFeed] = []
+        self.feeds: dict[str, list[PoseFeed]] = {}  # row name → its running feeds
         self.cameras: dict[str, Any] = {}  # name → the camera's PoseFeed (drivers.aruco.CameraThread)
         self.feedback: list[Any] = []
 
@@ -63,48 +98,20 @@ class LiveSources:
                 continue
             pose = poses.get(name)
             if vehicle.pose.kind == "live" and isinstance(pose, LiveVehicle):
-                for kind, params in vehicle.pose.params:
-                    if kind == "mavlink":
-                        self._start_mavlink(name, pose, dict(params))
-                    elif kind == "ros2":
-                        self._start_ros2(name, pose, dict(params))
+                self._start_sources(name, pose, vehicle.pose.params)
             if vehicle.feedback:
                 self._start_feedback(name, pose, dict(vehicle.feedback), _feedback_identity(vehicle))
         for camera in scene.cameras.values():
             if local(camera):
                 self._start_camera(scene, camera, poses)
 
-    def _deliver(self, vehicle: LiveVehicle, source: str):
-        post = self.scheduler.post
-        now = self.scheduler.now
-
-        def deliver(position: dict, velocity: dict | None, attitude: tuple | None) -> None:
-            post(lambda: vehicle.update(source, now(), position, velocity, attitude))
-
-        return deliver
-
-    def _start_mavlink(self, name: str, vehicle: LiveVehicle, params: dict) -> None:
-        from ..drivers.mavlink_source import MavlinkSource
-
-        heartbeat = dict(params["heartbeat"] or ())
-        source = MavlinkSource(name, params["url"], self._deliver(vehicle, "mavlink"), params["system_id"],
-                               params["origin"], params["message_rates"], _identity(params["heartbeat"]),
-                               heartbeat.get("rate_hz", 1.0))
-        source.start()
-        self.mavlink.append(source)
-
-    def _start_ros2(self, name: str, vehicle: LiveVehicle, params: dict) -> None:
-        """A ROS 2 topic read on the daemon's participant; Cyclone's thread keeps the latest measurement
-        and the loop applies it (:mod:`hilgate.ros2.poses`), stamped with the model time it is applied at."""
-        from ..ros2.poses import Ros2PoseFeed
-
-        now = self.scheduler.now
-
-        def apply(position: dict, velocity: dict | None, attitude: tuple) -> None:
-            vehicle.update("ros2", now(), position, velocity, attitude)
-
-        self.ros2_sources.append(Ros2PoseFeed(name, self.ros2.participant(), params, self.ros2.frame, apply,
-                                              self.scheduler.post))
+    def _start_sources(self, name: str, pose: LiveVehicle, sources: tuple) -> None:
+        """Each of a vehicle's live sources that its row starts (``aruco`` is started by its camera)."""
+        setting = FeedSetting(self.scheduler, self.ros2, name, pose)
+        for kind, params in sources:
+            start = POSE_SOURCES[kind].start
+            if start is not None:
+                self.feeds.setdefault(kind, []).append(resolve(start)(setting, dict(params)))
 
     def _start_feedback(self, name: str, pose: Any, params: dict, identity: Any) -> None:
         from ..drivers.mavlink_source import Feedback
@@ -156,11 +163,11 @@ class LiveSources:
                 for name, thread in self.cameras.items()]
 
     def ros2_status(self) -> list[dict]:
-        return [source.status() for source in self.ros2_sources]
+        return [source.status() for source in self.feeds.get("ros2", ())]
 
     def close(self) -> None:
-        for feed in [*self.mavlink, *self.cameras.values(), *self.ros2_sources]:
+        for feed in [*(feed for feeds in self.feeds.values() for feed in feeds), *self.cameras.values()]:
             feed.stop()
         for feedback in self.feedback:
             feedback.close()
-        self.mavlink, self.cameras, self.feedback, self.ros2_sources = [], {}, [], []
+        self.feeds, self.cameras, self.feedback = {}, {}, []

@@ -36,7 +36,6 @@ class WebFeed:
         self.flight = Flight()
         self._scene: Any = None
         self._failed = False
-        self.pictures = 0
 
     def start(self) -> None:
         self.scheduler.after_wall(INTERVAL_S, self._tick)
@@ -79,7 +78,6 @@ class WebFeed:
         try:
             scene = self._scene_if_changed()
             self.server.publish(scene, self.picture())
-            self.pictures += 1
         except Exception:
             log.exception("web view: the picture could not be built")
 

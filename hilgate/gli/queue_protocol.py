@@ -83,9 +83,6 @@ class QueueProtocol:
         """``message`` (a CMD_STATE) reached the application's queue."""
         self.said = message[1]
 
-    def frame_message(self, real: bytes, seq: int, src: int, dst: int) -> bytes:
-        return self.packet.encode_body(real, seq, src, dst, FRAME_PREFIX)
-
     def message_of(self, frame: Any) -> bytes | None:
         """The FRAME message of an application's frame (a :class:`~hilgate.core.backend.AppFrame`) in this
         link's packet class; None when it does not fit the class (re-encoded from its payload when the

@@ -20,7 +20,6 @@ from __future__ import annotations
 import json
 import queue
 import struct
-import threading
 import time
 import uuid
 from typing import Any
@@ -118,7 +117,6 @@ class ZenohLink:
         self.ready = bool(info.get("ready"))
         self.inbox: queue.Queue = queue.Queue()
         self.errors: queue.Queue = queue.Queue()
-        self._lock = threading.Lock()
         self.publisher = session.declare_publisher(self._key(f"send/{self.client}"))
         self.subscribers = [
             session.declare_subscriber(self._key("recv"), self._on_recv),

@@ -49,7 +49,7 @@ class Ros2Node:
     def configure(self, spec: Any) -> None:
         """Take a reloaded scene's section; Ros2Error if it changes what needs a restart."""
         if self._participant is not None and fixed_part(spec) != fixed_part(self.spec):
-            raise Ros2Error("ros2: domain_id, interfaces, peers, namespace and links are fixed while the daemon "
+            raise Ros2Error("domain_id, interfaces, peers, namespace and links are fixed while the daemon "
                             "runs (ROS 2 nodes hold its topics): restart it to change them")
         self.spec = spec
 

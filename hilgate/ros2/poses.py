@@ -156,3 +156,12 @@ class Ros2PoseFeed:
 
     def stop(self) -> None:
         self.participant.delete(self.reader)
+
+
+def start_pose_feed(setting: Any, params: dict) -> Ros2PoseFeed:
+    """The ``ros2`` row of the pose-source table (:mod:`hilgate.scene.pose_table`): a topic read on the
+    daemon's participant; Cyclone's thread keeps the latest measurement and the loop applies it, stamped
+    with the model time it is applied at."""
+    bridge = setting.ros2
+    return Ros2PoseFeed(setting.vehicle, bridge.participant(), params, bridge.frame, setting.applying("ros2"),
+                        setting.scheduler.post)

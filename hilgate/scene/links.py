@@ -12,6 +12,7 @@ import re
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from ..core.door_table import DOORS
 from ..models.errormodel import UNITS, ErrorModel
 from ..models.expr import ExprError, compile_expression
 from ..models.frame import BROADCAST
@@ -232,7 +233,10 @@ def require_narrow_addresses(links: Any) -> None:
                              f"are for hilgate sim")
 
 
-GLI_ENDPOINTS = ("mq", "socket", "ros2", "unet")
+GLI_ORDER = ("mq", "socket", "ros2", "unet")  # (how a link's gli: is listed in its view, as always)
+GLI_ENDPOINTS = tuple(sorted((name for name, door in DOORS.items() if door.gli),
+                             key=lambda name: (GLI_ORDER.index(name) if name in GLI_ORDER else len(GLI_ORDER), name)))
+"""The ``gli:`` values: the rows of the door table (:mod:`hilgate.core.door_table`) that a link asks for."""
 GLI_DEFAULT = ("mq", "socket")
 
 

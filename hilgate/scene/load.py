@@ -26,8 +26,8 @@ from .overrides import apply_override
 from .plugins import Plugin, PluginError, load_plugin
 from .ros2 import check_ros2_names, ros2_spec
 from .specs import CameraSpec, Scene, VehicleSpec
+from .channels import channel_spec
 from .in_water import check_modems_in_water
-from .water import water_spec
 from .vehicles import camera_spec, check_camera_references, vehicle_spec
 from .yaml_nodes import Node, SceneError, load_file, load_text
 
@@ -37,7 +37,6 @@ log = logging.getLogger(__name__)
 
 TOP_KEYS = ("name", "seed", "duration_s", "plugins", "channels", "vehicles", "links", "flows", "trace", "cameras",
             "zenoh", "apps", "ros2")
-CHANNEL_KEYS = ("speed_mps", "min_delay_s", "water")
 
 
 def _load_plugins(node: Node | None, extra: Sequence[str]) -> dict[str, Plugin]:
@@ -118,10 +117,7 @@ def _channels(f: Fields) -> dict[str, Channel]:
     if channels_node is None:
         raise f.error("missing required key 'channels' (e.g. acoustic: {speed_mps: 1500})")
     for cname, cnode in mapping(channels_node, "channels").items():
-        cf = Fields(cnode, join_path("channels", cname), CHANNEL_KEYS)
-        water = cf.get("water", water_spec, None)
-        channels[cname] = Channel(cname, cf.get("speed_mps", number(above=0)), cf.get("min_delay_s", number(0), 0.0),
-                                  water)
+        channels[cname] = channel_spec(cname, cnode)
     if not channels:
         raise channels_node.error("channels", "define at least one channel")
     return channels

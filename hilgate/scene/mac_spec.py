@@ -9,14 +9,19 @@ from __future__ import annotations
 
 from typing import Any
 
+from ..core.tables import merge_entry_points
 from ..models.mac import Mac, Param
 from ..models.macs import REGISTRY as MAC_REGISTRY
-from .checks import Fields, boolean, integer, join_path, mapping, number, quote, text, vector
+from .checks import Fields, boolean, integer, join_path, mapping, number, quote, text, unknown_key_message, vector
 from .plugins import Plugin, classes_of
 from .specs import MacSpec
 from .yaml_nodes import Node
 
 __all__ = ["mac_spec"]
+
+# a lab's own MACs, installed as packages (hilgate.core.tables): the entry point's name is the scene's
+merge_entry_points("hilgate.macs", MAC_REGISTRY, lambda row: isinstance(row, type) and issubclass(row, Mac),
+                   name_of=lambda row: None)
 
 
 def _plugin_macs(plugins: dict[str, Plugin]) -> dict[str, list[tuple[str, type[Mac]]]]:
@@ -55,7 +60,9 @@ def _mac_class(protocol: str, node: Node, path: str, plugins: dict[str, Plugin])
         raise node.error(path, f"MAC {protocol!r} is defined by several plugins ("
                                f"{', '.join(ref for ref, _ in provided[protocol])}); name one as plugin:Class")
     offered = ", ".join(f"{name} ({refs[0][0]})" for name, refs in provided.items())
-    raise node.error(path, f"unknown MAC protocol {quote(protocol)}; built in: {', '.join(MAC_REGISTRY)}"
+    close = unknown_key_message(protocol, [*MAC_REGISTRY, *provided])
+    guess = close[close.index("(did"):] if "(did you mean" in close else ""
+    raise node.error(path, f"unknown MAC protocol {quote(protocol)}{' ' + guess if guess else ''}; built in: {', '.join(MAC_REGISTRY)}"
                            + (f"; from plugins: {offered}" if offered else "")
                            + " (a MAC of your own comes from a .py file or module listed under plugins:)")
 

@@ -18,7 +18,7 @@ from .checks import (
     unknown_key_message, vector,
 )
 from .hosts import host_name
-from .ros2 import ros2_pose
+from .pose_table import POSE_SOURCES, check_live
 from .specs import CameraSpec, PoseSpec, VehicleSpec
 from .yaml_nodes import MAX_FILE_BYTES, Node, SceneError, read_limited
 
@@ -26,7 +26,7 @@ __all__ = ["VEHICLE_KEYS", "CAMERA_KEYS", "LIVE_KINDS", "POSE_KINDS", "vehicle_s
            "check_camera_references", "unknown_pose"]
 
 VEHICLE_KEYS = ("pose", "stale_after_s", "stale", "extrapolate_s", "initial", "feedback", "host")
-LIVE_KINDS = ("mavlink", "aruco", "ros2")
+LIVE_KINDS = tuple(POSE_SOURCES)  # (mavlink, aruco, ros2 and any an installed package adds)
 CAMERA_KEYS = ("source", "calibration", "dictionary", "marker_length_m", "fixed", "onboard", "map", "fps", "host")
 
 
@@ -85,62 +85,15 @@ def _controlled_pose(node: Node, path: str) -> Any:
     return (f.get("start", vector()), f.get("max_speed_mps", number(above=0)))
 
 
-def _mavlink_pose(node: Node, path: str) -> Any:
-    f = Fields(node, path, ("url", "system_id", "origin", "message_rates", "heartbeat"))
-    url = f.get("url", text)
-    system_id = f.get("system_id", integer(1, 255), None)
-    origin = f.get("origin", vector(3), None)  # latitude, longitude (degrees), altitude (m)
-    rates: tuple = ()
-    rates_node = f.child("message_rates")
-    if rates_node is not None:
-        rates = tuple((name, number(above=0, maximum=1000)(value, join_path(f.sub("message_rates"), name)))
-                      for name, value in mapping(rates_node, f.sub("message_rates")).items())
-    # hilgate sends a vehicle nothing the scene did not ask for, and never as its ground station
-    # (drivers/mavlink_identity.py says why): heartbeat: false (default) | true | {system_id, component_id, rate_hz}
-    from ..drivers import mavlink_identity as ident
-
-    hb_node, hb_path = f.child("heartbeat"), f.sub("heartbeat")
-    heartbeat = None
-    if hb_node is not None and not hb_node.is_map and not isinstance(hb_node.value, bool):
-        raise hb_node.error(hb_path, "must be true, false or {system_id: N, component_id: M, rate_hz: R}")
-    if hb_node is not None and (hb_node.is_map or hb_node.value):
-        own, component, rate = system_id, ident.DEFAULT_COMPONENT_ID, ident.DEFAULT_HEARTBEAT_HZ  # as a companion's
-        where = {"system_id": (f.child("system_id"), f.sub("system_id")), "component_id": (hb_node, hb_path)}
-        if hb_node.is_map:
-            hf = Fields(hb_node, hb_path, ("system_id", "component_id", "rate_hz"))
-            own = hf.get("system_id", integer(1, 255), own)
-            component = hf.get("component_id", integer(1, 255), component)
-            rate = hf.get("rate_hz", number(above=0, maximum=10), rate)
-            where.update({key: (hf.child(key), hf.sub(key)) for key in ("system_id", "component_id") if key in hf})
-        if own is None:
-            raise hb_node.error(hb_path, "needs a system id to send as: give the vehicle's system_id (hilgate then "
-                                "sends as its companion computer does) or heartbeat: {system_id: N}")
-        for key, problem in (("system_id", ident.system_problem(own)),
-                             ("component_id", ident.component_problem(component))):
-            if problem is not None:
-                raise where[key][0].error(where[key][1], problem)
-        heartbeat = (("system_id", own), ("component_id", component), ("rate_hz", rate))
-    return (("url", url), ("system_id", system_id), ("origin", origin), ("message_rates", rates),
-            ("heartbeat", heartbeat))
-
-
-def _aruco_pose(node: Node, path: str) -> Any:
-    f = Fields(node, path, ("camera", "marker", "offset"))
-    camera = f.get("camera", text)
-    marker = f.get("marker", integer(0, 100_000), None)
-    offset = f.get("offset", vector(), (0.0, 0.0, 0.0))
-    return (("camera", camera), ("marker", marker), ("offset", offset))
-
-
 POSE_KINDS: dict[str, Callable[[Node, str], Any]] = {
     "static": _static_pose,
     "path": _path_pose,
     "waypoints": _waypoints_pose,
     "controlled": _controlled_pose,
-    "mavlink": _mavlink_pose,
-    "aruco": _aruco_pose,
-    "ros2": ros2_pose,
+    **{kind: (lambda node, path, kind=kind: check_live(kind, node, path)) for kind in POSE_SOURCES},
 }
+"""Every key a vehicle's ``pose:`` may have: the scripted sources, then the live ones of the pose-source
+table (:mod:`hilgate.scene.pose_table`)."""
 
 
 def vehicle_spec(name: str, node: Node, path: str) -> VehicleSpec:
@@ -158,7 +111,7 @@ def vehicle_spec(name: str, node: Node, path: str) -> VehicleSpec:
         raise pose_node.error(pose_path, f"give a pose source: {', '.join(POSE_KINDS)}")
     live = [k for k in kinds if k in LIVE_KINDS]
     if len(kinds) > 1 and len(live) != len(kinds):
-        raise pose_node.error(pose_path, "only live sources (mavlink, aruco, ros2) can be combined, with merge")
+        raise pose_node.error(pose_path, f"only live sources ({', '.join(LIVE_KINDS)}) can be combined, with merge")
     if len(kinds) > 1 and merge_node is None:
         raise pose_node.error(pose_path, "several sources need 'merge' (e.g. {x: aruco, y: aruco, z: mavlink})")
     merge: tuple = ()
@@ -174,7 +127,7 @@ def vehicle_spec(name: str, node: Node, path: str) -> VehicleSpec:
     if not live:
         for key in ("stale_after_s", "stale", "extrapolate_s", "initial"):
             if key in f:
-                raise f.child(key).error(f.sub(key), "only for vehicles with a live pose (mavlink, aruco, ros2)")
+                raise f.child(key).error(f.sub(key), f"only for vehicles with a live pose ({', '.join(LIVE_KINDS)})")
     feedback: tuple = ()
     if "feedback" in f:
         ff = Fields(f.child("feedback"), f.sub("feedback"), ("url", "message", "rate_hz", "origin", "system_id"))

@@ -18,6 +18,7 @@ import math
 from typing import Any
 
 from ..models.physical import PhysicalErrorModel
+from ..models.propagations import implied
 from . import LinkSpec, Scene
 
 __all__ = ["scene_view", "link_view", "view_hash", "link_changes", "error_view"]
@@ -88,7 +89,9 @@ def scene_view(scene: Scene) -> dict[str, Any]:
     return {
         "name": scene.name,
         "seed": scene.seed,
-        "channels": {name: {"speed_mps": _plain(c.speed_mps), "min_delay_s": _plain(c.min_delay_s)}
+        "channels": {name: {"speed_mps": _plain(c.speed_mps), "min_delay_s": _plain(c.min_delay_s),
+                            # (a model the water does not imply: one a package added)
+                            **({"propagation": c.model} if c.model != implied(c.water) else {})}
                      for name, c in scene.channels.items()},
         "vehicles": {name: {"source": v.pose.source_name, **({"host": v.host} if v.host else {})}
                      for name, v in scene.vehicles.items()},

@@ -52,6 +52,8 @@ TOKEN_HINT = "the daemon's token (`hilgate view` on its host prints the address 
 """What a page that has not proved the token is told to give: where to get it, but no path."""
 MAX_MESSAGE = 4096
 """A page's messages are a proof or a player command: tens of bytes."""
+PING_S = 10
+"""A page is pinged this often and closed when its pong is this late: it went without closing (a laptop shut)."""
 REPLAY_TICK_S = 0.05
 """The trace player's pictures: 20 a second."""
 MISSING = ("the web view needs tornado, an optional extra: pip install 'hilgate[web]' (or pip install tornado)")
@@ -183,8 +185,9 @@ class WebServer:
         self._stopped = asyncio.Event()
         self._ioloop = tornado.ioloop.IOLoop.current()
         self.door = WebDoor(self._ioloop, self.auth_timeout_s)
+        # one number for both: tornado (6.5 on) caps the timeout at the interval and warns when it is longer
         app = tornado.web.Application(_handlers(self, tornado), websocket_max_message_size=MAX_MESSAGE,
-                                      websocket_ping_interval=10, websocket_ping_timeout=30,
+                                      websocket_ping_interval=PING_S, websocket_ping_timeout=PING_S,
                                       compress_response=False, log_function=_log_request)
         server = _door_server(tornado, self.door)(app, idle_connection_timeout=60, body_timeout=10,
                                                   max_header_size=16384, max_body_size=MAX_MESSAGE)
