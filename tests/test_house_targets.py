@@ -43,9 +43,6 @@ ALLOWED_COMPLEXITY = {
     "hilgate/gli/zenoh_auth.py:load_identity",  # 21
     "hilgate/report/observations.py:_Real.event",  # 22
     "hilgate/scene/backends.py:emulated_device",  # 21
-    "hilgate/scene/vehicles.py:vehicle_spec",  # 22
-    "hilgate/sim/water_budget.py:water_tables",  # 22
-    "hilgate/web/picture.py:scene_message",  # 25
     "models/radio.py:Radio._arrive_sinr",  # 21
     "models/sfama.py:SFama.on_frame",  # 24
 }

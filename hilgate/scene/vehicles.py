@@ -128,15 +128,7 @@ def vehicle_spec(name: str, node: Node, path: str) -> VehicleSpec:
         for key in ("stale_after_s", "stale", "extrapolate_s", "initial"):
             if key in f:
                 raise f.child(key).error(f.sub(key), f"only for vehicles with a live pose ({', '.join(LIVE_KINDS)})")
-    feedback: tuple = ()
-    if "feedback" in f:
-        ff = Fields(f.child("feedback"), f.sub("feedback"), ("url", "message", "rate_hz", "origin", "system_id"))
-        message = ff.get("message", choice("vision_position_estimate", "gps_input"), "vision_position_estimate")
-        origin = ff.get("origin", vector(3), None)
-        if message == "gps_input" and origin is None:
-            raise ff.error("gps_input needs origin: [latitude, longitude, altitude]")
-        feedback = (("url", ff.get("url", text)), ("message", message), ("rate_hz", ff.get("rate_hz", number(above=0,
-                    maximum=100), 4.0)), ("origin", origin), ("system_id", ff.get("system_id", integer(1, 255), 1)))
+    feedback = _feedback(f)
     return VehicleSpec(
         name, pose, node.line,
         stale_after_s=f.get("stale_after_s", number(above=0), 2.0),
@@ -146,6 +138,20 @@ def vehicle_spec(name: str, node: Node, path: str) -> VehicleSpec:
         feedback=feedback,
         host=f.get("host", host_name, None),
     )
+
+
+def _feedback(f: Fields) -> tuple:
+    """A vehicle's ``feedback:`` (its measured pose sent back to its autopilot over MAVLink); () without."""
+    feedback: tuple = ()
+    if "feedback" in f:
+        ff = Fields(f.child("feedback"), f.sub("feedback"), ("url", "message", "rate_hz", "origin", "system_id"))
+        message = ff.get("message", choice("vision_position_estimate", "gps_input"), "vision_position_estimate")
+        origin = ff.get("origin", vector(3), None)
+        if message == "gps_input" and origin is None:
+            raise ff.error("gps_input needs origin: [latitude, longitude, altitude]")
+        feedback = (("url", ff.get("url", text)), ("message", message), ("rate_hz", ff.get("rate_hz", number(above=0,
+                    maximum=100), 4.0)), ("origin", origin), ("system_id", ff.get("system_id", integer(1, 255), 1)))
+    return feedback
 
 
 def _placement(node: Node, path: str) -> tuple:

@@ -44,22 +44,28 @@ def water_tables(scene: Scene, channels: Mapping[str, Any], frame_bytes: int | N
             path = bound.model
             if bound.refused is not None or not isinstance(path, BellhopPath):
                 continue
-            ranges = [f * water.range_m for f in RANGE_FRACTIONS]
-            depths = [f * water.depth_m for f in DEPTH_FRACTIONS]
             head = (f"{sender.id} -> {receiver.id} on {channel.name}: {path.fields.frequency_hz / 1000:g} kHz, "
                     f"source at {zs:.0f} m, {size} bytes; TL dB / PER by range (columns) and receiver depth (rows)")
-            lines = [head, "  depth m" + "".join(f"{_metres(r):>18}" for r in ranges)]
-            for zr in depths:
-                cells = []
-                for r in ranges:
-                    here = path.at((0.0, 0.0, zs + water.surface_z_m), (r, 0.0, zr + water.surface_z_m))
-                    per = here.per(math.hypot(r, zr - zs), size) if isinstance(path.model, PhysicalErrorModel) else None
-                    cells.append(f"{here.tl_db:.1f} / " + _per(per))
-                lines.append(f"  {zr:>7.0f}" + "".join(f"{c:>18}" for c in cells))
-            blocks.append("\n".join(lines))
+            blocks.append("\n".join([head, *_grid(path, water, zs, size)]))
             if limit is not None and len(blocks) >= limit:
                 return blocks
     return blocks
+
+
+def _grid(path: Any, water: Any, zs: float, size: int) -> list[str]:
+    """A pair's table: TL and PER at fractions of the water's range (columns) and depth (rows), the source at
+    depth ``zs``."""
+    ranges = [f * water.range_m for f in RANGE_FRACTIONS]
+    depths = [f * water.depth_m for f in DEPTH_FRACTIONS]
+    lines = ["  depth m" + "".join(f"{_metres(r):>18}" for r in ranges)]
+    for zr in depths:
+        cells = []
+        for r in ranges:
+            here = path.at((0.0, 0.0, zs + water.surface_z_m), (r, 0.0, zr + water.surface_z_m))
+            per = here.per(math.hypot(r, zr - zs), size) if isinstance(path.model, PhysicalErrorModel) else None
+            cells.append(f"{here.tl_db:.1f} / " + _per(per))
+        lines.append(f"  {zr:>7.0f}" + "".join(f"{c:>18}" for c in cells))
+    return lines
 
 
 def _metres(r: float) -> str:

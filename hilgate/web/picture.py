@@ -77,30 +77,8 @@ def scene_message(view: dict[str, Any], mode: str) -> dict[str, Any]:
     links: dict[str, Any] = {}
     raw_links = view.get("links") if isinstance(view.get("links"), dict) else {}
     for link_id, link in raw_links.items():
-        if not isinstance(link, dict):
-            continue
-        params = link.get("params") if isinstance(link.get("params"), dict) else {}
-        channel_name = link.get("tx_channel")
-        channel = channels.get(channel_name) if isinstance(channel_name, str) else None
-        channel = channel if isinstance(channel, dict) else {}
-        span = params.get("range_m") if isinstance(params.get("range_m"), list) else []
-        rmin = _number(span[0], 0.0) if len(span) > 0 else 0.0
-        rmax = _number(span[1], None) if len(span) > 1 else None
-        speed = _number(channel.get("speed_mps"), DEFAULT_SPEED_MPS)
-        links[_text(link_id)] = {
-            "vehicle": _text(link.get("vehicle")),
-            "backend": _text(link.get("backend")),
-            "kind": link_kind(link),
-            "channel": _text(channel_name),
-            "speed_mps": speed if speed and speed > 0 else DEFAULT_SPEED_MPS,
-            "min_delay_s": max(0.0, _number(channel.get("min_delay_s"), 0.0)),
-            "range_m": [max(0.0, rmin), rmax if rmax is None or rmax > 0 else None],
-            "bitrate_bps": _number(params.get("bitrate_bps"), None),
-            "fifo_bytes": _number(params.get("fifo_bytes"), None),
-            "address": link.get("address") if isinstance(link.get("address"), int) else None,
-            "host": link.get("host") if isinstance(link.get("host"), str) else None,
-            "emulate": _text(link["emulate"].get("protocol", "modem")) if isinstance(link.get("emulate"), dict) else None,
-        }
+        if isinstance(link, dict):
+            links[_text(link_id)] = _scene_link(link, channels)
     raw_vehicles = view.get("vehicles") if isinstance(view.get("vehicles"), dict) else {}
     vehicles = {}
     for name, vehicle in raw_vehicles.items():
@@ -112,6 +90,32 @@ def scene_message(view: dict[str, Any], mode: str) -> dict[str, Any]:
     hosts = sorted({link["host"] for link in links.values() if link["host"]})
     return {"class": "SCENE", "mode": mode, "name": _text(view.get("name", "?")), "links": links,
             "vehicles": vehicles, "hosts": hosts, "fates": fates()}
+
+
+def _scene_link(link: dict[str, Any], channels: dict[str, Any]) -> dict[str, Any]:
+    """One link of the page's SCENE, from its scene view and its channels' (anything malformed read as unknown)."""
+    params = link.get("params") if isinstance(link.get("params"), dict) else {}
+    channel_name = link.get("tx_channel")
+    channel = channels.get(channel_name) if isinstance(channel_name, str) else None
+    channel = channel if isinstance(channel, dict) else {}
+    span = params.get("range_m") if isinstance(params.get("range_m"), list) else []
+    rmin = _number(span[0], 0.0) if len(span) > 0 else 0.0
+    rmax = _number(span[1], None) if len(span) > 1 else None
+    speed = _number(channel.get("speed_mps"), DEFAULT_SPEED_MPS)
+    return {
+        "vehicle": _text(link.get("vehicle")),
+        "backend": _text(link.get("backend")),
+        "kind": link_kind(link),
+        "channel": _text(channel_name),
+        "speed_mps": speed if speed and speed > 0 else DEFAULT_SPEED_MPS,
+        "min_delay_s": max(0.0, _number(channel.get("min_delay_s"), 0.0)),
+        "range_m": [max(0.0, rmin), rmax if rmax is None or rmax > 0 else None],
+        "bitrate_bps": _number(params.get("bitrate_bps"), None),
+        "fifo_bytes": _number(params.get("fifo_bytes"), None),
+        "address": link.get("address") if isinstance(link.get("address"), int) else None,
+        "host": link.get("host") if isinstance(link.get("host"), str) else None,
+        "emulate": _text(link["emulate"].get("protocol", "modem")) if isinstance(link.get("emulate"), dict) else None,
+    }
 
 
 def reach_s(link: dict[str, Any] | None, size: int, extent_m: float = UNBOUNDED_REACH_M) -> float:
