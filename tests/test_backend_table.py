@@ -146,6 +146,7 @@ def test_the_built_in_rows_keep_todays_names_keys_and_classes():
     from hilgate.drivers.s100_emulator import S100Emulator
     from hilgate.drivers.evologics import EvologicsBackend, EvologicsOptions
     from hilgate.drivers.s100 import S100Backend, S100Options
+    from hilgate.core.tables import resolve
 
     assert BACKENDS == ("sim", "evologics", "s100", "m64", "micromodem", "unet")
     assert LINK_KEYS[-26:] == ("port", "baud", "im", "ack", "source_level", "gain", "extended", "im_retries",
@@ -155,8 +156,8 @@ def test_the_built_in_rows_keep_todays_names_keys_and_classes():
                                "modem_host", "unet_protocol", "send_timeout_s",  # unet
                                "emulate", "addressing")
     assert EvologicsOptions is table.EvologicsOptions and S100Options is table.S100Options
-    assert table._resolve(DRIVERS["evologics"].backend) is EvologicsBackend
-    assert table._resolve(DRIVERS["s100"].backend) is S100Backend
+    assert resolve(DRIVERS["evologics"].backend) is EvologicsBackend
+    assert resolve(DRIVERS["s100"].backend) is S100Backend
     assert {name: table.emulator_for(name) for name in ("evologics", "s100")} == {"evologics": EvologicsEmulator,
                                                                                  "s100": S100Emulator}
     assert table.emulated_protocols() == ("evologics", "s100", "m64", "micromodem", "unet")
