@@ -3,7 +3,7 @@ row of the driver table names (:func:`.table.emulator_for`), one module each (:m
 :mod:`.s100_emulator`, :mod:`.m64_emulator`, :mod:`.micromodem_emulator`, :mod:`.unet_emulator`) on the hosts
 they share (:mod:`.emulated_modem`: a pty, :mod:`.emulator_pty`, or a TCP port, :mod:`.emulator_tcp`).
 
-Software written for the real modem runs unchanged against the simulation; docs/modems.md's conformance
+Software written for the real modem runs unchanged against the simulation; docs/conformance.md's conformance
 tables list what each emulator does and does not emulate.
 """
 

@@ -13,7 +13,7 @@ one-way time measured from that round trip.  A link with ``usbl:`` prints ``USBL
 a modem does.  Like a modem just powered on, it starts in command mode (``ATO`` enters data mode,
 ``+++AT`` escapes work there). Enough of the S2C's command surface is there for field
 drivers that poll and check it (LSTS DUNE's task: ``AT?MODE``, ``ATI1``, ``AT?CLOCK``, ``AT?P``,
-``SENDEND``, burst reports); the conformance table of docs/modems.md lists what is and is not emulated.
+``SENDEND``, burst reports); the conformance table of docs/conformance.md lists what is and is not emulated.
 """
 
 from __future__ import annotations

@@ -40,7 +40,7 @@
 
 Not emulated: uplink requests (a ``$CCCYC`` whose source is another modem: ``$CAERR``), FDP/JANUS
 packets (``$CCTFP``, ``$CCTDP``, ``$CCTJN``, ``$CCCMD``), navigation pings (``$CCPDT``, ``$CCPNT``),
-hibernation, sweeps, ``$CAXST``; they answer ``$CAERR`` (docs/modems.md lists each).  Micro-Modem address 0
+hibernation, sweeps, ``$CAXST``; they answer ``$CAERR`` (docs/conformance-micromodem.md lists each).  Micro-Modem address 0
 is broadcast (hilgate's 255 on the channel).
 """
 
