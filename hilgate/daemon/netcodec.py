@@ -266,6 +266,28 @@ class _Reader:
             frame.ack = ack  # retries: the receiving modem answers with an ACK frame
         return frame
 
+    def app_frame(self) -> AppFrame:
+        """The application's frame a transmission carries, its payload a slice of its real packet or after it."""
+        seq, src, dst, t0, meta_length, real_length, payload_length, offset = self.fixed(_APP)
+        if not (-1 <= src <= 255 and dst <= 255 and math.isfinite(t0)):
+            raise NetError("an application frame's address or time is out of range")
+        if meta_length > MAX_HEADER:
+            raise NetError("meta that long")
+        packet = _packet(self.name("the packet class", PACKET_NAME))
+        meta = None
+        if meta_length:
+            meta = _loads(self.take(meta_length))
+            if not isinstance(meta, dict):
+                raise NetError("meta is not an object")
+        real = self.take(real_length)
+        if offset == FOLLOWS:
+            payload = self.take(payload_length)
+        elif offset + payload_length <= real_length:
+            payload = real[offset:offset + payload_length]
+        else:
+            raise NetError("a payload beyond its packet")
+        return AppFrame(real, payload, packet, seq, src, dst, t0, meta)
+
 
 @functools.lru_cache(maxsize=64)
 def _packet(name: str) -> Any:
@@ -317,28 +339,8 @@ def decode_transmission(data: bytes) -> Transmission:
         ref = frame.ref = reader.frame()
         ref_key = (ref.src_link, ref.id)
     if flags & HAS_APP:
-        seq, src, dst, t0, meta_length, real_length, payload_length, offset = reader.fixed(_APP)
-        if not (-1 <= src <= 255 and dst <= 255 and math.isfinite(t0)):
-            raise NetError("an application frame's address or time is out of range")
-        if meta_length > MAX_HEADER:
-            raise NetError("meta that long")
-        packet = _packet(reader.name("the packet class", PACKET_NAME))
-        meta = None
-        if meta_length:
-            meta = _loads(reader.take(meta_length))
-            if not isinstance(meta, dict):
-                raise NetError("meta is not an object")
-        real = reader.take(real_length)
-        if offset == FOLLOWS:
-            payload = reader.take(payload_length)
-        elif offset + payload_length <= real_length:
-            payload = real[offset:offset + payload_length]
-        else:
-            raise NetError("a payload beyond its packet")
-        if reader.at != reader.end:
-            raise NetError("trailing bytes")
-        frame.app_frame = AppFrame(real, payload, packet, seq, src, dst, t0, meta)
-    elif reader.at != reader.end:
+        frame.app_frame = reader.app_frame()
+    if reader.at != reader.end:
         raise NetError("trailing bytes")
     return Transmission(host, epoch_ns, number, frame, t, duration, position, ref_key, session)
 
