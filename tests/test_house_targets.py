@@ -30,8 +30,6 @@ ALLOWED_COMPLEXITY = {
     # on the frame's pass (tests/test_frame_path.py counts its calls): a split adds calls to every frame
     "hilgate/core/realtime.py:RealtimeScheduler._handle_inputs",  # 28
     "models/modem.py:SimModem.heard",  # 27
-    # the network of hosts (branch soak, merged meanwhile), left for last as the brief asked
-    "hilgate/daemon/network.py:Network._on_transmission",  # 21
     # issue 39 item 3 (branch rooms): not split by its deadline
     "drivers/m64_codec.py:_Splitter._next",  # 27
     "drivers/s100_codec.py:FrameHunter._next",  # 27
@@ -45,13 +43,8 @@ ALLOWED_COMPLEXITY = {
     "models/radio.py:Radio._arrive_sinr",  # 21
     "models/sfama.py:SFama.on_frame",  # 24
 }
-ALLOWED_MODULE_LINES = {
-    # the network of hosts (branch soak, merged meanwhile), left for last as the brief asked
-    "hilgate/daemon/network.py",  # 607
-}
+ALLOWED_MODULE_LINES: set[str] = set()
 ALLOWED_CLASS_LINES = {
-    # the network of hosts (branch soak, merged meanwhile), left for last as the brief asked
-    "hilgate/daemon/network.py:Network",  # 484
     # issue 39 item 2 (branch rooms): not split by its deadline (SimModem is on the frame's pass: a split must
     # keep its calls)
     "models/modem.py:SimModem",  # 345

@@ -54,7 +54,7 @@ from ..core.packets import Raw, packet_class
 from ..models.frame import Frame
 
 __all__ = ["Transmission", "encode_transmission", "decode_transmission", "encode_pose", "decode_pose",
-           "NetError", "to_local", "ReplayWindow", "MAX_TRANSMISSION"]
+           "NetError", "to_local", "ReplayWindow", "MAX_TRANSMISSION", "TIME_WINDOW_S"]
 
 MAX_HEADER = 16384
 MAX_DURATION_S = 3600.0  # a frame longer on air than this is not one a modem sends
@@ -65,6 +65,7 @@ LINK_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,200}|\*")  # a link id (sc
 KIND = re.compile(r"[a-z][a-z0-9_]{0,31}")
 PACKET_NAME = re.compile(r"[A-Za-z0-9_.:-]{1,64}")  # (simple:N has a colon)
 SESSION = re.compile(r"[0-9a-f]{1,32}")
+TIME_WINDOW_S = 60.0  # another host's transmission or pose further from now than this (to_local) is dropped (counted)
 
 
 class NetError(ValueError):

@@ -234,7 +234,7 @@ class Settlement:
                 counters[exc.cause] += 1
                 continue
             host = report["host"]
-            if host != network._key_host(key, "ack"):
+            if host != network.key_host(key, "ack"):
                 counters["forged"] += 1
             elif host not in network.hosts:
                 counters["foreign_sender"] += 1
