@@ -1,9 +1,9 @@
 """What a daemon knows of the other hosts of its network: each one's view (:class:`HostView`), and whether
 it and its links are up, from the liveliness tokens every daemon holds for its host and each of its links.
 
-Kept apart from :mod:`.network` (which hears and publishes transmissions) so that the tokens, their keys
-(``alive/<host>/host/<zid>`` and ``alive/<host>/link/<link>/<zid>``) and the refusal of a second daemon
-with the same host name or link stay in one place.
+Kept apart from :mod:`.network` and :mod:`.nethearing` (which publish and hear transmissions) so that
+the tokens, their keys (``alive/<host>/host/<zid>`` and ``alive/<host>/link/<link>/<zid>``) and the
+refusal of a second daemon with the same host name or link stay in one place.
 """
 
 from __future__ import annotations

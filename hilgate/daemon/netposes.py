@@ -1,8 +1,8 @@
 """The poses a daemon tells the others (``pose/<host>/<vehicle>``: live vehicles at each update, scripted
 ones ``pose_rate_hz`` times a second) and those it takes from theirs, for the vehicles they own.
 
-Kept apart from :mod:`.network` (which hears and publishes transmissions): a pose moves a
-:class:`~hilgate.sim.live_vehicle.RemoteVehicle` here, never a frame.
+Kept apart from :mod:`.network` and :mod:`.nethearing` (which publish and hear transmissions): a pose
+moves a :class:`~hilgate.sim.live_vehicle.RemoteVehicle` here, never a frame.
 """
 
 from __future__ import annotations
@@ -44,7 +44,8 @@ class Poses:
         """Publish each live vehicle of this host at each of its updates."""
         world = self.network.router.world
         for name, pose in world.poses.items():
-            if isinstance(pose, LiveVehicle) and not isinstance(pose, RemoteVehicle) and world.local(scene.vehicles[name]):
+            if (isinstance(pose, LiveVehicle) and not isinstance(pose, RemoteVehicle)
+                    and world.local(scene.vehicles[name])):
                 pose.listeners = [self._live_update(name, pose)]
 
     def _live_update(self, name: str, pose: LiveVehicle) -> Callable[[], None]:

@@ -3,9 +3,10 @@ frame's destinations are another host's, when a transmission heard here has ende
 the reports to the others (every :data:`~.netledger.REPORT_S`, and a last one when the daemon stops), and
 their reports, read on the loop.
 
-Kept apart from :mod:`.network` (which hears and publishes transmissions) so that the settling, its
-keys (``<prefix>/ack/<host>/<sender>``) and its costs stay in one place: per frame for another host, a
-dictionary entry on the sender and one on the receiver; per host pair, five small messages a second.
+Kept apart from :mod:`.network` and :mod:`.nethearing` (which publish and hear transmissions) so that
+the settling, its keys (``<prefix>/ack/<host>/<sender>``) and its costs stay in one place: per frame for
+another host, a dictionary entry on the sender and one on the receiver; per host pair, five small
+messages a second.
 """
 
 from __future__ import annotations
