@@ -18,7 +18,7 @@ from .nethosts import HostView
 from ..core.inbox import Inbox
 from ..sim.live_vehicle import RemoteVehicle
 
-log = logging.getLogger("hilgate.daemon.network")  # (the network's: its log lines keep their logger's name)
+log = logging.getLogger(__name__)
 
 __all__ = ["Hearing", "remember"]
 

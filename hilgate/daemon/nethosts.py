@@ -15,7 +15,7 @@ from .access import AccessError
 from .netcodec import ReplayWindow
 from ..core.inbox import Inbox
 
-log = logging.getLogger("hilgate.daemon.network")  # (the network's: its log lines keep their logger's name)
+log = logging.getLogger(__name__)
 
 __all__ = ["HostView", "Liveliness"]
 
