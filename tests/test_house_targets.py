@@ -34,7 +34,6 @@ ALLOWED_COMPLEXITY = {
     "hilgate/daemon/netcodec.py:decode_transmission",  # 24
     "hilgate/daemon/network.py:Network._on_transmission",  # 21
     # issue 39 item 3 (branch rooms): not split by its deadline
-    "hilgate/core/fjage.py:FjageCodec._event",  # 21
     "hilgate/core/unet_node.py:UnetNode._parameters",  # 21
     "hilgate/gli/socket_client.py:Link.open",  # 22
     "hilgate/gli/zenoh_auth.py:load_identity",  # 21
