@@ -34,7 +34,6 @@ ALLOWED_COMPLEXITY = {
     "hilgate/daemon/netcodec.py:decode_transmission",  # 24
     "hilgate/daemon/network.py:Network._on_transmission",  # 21
     # issue 39 item 3 (branch rooms): not split by its deadline
-    "models/sfama.py:SFama.on_frame",  # 24
 }
 ALLOWED_MODULE_LINES = {
     # the network of hosts (branch soak, merged meanwhile), left for last as the brief asked
