@@ -144,42 +144,64 @@ class _Splitter:
         if not buffer:
             return None
         if buffer[0] != SOP:
-            end = _line_end(buffer, 0)
-            if end < 0:
-                if len(buffer) > MAX_SENTENCE:
-                    data = bytes(buffer)
-                    buffer.clear()
-                    return Malformed("no sentence", data)
-                # wait for the line end, unless a sentence starts in the noise
-                start = buffer.find(b"w")
-                if start > 0:
-                    data = bytes(buffer[:start])
-                    del buffer[:start]
-                    return Malformed("no sentence", data)
-                return None
-            data = bytes(buffer[:end])
-            del buffer[:end + 1]
-            return Malformed("no sentence", data)
-        size_end = None
-        if len(buffer) >= 3 and buffer[2] in PAYLOAD_COMMANDS and buffer[1] == self.direction:
-            # w?q,<size>,<payload>: the payload is framed by its length
-            comma = buffer.find(b",", 4, 8)
-            if len(buffer) < 4:
-                return None
-            if buffer[3] != ord(","):
-                size_end = None
-            elif comma < 0:
-                if len(buffer) < 8 and _line_end(buffer, 0) < 0:
-                    return None
-            else:
-                digits = bytes(buffer[4:comma])
-                if digits.isdigit() and int(digits) <= MAX_PAYLOAD:
-                    size_end = comma + 1 + int(digits)
-                    if len(buffer) < size_end:
-                        return None
+            return self._noise()
+        size_end = self._payload_end()
+        if size_end is _INCOMPLETE:
+            return None
+        return self._sentence(size_end)
+
+    def _noise(self) -> Malformed | None:
+        """Bytes before a sentence's start: up to the line end (or a ``w`` that starts one) as Malformed, or
+        None to wait for more."""
+        buffer = self.buffer
+        end = _line_end(buffer, 0)
+        if end < 0:
+            if len(buffer) > MAX_SENTENCE:
+                data = bytes(buffer)
+                buffer.clear()
+                return Malformed("no sentence", data)
+            # wait for the line end, unless a sentence starts in the noise
+            start = buffer.find(b"w")
+            if start > 0:
+                data = bytes(buffer[:start])
+                del buffer[:start]
+                return Malformed("no sentence", data)
+            return None
+        data = bytes(buffer[:end])
+        del buffer[:end + 1]
+        return Malformed("no sentence", data)
+
+    def _payload_end(self) -> int | None | object:
+        """Where a ``w?q,<size>,<payload>`` sentence's payload ends (it is framed by its length, not by a
+        line end); None for a sentence without one, _INCOMPLETE while the size or payload is still coming."""
+        buffer = self.buffer
+        if not (len(buffer) >= 3 and buffer[2] in PAYLOAD_COMMANDS and buffer[1] == self.direction):
+            return None
+        comma = buffer.find(b",", 4, 8)
+        if len(buffer) < 4:
+            return _INCOMPLETE
+        if buffer[3] != ord(","):
+            return None
+        if comma < 0:
+            if len(buffer) < 8 and _line_end(buffer, 0) < 0:
+                return _INCOMPLETE
+            return None
+        digits = bytes(buffer[4:comma])
+        if digits.isdigit() and int(digits) <= MAX_PAYLOAD:
+            size_end = comma + 1 + int(digits)
+            if len(buffer) < size_end:
+                return _INCOMPLETE
+            return size_end
+        return None
+
+    def _sentence(self, size_end: int | None) -> object | None:
+        """The sentence at the buffer's start, up to its line end (after the payload, if it has one), or
+        None to wait for more."""
+        buffer = self.buffer
+        longest = MAX_SENTENCE + (MAX_PAYLOAD if size_end is not None else 0)
         end = _line_end(buffer, size_end if size_end is not None else 0)
         if end < 0:
-            if len(buffer) > MAX_SENTENCE + (MAX_PAYLOAD if size_end is not None else 0):
+            if len(buffer) > longest:
                 data = bytes(buffer)
                 buffer.clear()
                 return Malformed("too long", data)
@@ -190,9 +212,12 @@ class _Splitter:
             # the CR of a CR LF line end; a payload's own last byte may be CR (wlmodem sends no checksum
             # after it), and the payload was framed by its length: that CR is the payload's
             line = line[:-1]
-        if len(line) > MAX_SENTENCE + (MAX_PAYLOAD if size_end is not None else 0):
+        if len(line) > longest:
             return Malformed("too long", line)
         return _parse(line, size_end, self.direction)
+
+
+_INCOMPLETE = object()  # _Splitter._payload_end's answer while a payload's size or bytes are still coming
 
 
 def _line_end(buffer: bytearray, start: int) -> int:

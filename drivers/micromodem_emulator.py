@@ -57,19 +57,13 @@ from hilgate.core.packets import BROADCAST, PacketError, Raw
 
 from .emulated_modem import EmulatedModem
 from .micromodem_codec import (CI_AIRTIME_S, MINIPACKET_S, PACKET_TYPES, RATES, RXP_TYPES, BadSentence, CycleStats,
-                               ModemCodec, Sentence, cst, hhmmss, sentence)
+                               ModemCodec, Sentence, cst, sentence)
 from .micromodem_figures import figures
+from .micromodem_settings import CONFIG, FIRMWARE, MicromodemSettings
 
 log = logging.getLogger(__name__)
 
-FIRMWARE = "2.0.0"
 MM_BROADCAST = 0
-CONFIG = {"SRC": 0, "AGN": 250, "ASD": 0, "BND": 3, "CST": 1, "CTO": 10, "DTO": 5, "PCM": 0, "REV": 0,
-          "RXD": 1, "RXP": 1, "TAT": 50, "TXF": 1, "TXP": 1, "XST": 0}
-"""The configuration parameters the emulator keeps (``DTO``: seconds the modem waits for a frame;
-``CTO``: seconds a cycle may take in all; ``RXP``, ``TXP``, ``TXF``, ``CST``, ``RXD``: whether it prints
-``$CARXP``, ``$CATXP``, ``$CATXF``, ``$CACST``, ``$CARXD``; ``AGN``: the analog gain, 250 is 30 dB).
-``$CCCFG,ALL,0`` sets them back to these (the link's address stays)."""
 
 
 @dataclass
@@ -85,18 +79,9 @@ class _Cycle:
     timer: Any = None
 
 
-def _iso_time(text: str) -> datetime.datetime | None:
-    """An ISO 8601 time as ``$CCTMS`` carries it (``2025-06-06T23:01:23Z``, fractions allowed), in UTC;
-    ``acomms`` writes ``…ZZ`` (its time already ends in Z before it adds one), which the modem takes."""
-    try:
-        when = datetime.datetime.fromisoformat(text.strip().rstrip("Zz") + "+00:00")
-    except ValueError:
-        return None
-    return when if when.tzinfo is not None else when.replace(tzinfo=datetime.timezone.utc)
-
-
-class MicromodemEmulator(EmulatedModem):
-    """A WHOI Micro-Modem (the module's docstring)."""
+class MicromodemEmulator(MicromodemSettings, EmulatedModem):
+    """A WHOI Micro-Modem (the module's docstring): its data cycles, pings and minipackets, what the model
+    reports of them and what it delivers; the settings a host reads and writes are :class:`.MicromodemSettings`'."""
 
     busy = False
     codec = ModemCodec
@@ -118,16 +103,6 @@ class MicromodemEmulator(EmulatedModem):
     def _say(self, kind: str, *fields: object) -> None:
         self._to_hosts(sentence(kind, *fields))
 
-    def _clock(self) -> str:
-        return hhmmss(self._epoch() + self.scheduler.now())
-
-    def _epoch(self) -> float:
-        """The modem's clock at model time 0 (UNIX seconds): the daemon's, moved by ``$CCTMS``/``$CCCLK``."""
-        return self.scheduler.epoch_ns / 1e9 + self.clock_offset
-
-    def _now(self) -> datetime.datetime:
-        return datetime.datetime.fromtimestamp(self._epoch() + self.scheduler.now(), datetime.timezone.utc)
-
     def _error(self, module: str, number: int, text: str) -> None:
         self._say("CAERR", self._clock(), module, number, text)
 
@@ -145,39 +120,6 @@ class MicromodemEmulator(EmulatedModem):
                         handler(self, event)
                 case BadSentence(reason=reason):
                     self._error("NMEA", 2, reason.capitalize())
-
-    def _query(self, s: Sentence) -> None:
-        name = (s.field(0) or "").upper()
-        if name == "ALL":
-            for key, value in self.config.items():
-                self._say("CACFG", key, value)
-        elif name == "INFO":
-            self._say("CACFG", "info.firmware_version", FIRMWARE)
-        elif name in self.config:
-            self._say("CACFG", name, self.config[name])
-        else:
-            self._error("CCCFQ", 3, f"Unknown parameter {name}")
-
-    def _configure(self, s: Sentence) -> None:
-        name = (s.field(0) or "").upper()
-        value = s.number(1)
-        if name == "ALL" and value == 0:  # factory settings (the link keeps its address)
-            self.config = dict(CONFIG, SRC=self.config["SRC"])
-            self._say("CACFG", name, value)
-            return
-        if name not in self.config or value is None:
-            self._error("CCCFG", 3, f"Bad parameter {name}")
-            return
-        if name == "SRC":
-            if not 1 <= value <= 254:
-                self._error("CCCFG", 4, "SRC out of range")
-                return
-            self.port.set_address(value)
-        self.config[name] = value
-        self._say("CACFG", name, value)
-
-    def _api_level(self, s: Sentence) -> None:
-        self._say("CAALQ", 0, 11)
 
     def _cycle_init(self, s: Sentence) -> None:
         numbers = [s.number(i) for i in range(6)]
@@ -297,51 +239,6 @@ class MicromodemEmulator(EmulatedModem):
             self.pings.add(id(frame))
         self._send(frame, None)
 
-    def _set_time(self, s: Sentence) -> None:
-        """``$CCTMS,<ISO 8601 time>,<mode>``: the modem's clock reads that time now; ``$CATMS,0,<time>``."""
-        when = _iso_time(s.field(0) or "")
-        if when is None:
-            self._error("CCTMS", 1, "Bad time")
-            return
-        self._move_clock(when)
-        self._say("CATMS", 0, self._iso(self._now()))
-
-    def _query_time(self, s: Sentence) -> None:
-        """``$CCTMQ`` → ``$CATMQ,<ISO 8601 time>,<clock source>,<PPS source>`` (the emulator's own clock, no PPS)."""
-        self._say("CATMQ", self._iso(self._now()), "RTC", "NONE")
-
-    def _set_clock(self, s: Sentence) -> None:
-        """``$CCCLK,yyyy,MM,dd,HH,mm,ss`` (the Micro-Modem 1's clock command) → ``$CACLK`` with the time set."""
-        numbers = [s.number(i) for i in range(6)]
-        try:
-            when = datetime.datetime(*numbers, tzinfo=datetime.timezone.utc)  # type: ignore[arg-type]
-        except (TypeError, ValueError):
-            self._error("CCCLK", 1, "Bad time")
-            return
-        self._move_clock(when)
-        self._clock_query(s)
-
-    def _clock_query(self, s: Sentence) -> None:
-        """``$CCCLQ`` → ``$CACLK,yyyy,MM,dd,HH,mm,ss`` (``libumutil.h``'s answer to the clock query)."""
-        now = self._now()
-        self._say("CACLK", now.year, now.month, now.day, now.hour, now.minute, now.second)
-
-    def _move_clock(self, when: datetime.datetime) -> None:
-        self.clock_offset += when.timestamp() - (self._epoch() + self.scheduler.now())
-
-    @staticmethod
-    def _iso(when: datetime.datetime) -> str:
-        return when.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
-
-    def _hardware_line(self, s: Sentence) -> None:
-        """``$CCMEC,src,dest,line,mode,arg``: this modem's own lines only; echoed ``$CAMEC`` (no line is
-        modelled: the echo is all a host sees of it)."""
-        numbers = [s.number(i) for i in range(5)]
-        if None in numbers or numbers[1] != self.config["SRC"]:
-            self._error("CCMEC", 1, "Only the local modem's lines are emulated")
-            return
-        self._say("CAMEC", *numbers)
-
     def _minipacket(self, s: Sentence) -> None:
         """``$CCMUC,src,dest,<13 bits in hex>``: a user minipacket (FSK, :data:`MINIPACKET_S` on the
         channel), echoed ``$CAMUC``; the far modem prints ``$CAMUA,src,dest,<hex>``."""
@@ -360,9 +257,11 @@ class MicromodemEmulator(EmulatedModem):
         frame.airtime_s = MINIPACKET_S
         self._send(frame, None)
 
-    COMMANDS = {"CCCFQ": _query, "CCCFG": _configure, "CCALQ": _api_level, "CCCYC": _cycle_init, "CCTXD": _data,
-                "CCMPC": _ping, "CCTMS": _set_time, "CCTMQ": _query_time, "CCCLK": _set_clock, "CCCLQ": _clock_query,
-                "CCMEC": _hardware_line, "CCMUC": _minipacket}
+    COMMANDS = {"CCCFQ": MicromodemSettings._query, "CCCFG": MicromodemSettings._configure,
+                "CCALQ": MicromodemSettings._api_level, "CCCYC": _cycle_init, "CCTXD": _data, "CCMPC": _ping,
+                "CCTMS": MicromodemSettings._set_time, "CCTMQ": MicromodemSettings._query_time,
+                "CCCLK": MicromodemSettings._set_clock, "CCCLQ": MicromodemSettings._clock_query,
+                "CCMEC": MicromodemSettings._hardware_line, "CCMUC": _minipacket}
 
     @staticmethod
     def _dst(dest: int) -> int:

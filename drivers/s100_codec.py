@@ -201,6 +201,39 @@ class FrameHunter:
         del self._buffer[:count]
         return Skipped(count, reason, data)
 
+    def _notice(self) -> object | None:
+        """A ``+++`` notice at the buffer's start: up to its CR LF, or up to a whole valid frame inside it;
+        None to wait for more."""
+        buffer = self._buffer
+        preamble = self.packet.preamble
+        end = buffer.find(CRLF, 0, MAX_NOTICE)
+        limit = end if end >= 0 else min(len(buffer), MAX_NOTICE)
+        # a notice ends at its CR LF, or where a whole valid frame starts inside it (line noise
+        # that merely begins with "+++" must not swallow the frame behind it)
+        position = buffer.find(preamble, 3, limit)
+        arriving = False
+        while position >= 0:
+            found = self._frame_at(position)
+            if found == "frame":
+                text = bytes(buffer[:position])
+                del buffer[:position]
+                return Notice(text, ended=False)
+            arriving = arriving or found == "more"
+            position = buffer.find(preamble, position + 1, limit)
+        if end >= 0 and arriving and not self._frame_after(end + 2):
+            # a frame that starts before the CR LF is still arriving and nothing proves the CR LF
+            # ends the notice: it may be inside that frame's payload, so wait (one frame at most).
+            # A whole valid frame after the CR LF is such a proof, even behind other junk: a "U"
+            # in "EFAULT" must not hold good frames back until its would-be length has come
+            return None
+        if end >= 0:
+            text = bytes(buffer[:end])
+            del buffer[: end + 2]
+            return Notice(text)
+        if len(buffer) < MAX_NOTICE:
+            return None
+        return self._skip(3, "notice without end")
+
     def _next(self) -> object | None:
         buffer = self._buffer
         packet = self.packet
@@ -213,33 +246,7 @@ class FrameHunter:
         if not buffer:
             return None
         if buffer[:3] == b"+++":
-            end = buffer.find(CRLF, 0, MAX_NOTICE)
-            limit = end if end >= 0 else min(len(buffer), MAX_NOTICE)
-            # a notice ends at its CR LF, or where a whole valid frame starts inside it (line noise
-            # that merely begins with "+++" must not swallow the frame behind it)
-            position = buffer.find(preamble, 3, limit)
-            arriving = False
-            while position >= 0:
-                found = self._frame_at(position)
-                if found == "frame":
-                    text = bytes(buffer[:position])
-                    del buffer[:position]
-                    return Notice(text, ended=False)
-                arriving = arriving or found == "more"
-                position = buffer.find(preamble, position + 1, limit)
-            if end >= 0 and arriving and not self._frame_after(end + 2):
-                # a frame that starts before the CR LF is still arriving and nothing proves the CR LF
-                # ends the notice: it may be inside that frame's payload, so wait (one frame at most).
-                # A whole valid frame after the CR LF is such a proof, even behind other junk: a "U"
-                # in "EFAULT" must not hold good frames back until its would-be length has come
-                return None
-            if end >= 0:
-                text = bytes(buffer[:end])
-                del buffer[: end + 2]
-                return Notice(text)
-            if len(buffer) < MAX_NOTICE:
-                return None
-            return self._skip(3, "notice without end")
+            return self._notice()
         start = buffer.find(preamble)
         if start < 0:
             keep = len(preamble) - 1 if buffer.endswith(preamble[:1]) else 0

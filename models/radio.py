@@ -269,7 +269,7 @@ class Radio:
         pending = self.pending
         dst = frame.dst_addr
         seq = self.air.seq if self.air is not None else 0
-        if not (self.judges_all or dst == self.address or dst == BROADCAST):
+        if dst not in (self.address, BROADCAST) and not self.judges_all:  # not judged: only interference
             for other in pending:
                 if other.start < end - OVERLAP_EPS and start < other.end - OVERLAP_EPS:
                     _add_part(other, seq, power)

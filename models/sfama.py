@@ -196,27 +196,12 @@ class SFama(HoldingMac):
         now = modem.clock.now()
         mine = addressed and frame.dst_addr == modem.address
         if frame.kind in (RTS, CTS) and not mine:
-            # overheard: stay silent until the end of the ACK slot of the announced exchange
-            j = self.slot_index(now - EPS)
-            n = self.data_slots(frame.ref.size)
-            until = self.boundary(j + (3 if frame.kind == RTS else 2) + n)
-            if until > self.silent_until:
-                self.silent_until = until
+            self._overheard(frame, now)
             return
         if not mine and frame.kind != DATA:
             return
         if frame.kind == RTS:
-            modem.consume(frame)
-            if now < self.silent_until - EPS or self.state in (WAIT_CTS, SEND_DATA, WAIT_ACK) or self.answering:
-                return  # busy or silenced: no CTS
-            cts = modem.control_frame(CTS, self.cts_bytes, frame.src_addr, frame.src_link, frame.ref)
-            # the slot is sized so that an RTS from up to max_range has fully arrived by the next
-            # boundary, possibly exactly on it: the CTS goes at that boundary
-            at = self.next_boundary(now)
-            self._answer(at, cts)
-            # having granted the exchange, keep quiet until its ACK slot is over
-            j = self.slot_index(at)
-            self.silent_until = max(self.silent_until, self.boundary(j + 2 + self.data_slots(frame.ref.size)))
+            self._on_rts(frame, now)
         elif frame.kind == CTS:
             modem.consume(frame)
             if self.state == WAIT_CTS and frame.ref is self.current:
@@ -234,6 +219,30 @@ class SFama(HoldingMac):
                 modem.observer.mac(now, modem, frame, "dup")
                 return
             modem.deliver(frame)
+
+    def _overheard(self, frame: "Frame", now: float) -> None:
+        """An RTS or CTS for another modem: stay silent until the end of the ACK slot of the announced
+        exchange."""
+        j = self.slot_index(now - EPS)
+        n = self.data_slots(frame.ref.size)
+        until = self.boundary(j + (3 if frame.kind == RTS else 2) + n)
+        if until > self.silent_until:
+            self.silent_until = until
+
+    def _on_rts(self, frame: "Frame", now: float) -> None:
+        """An RTS for this modem: a CTS at the next slot boundary, unless busy or silenced."""
+        modem = self.modem
+        modem.consume(frame)
+        if now < self.silent_until - EPS or self.state in (WAIT_CTS, SEND_DATA, WAIT_ACK) or self.answering:
+            return  # busy or silenced: no CTS
+        cts = modem.control_frame(CTS, self.cts_bytes, frame.src_addr, frame.src_link, frame.ref)
+        # the slot is sized so that an RTS from up to max_range has fully arrived by the next
+        # boundary, possibly exactly on it: the CTS goes at that boundary
+        at = self.next_boundary(now)
+        self._answer(at, cts)
+        # having granted the exchange, keep quiet until its ACK slot is over
+        j = self.slot_index(at)
+        self.silent_until = max(self.silent_until, self.boundary(j + 2 + self.data_slots(frame.ref.size)))
 
     def _answer(self, at: float, frame: "Frame") -> None:
         """Send a CTS or ACK at the slot start ``at`` (a receiver's promise; it defers its own RTS)."""

@@ -30,26 +30,12 @@ ALLOWED_COMPLEXITY = {
     # on the frame's pass (tests/test_frame_path.py counts its calls): a split adds calls to every frame
     "hilgate/core/realtime.py:RealtimeScheduler._handle_inputs",  # 28
     "models/modem.py:SimModem.heard",  # 27
-    # issue 39 item 3 (branch rooms): not split by its deadline
-    "drivers/m64_codec.py:_Splitter._next",  # 27
-    "drivers/s100_codec.py:FrameHunter._next",  # 27
-    "hilgate/commands/water_figures.py:water_figures",  # 23
-    "hilgate/core/fjage.py:FjageCodec._event",  # 21
-    "hilgate/core/unet_node.py:UnetNode._parameters",  # 21
-    "hilgate/gli/socket_client.py:Link.open",  # 22
-    "hilgate/gli/zenoh_auth.py:load_identity",  # 21
-    "hilgate/report/observations.py:_Real.event",  # 22
-    "hilgate/scene/backends.py:emulated_device",  # 21
-    "models/radio.py:Radio._arrive_sinr",  # 21
-    "models/sfama.py:SFama.on_frame",  # 24
 }
 ALLOWED_MODULE_LINES: set[str] = set()
 ALLOWED_CLASS_LINES = {
     # issue 39 item 2 (branch rooms): not split by its deadline (SimModem is on the frame's pass: a split must
     # keep its calls)
     "models/modem.py:SimModem",  # 345
-    "drivers/micromodem_emulator.py:MicromodemEmulator",  # 382
-    "hilgate/core/unet_node.py:UnetNode",  # 304
 }
 ALLOWED_TOP_MODULES: set[str] = set()
 

@@ -55,19 +55,7 @@ def water_figures(trace_path: str, scene_path: str, out: str, formats: tuple[str
         mesh = ax.pcolormesh(ranges, depths, tl, shading="auto", cmap="viridis_r",
                              vmin=float(np.percentile(tl, 2)), vmax=float(np.percentile(tl, 98)))
         fig.colorbar(mesh, ax=ax, label="transmission loss (dB)")
-        here = dict(track)
-        times = [t for t, _ in track]
-        for vehicle, samples in sorted(trace.poses.items()):
-            points = [(t, p) for t, p in samples if p is not None]
-            if vehicle == source.vehicle or not points:
-                continue
-            rs, zs_ = [], []
-            for t, p in points:
-                a = here.get(t) or here[times[min(range(len(times)), key=lambda i: abs(times[i] - t))]]
-                rs.append(math.hypot(p[0] - a[0], p[1] - a[1]))
-                zs_.append(p[2] - water.surface_z_m)
-            ax.plot(rs, zs_, lw=1.5, label=vehicle)
-            ax.plot(rs[-1:], zs_[-1:], "o", color=ax.lines[-1].get_color())
+        _draw_tracks(ax, trace.poses, source.vehicle, track, water.surface_z_m)
         ax.plot([0], [zs], "*", color="white", markersize=12, markeredgecolor="black",
                 label=f"{source.vehicle} (source)")
         ax.set_ylim(water.deepest_m, 0.0)
@@ -83,3 +71,22 @@ def water_figures(trace_path: str, scene_path: str, out: str, formats: tuple[str
             written.append(path)
         plt.close(fig)
     return written
+
+
+def _draw_tracks(ax, poses: dict, source_vehicle: str, track: list, surface_z_m: float) -> None:
+    """Every other vehicle's track on ``ax``, in the source's plane: its horizontal distance from the source's
+    vehicle at each of its pose samples (the source's nearest sample in time when none is at the same time),
+    and its depth; a dot at its last sample."""
+    here = dict(track)
+    times = [t for t, _ in track]
+    for vehicle, samples in sorted(poses.items()):
+        points = [(t, p) for t, p in samples if p is not None]
+        if vehicle == source_vehicle or not points:
+            continue
+        rs, zs_ = [], []
+        for t, p in points:
+            a = here.get(t) or here[times[min(range(len(times)), key=lambda i: abs(times[i] - t))]]
+            rs.append(math.hypot(p[0] - a[0], p[1] - a[1]))
+            zs_.append(p[2] - surface_z_m)
+        ax.plot(rs, zs_, lw=1.5, label=vehicle)
+        ax.plot(rs[-1:], zs_[-1:], "o", color=ax.lines[-1].get_color())

@@ -158,25 +158,31 @@ class FjageCodec:
             if ident is None or not isinstance(answered, str):
                 return Bad("an answer without a string id and inResponseTo", False)
             return Response(ident, answered, obj)
-        action = obj.get("action")
-        if not isinstance(action, str):
-            return Bad("no action", False, ident)
-        action_name = action[:60]
-        if action == "send":
-            msg = obj.get("message")
-            if not (isinstance(msg, dict) and isinstance(msg.get("clazz"), str) and isinstance(msg.get("data"), dict)):
-                return Bad("send without a message {clazz, data}", False, ident, action_name)
-            return Deliver(msg, obj.get("relay") is True)
-        if action == "wantsMessagesFor":
-            ids = obj.get("agentIDs")
-            if not isinstance(ids, list) or not all(isinstance(a, str) for a in ids):
-                return Bad("wantsMessagesFor without a list of agent ids", False, ident, action_name)
-            return Wants(tuple(ids))
-        if action in ACTIONS:
-            if ident is None:
-                return Bad(f"{action} without a string id", False, None, action_name)
-            return Request(ident, action, obj)
-        return Bad(f"unknown action {action_name!r}", False, ident, action_name)
+        return _action(obj, ident)
+
+
+def _action(obj: dict, ident: str | None) -> Event:
+    """A line that asks something of the gateway (``action``: send, wantsMessagesFor, or one of ACTIONS)
+    as its event, or Bad naming what it lacks."""
+    action = obj.get("action")
+    if not isinstance(action, str):
+        return Bad("no action", False, ident)
+    action_name = action[:60]
+    if action == "send":
+        msg = obj.get("message")
+        if not (isinstance(msg, dict) and isinstance(msg.get("clazz"), str) and isinstance(msg.get("data"), dict)):
+            return Bad("send without a message {clazz, data}", False, ident, action_name)
+        return Deliver(msg, obj.get("relay") is True)
+    if action == "wantsMessagesFor":
+        ids = obj.get("agentIDs")
+        if not isinstance(ids, list) or not all(isinstance(a, str) for a in ids):
+            return Bad("wantsMessagesFor without a list of agent ids", False, ident, action_name)
+        return Wants(tuple(ids))
+    if action in ACTIONS:
+        if ident is None:
+            return Bad(f"{action} without a string id", False, None, action_name)
+        return Request(ident, action, obj)
+    return Bad(f"unknown action {action_name!r}", False, ident, action_name)
 
 
 # -- writing --------------------------------------------------------------------------------------------

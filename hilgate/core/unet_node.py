@@ -139,6 +139,45 @@ def from_unet(address: int) -> int:
     return HILGATE_BROADCAST if address == UNET_BROADCAST else address
 
 
+# -- parameters ------------------------------------------------------------------------------------
+
+
+def agent_params(host: NodeHost, agent: str, index: int) -> tuple[dict[str, Any], set[str]]:
+    """(qualified name → value, the writable ones) of ``agent`` (``index`` ≥ 0: per frame type), read from
+    ``host``: the table of what each agent shows, apart from :class:`UnetNode`, which answers the requests."""
+    if agent == "node":
+        group = PARAM_GROUPS["node"]
+        values = {"address": to_unet(host.address), "nodeName": host.node_name, "addressSize": 8,
+                  "time": round(host.now() * 1e6), "canForward": False, "mobility": False}
+        return {f"{group}.{k}": v for k, v in values.items()}, {f"{group}.address"}
+    if agent in DATAGRAM_AGENTS:
+        phy = host.phy_params()
+        mtu = {f"{PARAM_GROUPS['datagram']}.MTU": phy["MTU"], f"{PARAM_GROUPS['datagram']}.RTU": phy["MTU"]}
+        if agent == "uwlink":
+            return mtu, set()
+        if index in (1, DATA_FRAME):
+            group = PARAM_GROUPS["phy[]"]
+            values = {"MTU": phy["MTU"], "frameLength": phy["MTU"], "dataRate": phy["dataRate"],
+                      "frameDuration": phy["frameDuration"]}
+            return {f"{group}.{k}": v for k, v in values.items()}, set()
+        group = PARAM_GROUPS["phy"]
+        values = {"time": round(host.now() * 1e6), "busy": phy["busy"], "rxEnable": True}
+        return {**mtu, **{f"{group}.{k}": v for k, v in values.items()}}, set()
+    return {}, set()
+
+
+def _asked(data: dict) -> list[tuple[str, Any, bool]]:
+    """The parameters a ``ParameterReq`` names, one (``param``) or many (``requests``): (name, value, is a
+    set), in its order."""
+    asked: list[tuple[str, Any, bool]] = []
+    if isinstance(data.get("param"), str):
+        asked.append((data["param"], data.get("value"), data.get("value") is not None))
+    for item in data.get("requests") or []:
+        if isinstance(item, dict) and isinstance(item.get("param"), str):
+            asked.append((item["param"], item.get("value"), item.get("value") is not None))
+    return asked
+
+
 class UnetNode:
     """The agents of one node, shared by every peer connected to it (the module's docstring)."""
 
@@ -292,45 +331,18 @@ class UnetNode:
 
     # -- parameters ----------------------------------------------------------------------------------
 
-    def _params(self, agent: str, index: int) -> tuple[dict[str, Any], set[str]]:
-        """(qualified name → value, the writable ones) of ``agent`` (``index`` ≥ 0: per frame type)."""
-        if agent == "node":
-            group = PARAM_GROUPS["node"]
-            values = {"address": to_unet(self.host.address), "nodeName": self.host.node_name, "addressSize": 8,
-                      "time": round(self.host.now() * 1e6), "canForward": False, "mobility": False}
-            return {f"{group}.{k}": v for k, v in values.items()}, {f"{group}.address"}
-        if agent in DATAGRAM_AGENTS:
-            phy = self.host.phy_params()
-            mtu = {f"{PARAM_GROUPS['datagram']}.MTU": phy["MTU"], f"{PARAM_GROUPS['datagram']}.RTU": phy["MTU"]}
-            if agent == "uwlink":
-                return mtu, set()
-            if index in (1, DATA_FRAME):
-                group = PARAM_GROUPS["phy[]"]
-                values = {"MTU": phy["MTU"], "frameLength": phy["MTU"], "dataRate": phy["dataRate"],
-                          "frameDuration": phy["frameDuration"]}
-                return {f"{group}.{k}": v for k, v in values.items()}, set()
-            group = PARAM_GROUPS["phy"]
-            values = {"time": round(self.host.now() * 1e6), "busy": phy["busy"], "rxEnable": True}
-            return {**mtu, **{f"{group}.{k}": v for k, v in values.items()}}, set()
-        return {}, set()
-
     def _parameters(self, client: Any, agent: str, data: dict) -> None:
         index = data.get("index", -1)
         index = index if type(index) is int else -1
-        asked: list[tuple[str, Any, bool]] = []  # (name, value, is a set)
-        if isinstance(data.get("param"), str):
-            asked.append((data["param"], data.get("value"), data.get("value") is not None))
-        for item in data.get("requests") or []:
-            if isinstance(item, dict) and isinstance(item.get("param"), str):
-                asked.append((item["param"], item.get("value"), item.get("value") is not None))
-        params, writable = self._params(agent, index)
+        asked = _asked(data)
+        params, writable = agent_params(self.host, agent, index)
         if asked:
             by_short = {fjage.short_name(name): name for name in params}
             for name, value, is_set in asked:
                 full = name if name in params else by_short.get(fjage.short_name(name))
                 if full is not None and is_set and full in writable:
                     self._set(agent, full, value)
-            params, writable = self._params(agent, index)
+            params, writable = agent_params(self.host, agent, index)
             names = [name if name in params else by_short.get(fjage.short_name(name)) for name, _, _ in asked]
             chosen = {full: params[full] for full in names if full is not None}
         else:

@@ -113,21 +113,7 @@ class Link:
         secret = None
         if tcp is not None:
             secret = _token(token, token_file, runtime_dir)  # before connecting: no token, no traffic
-            try:
-                sock = socket.create_connection(tcp, timeout=timeout)
-            except OSError as exc:
-                raise GliError(f"cannot reach hilgate's TCP GLI at {tcp[0]}:{tcp[1]}: {exc.strerror or exc}") from None
-            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        else:
-            runtime = client_runtime_dir(runtime_dir)
-            path = os.path.join(runtime, "gli", f"{link_id}.sock")
-            sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-            sock.settimeout(timeout)
-            try:
-                sock.connect(path)
-            except OSError as exc:
-                sock.close()
-                raise GliError(unreachable(link_id, runtime, path, exc)) from None
+        sock = _connect(link_id, tcp, runtime_dir, timeout)
         link = cls(sock, link_id)
         try:
             deadline = time.monotonic() + timeout
@@ -248,6 +234,28 @@ class Link:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _connect(link_id: str, tcp: tuple[str, int] | None, runtime_dir: str | None, timeout: float) -> socket.socket:
+    """A socket connected to the daemon: its TCP GLI at ``tcp``, else the link's Unix socket under its runtime
+    folder; a GliError that says why not."""
+    if tcp is not None:
+        try:
+            sock = socket.create_connection(tcp, timeout=timeout)
+        except OSError as exc:
+            raise GliError(f"cannot reach hilgate's TCP GLI at {tcp[0]}:{tcp[1]}: {exc.strerror or exc}") from None
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        return sock
+    runtime = client_runtime_dir(runtime_dir)
+    path = os.path.join(runtime, "gli", f"{link_id}.sock")
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    sock.settimeout(timeout)
+    try:
+        sock.connect(path)
+    except OSError as exc:
+        sock.close()
+        raise GliError(unreachable(link_id, runtime, path, exc)) from None
+    return sock
 
 
 def _token(token: str | bytes | None, token_file: str | None, runtime_dir: str | None) -> bytes:

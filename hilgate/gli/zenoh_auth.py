@@ -88,13 +88,7 @@ def load_identity(path: str, name: str | None = None, role: str | None = None) -
     if directory is None:
         raise CredentialError(f"no credentials in {path} (no {MANIFEST}{f' for {name}' if name else ''}; "
                               f"make them with: hilgate network init DIR --hosts ... --apps N)")
-    try:
-        with open(os.path.join(directory, MANIFEST), encoding="utf-8") as handle:
-            manifest = json.loads(handle.read(1 << 20))
-        identity = Identity(directory, str(manifest["name"]), str(manifest["role"]),
-                            tuple(str(h) for h in manifest["hosts"]), tuple(str(a) for a in manifest["apps"]))
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise CredentialError(f"{os.path.join(directory, MANIFEST)} is not a hilgate network manifest: {exc}") from None
+    identity = _read_manifest(directory)
     for value in (identity.name, *identity.hosts, *identity.apps):
         if not NAME.fullmatch(value):
             raise CredentialError(f"{directory}: {value!r} is not a name (letters, digits, '_', '.', '-')")
@@ -105,6 +99,24 @@ def load_identity(path: str, name: str | None = None, role: str | None = None) -
     if role is not None and identity.role != role:
         raise CredentialError(f"the credentials in {directory} are an {identity.role}'s ({identity.name!r}), "
                               f"not a {role}'s")
+    _check_files(identity)
+    return identity
+
+
+def _read_manifest(directory: str) -> Identity:
+    """The identity that ``directory``'s manifest names (unchecked), or a CredentialError if it is none."""
+    try:
+        with open(os.path.join(directory, MANIFEST), encoding="utf-8") as handle:
+            manifest = json.loads(handle.read(1 << 20))
+        return Identity(directory, str(manifest["name"]), str(manifest["role"]),
+                        tuple(str(h) for h in manifest["hosts"]), tuple(str(a) for a in manifest["apps"]))
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise CredentialError(f"{os.path.join(directory, MANIFEST)} is not a hilgate network manifest: {exc}") from None
+
+
+def _check_files(identity: Identity) -> None:
+    """A CredentialError unless the identity's CA, certificate and key are there, and its key is readable by
+    this process but not by others."""
     for needed in (identity.ca, identity.cert, identity.key):
         if not os.path.isfile(needed):
             raise CredentialError(f"{needed} is missing")
@@ -116,7 +128,6 @@ def load_identity(path: str, name: str | None = None, role: str | None = None) -
             pass
     except OSError as exc:
         raise CredentialError(f"cannot read {identity.key}: {exc.strerror}") from None
-    return identity
 
 
 def _allow(rule_id: str, messages: list[str], keys: list[str], flow: str = "ingress") -> dict[str, Any]:

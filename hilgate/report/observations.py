@@ -316,35 +316,46 @@ class _Real:
         if info.backend == "sim":
             return
         if ev == "tx":
-            t = number(event, "t", where)
-            size = count(event, "size", where, 0)
-            address = _address(event.get("dst"), links, where, "dst")
-            if address is None or address == BROADCAST:
-                targets = [name for name in self.listeners.get(info.tx_channel, ()) if name != link]
-            else:
-                target = self.addressed.get((info.tx_channel, address))
-                targets = [target] if target is not None and target != link else []
-            for dst in targets:
-                if wanted is None or dst in wanted:
-                    frame = _Frame(t, link, dst, size, info.vehicle, links[dst].vehicle)
-                    self.frames.append(frame)
-                    self.by_sender[(dst, size, link)].append(frame)
-                    self.by_size[(dst, size)].append(frame)
+            self._sent(link, info, event, where, links, wanted)
         elif ev == "rx" and (wanted is None or link in wanted):
-            t = number(event, "t", where)
-            size = count(event, "size", where, -1)
-            address = _address(event.get("src"), links, where, "src")
-            if "src" in event and event.get("src") is not None:
-                sender = self.senders.get((info.rx_channel, address)) if address is not None else None
-                if sender is None:
-                    return  # from no real link of the scene
-                candidates = self.by_sender.get((link, size, sender))
-            else:
-                candidates = self.by_size.get((link, size))
-            if candidates:
-                self._match(candidates, t, event)
+            self._received(link, info, event, where, links)
         elif ev == "drop" and event.get("cause") in ("queue_full", "down", "closed"):
             out.excluded[str(event["cause"])] += 1
+
+    def _sent(self, link: str, info: LinkInfo, event: dict, where: str, links: dict[str, LinkInfo],
+              wanted: set[str] | None) -> None:
+        """A real link's ``tx``: one open frame per real link it was for (its addressee, or every other
+        listener on its channel for a broadcast), waiting for its ``rx``."""
+        t = number(event, "t", where)
+        size = count(event, "size", where, 0)
+        address = _address(event.get("dst"), links, where, "dst")
+        if address is None or address == BROADCAST:
+            targets = [name for name in self.listeners.get(info.tx_channel, ()) if name != link]
+        else:
+            target = self.addressed.get((info.tx_channel, address))
+            targets = [target] if target is not None and target != link else []
+        for dst in targets:
+            if wanted is None or dst in wanted:
+                frame = _Frame(t, link, dst, size, info.vehicle, links[dst].vehicle)
+                self.frames.append(frame)
+                self.by_sender[(dst, size, link)].append(frame)
+                self.by_size[(dst, size)].append(frame)
+
+    def _received(self, link: str, info: LinkInfo, event: dict, where: str, links: dict[str, LinkInfo]) -> None:
+        """A real link's ``rx``: matched to an open frame of its sender (the one its source address names)
+        and size, or of its size alone when it names none."""
+        t = number(event, "t", where)
+        size = count(event, "size", where, -1)
+        address = _address(event.get("src"), links, where, "src")
+        if "src" in event and event.get("src") is not None:
+            sender = self.senders.get((info.rx_channel, address)) if address is not None else None
+            if sender is None:
+                return  # from no real link of the scene
+            candidates = self.by_sender.get((link, size, sender))
+        else:
+            candidates = self.by_size.get((link, size))
+        if candidates:
+            self._match(candidates, t, event)
 
     def _match(self, candidates: list[_Frame], t: float, rx: dict) -> None:
         while candidates and candidates[-1].delivered:  # matched through the other index

@@ -94,10 +94,7 @@ def emulated_device(node: Node, path: str) -> tuple[tuple[str, Any], ...]:
     keys = tuple(dict.fromkeys(key for options in own.values() for key, _, _ in options))
     f = Fields(node, path, ("protocol", "pty", "tcp", *keys))
     protocol = f.get("protocol", choice(*emulated_protocols()))
-    for key in keys:
-        if key in f and key not in (k for k, _, _ in own[protocol]):
-            users = [name for name, options in own.items() if key in (k for k, _, _ in options)]
-            raise f.child(key).error(f.sub(key), f"only for protocol {' or '.join(users)} (this is {protocol})")
+    _refuse_others_options(f, own, keys, protocol)
     extra = tuple((key, f.get(key, checker(check)) if key in f else default) for key, check, default in own[protocol])
     if ("pty" in f) == ("tcp" in f):
         raise f.error("give exactly one of pty (a path for the device link) or tcp (a loopback port)")
@@ -110,3 +107,12 @@ def emulated_device(node: Node, path: str) -> tuple[tuple[str, Any], ...]:
                                                      f"the {DRIVERS[protocol].title} is serial")
         return (("protocol", protocol), ("tcp", f.get("tcp", integer(1, 65535))), *extra)
     return (("protocol", protocol), ("pty", f.get("pty", pty_path)), *extra)
+
+
+def _refuse_others_options(f: Fields, own: dict[str, list], keys: tuple[str, ...], protocol: str) -> None:
+    """An error at the first of ``keys`` given that is another emulated device's option, not ``protocol``'s
+    (``own``: each protocol's options), naming the protocols it is for."""
+    for key in keys:
+        if key in f and key not in (k for k, _, _ in own[protocol]):
+            users = [name for name, options in own.items() if key in (k for k, _, _ in options)]
+            raise f.child(key).error(f.sub(key), f"only for protocol {' or '.join(users)} (this is {protocol})")
