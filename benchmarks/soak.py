@@ -23,7 +23,7 @@ any frame is unexplained, delivered twice or out of order.
     python benchmarks/soak.py [--minutes 60] [--reload-every 60] [--restart-every 600] [--sample-every 10]
                               [--loopback] [--keep DIR]
 
-``make soak`` runs the hour; tests/test_benchmarks_run.py a minute and a half (reloads every 20 s, one restart).
+``make soak`` runs the hour; tests/test_benchmarks_run.py a minute (reloads every 10 s, one restart).
 """
 
 from __future__ import annotations

@@ -60,11 +60,11 @@ WITH_DAEMONS = {
                           [r"ns-3: not run \(", r"run 1, +same CPU, +bare: lateness at the application p50 ",
                            r"run 1, +same CPU, hilgate: lateness at the application p50 .* daemon CPU ",
                            r" +same CPU: bare .* hilgate .* ns-3 not run; ratio hilgate / bare "]),
-    # a minute and a half of `make soak`'s hour: reloads every 20 s, one restart of B; it exits 1 when a
+    # a minute of `make soak`'s hour: reloads every 10 s, one restart of B; it exits 1 when a
     # frame is unexplained, delivered twice or out of order (so this asserts the account balances)
-    "soak": (["benchmarks/soak.py", "--minutes", "1.5", "--reload-every", "20", "--restart-every", "45",
-              "--sample-every", "5"],
-             [r"soak: .* at 100 frames/s, a reload every 20 s, B restarted every 45 s; ",
+    "soak": (["benchmarks/soak.py", "--minutes", "1", "--reload-every", "10", "--restart-every", "25",
+              "--sample-every", "3"],
+             [r"soak: .* at 100 frames/s, a reload every 10 s, B restarted every 25 s; ",
               r"reloads: \d+ \(\d+ refused or unanswered\); restarts of B: 1; ",
               r"memory of daemon A \(one run, \d+ samples\): RSS .* slope ",
               r"memory of daemon B \(run 2, ", r"restart of B: down .* s after",
