@@ -44,7 +44,10 @@ class PtyCable(PluggablePty):
             self.write(garbage)
 
     def answer(self, data: bytes) -> bytes:
-        os.write(self.modem, data)
+        try:
+            os.write(self.modem, data)
+        except OSError:  # the emulated modem's end is gone (its daemon stopping): the bytes fall off the line
+            pass
         return b""
 
     def _relay(self, stop: threading.Event) -> None:
