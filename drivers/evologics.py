@@ -56,9 +56,7 @@ class EvologicsBackend(ModemBackend):
     def admit(self, frame: AppFrame) -> None:
         """A frame larger than the mode takes (``im:``, the link's ``limits:``) is refused now, with the
         text a simulated link with the same limits gives (:meth:`ModemLimits.refusal`)."""
-        problem = self.limits.refusal(len(frame.real), "im" if self.options.im else "burst")
-        if problem is not None:
-            raise PacketError("size", problem)
+        self.limits.admit(len(frame.real), "im" if self.options.im else "burst")
 
     def close(self) -> None:
         for timer in (self.inflight_timer, self.delivery_timer, self.retry_timer):

@@ -63,10 +63,7 @@ class M64Backend(ModemBackend):
 
     def admit(self, frame: AppFrame) -> None:
         """A frame larger than a datagram of the link's limits is refused when the application sends it."""
-        limits = self.options.limits or M64_LIMITS
-        problem = limits.refusal(len(frame.real), "datagram")
-        if problem is not None:
-            raise PacketError("size", problem)
+        (self.options.limits or M64_LIMITS).admit(len(frame.real), "datagram")
 
     def send(self, frame: AppFrame) -> bool:
         self.admit(frame)

@@ -34,6 +34,7 @@ from __future__ import annotations
 from dataclasses import MISSING, Field, dataclass, field, fields
 from typing import Any, Callable, Iterator
 
+from hilgate.core.packets import PacketError
 from hilgate.core.tables import merge_entry_points, resolve
 
 __all__ = [
@@ -148,6 +149,12 @@ class ModemLimits:
             name, n = larger[0]
             hint += f" or {PLURALS.get(name, name)} (at most {n})"
         return f"{size} bytes on air do not fit {MODES.get(mode, mode)} of the {title} (at most {most}); {hint}"
+
+    def admit(self, size: int, mode: str | None = None) -> None:
+        """Refuse (``PacketError`` "size", with :meth:`refusal`'s words) a message that does not fit ``mode``."""
+        problem = self.refusal(size, mode)
+        if problem is not None:
+            raise PacketError("size", problem)
 
     def describe(self) -> str:
         """One line for ``hilgate check``."""

@@ -72,10 +72,7 @@ class UnetBackend(QueuedBackend):
         return not self.queue and self.inflight is None
 
     def admit(self, frame: AppFrame) -> None:
-        limits = self.options.limits or UNET_LIMITS
-        problem = limits.refusal(len(frame.real), "datagram")
-        if problem is not None:
-            raise PacketError("size", problem)
+        (self.options.limits or UNET_LIMITS).admit(len(frame.real), "datagram")
 
     def send(self, frame: AppFrame) -> bool:
         self.admit(frame)
