@@ -41,6 +41,8 @@ import time
 import uuid
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(1, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tests"))
+from ports import free_port  # noqa: E402  (ports outside the ephemeral range: tests/ports.py)
 from daemon_harness import Daemon  # noqa: E402
 
 from hilgate.client import Link  # noqa: E402
@@ -50,12 +52,6 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DDS_FLOODER = os.path.join(REPO, "tests", "peers", "dds_flooder.py")
 BITRATE = 20000
 GARBAGE = 60_000
-
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 def rss_mb(pid: int) -> float:

@@ -35,7 +35,6 @@ import argparse
 import json
 import multiprocessing as mp
 import os
-import socket
 import statistics
 import sys
 import tempfile
@@ -44,6 +43,8 @@ import time
 import uuid
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(1, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tests"))
+from ports import free_port  # noqa: E402  (ports outside the ephemeral range: tests/ports.py)
 from gli_roundtrip import MESSAGE, _echo, frame, open_queue, percentiles, round_trip, send_paced  # noqa: E402
 from peers import spread  # noqa: E402
 from daemon_harness import Daemon  # noqa: E402
@@ -53,12 +54,6 @@ from hilgate.gli.queues import unlink_queues  # noqa: E402
 
 WARM_UP = 100
 SPAWN = mp.get_context("spawn")  # never fork a process that has a Zenoh runtime
-
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 def zenoh_config(listen: str | None = None, connect: str | None = None):

@@ -35,7 +35,6 @@ import math
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -44,6 +43,8 @@ import uuid
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
+sys.path.insert(1, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tests"))
+from ports import free_port  # noqa: E402  (ports outside the ephemeral range: tests/ports.py)
 import netns  # noqa: E402
 from daemon_harness import Daemon  # noqa: E402
 from soak_account import Run, account  # noqa: E402
@@ -55,12 +56,6 @@ SIZE = 20
 LEASE_S = 5.0  # (a loaded machine starves Zenoh's threads now and then: at 1 s, hosts were seen down)
 PAUSE_S = 2.0  # B's application stops sending this long before B stops
 SETTLE_S = 60.0  # at the end: the longest wait for the hosts to settle what is on its way
-
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 class Layout:

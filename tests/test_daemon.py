@@ -17,7 +17,7 @@ import time
 
 import pytest
 
-from daemon_kit import SCENE_HEAD, Daemon, peer_events, two_links, unique
+from daemon_kit import SCENE_HEAD, Daemon, free_port, peer_events, two_links, unique
 from hilgate.gli import wire
 from hilgate.client import GliError, Link
 
@@ -131,9 +131,7 @@ def test_a_frame_that_leaves_at_once_still_gets_its_ready(daemon_of):
 
 def test_socket_clients_over_unix_and_tcp(daemon_of, busy_host):
     a, b = unique("a"), unique("b")
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
+    port = free_port()
     daemon = daemon_of(scene(a, b), [a, b], "--tcp", str(port))
     with Link.open(a, runtime_dir=daemon.runtime) as la, \
             Link.open(b, tcp=("127.0.0.1", port), runtime_dir=daemon.runtime) as lb:  # its RUNTIME/tcp.token

@@ -23,7 +23,7 @@ from pathlib import Path
 import pytest
 
 from browser_kit import HANG_GUARD_S, browser  # noqa: F401  (the fixture)
-from daemon_kit import Daemon, hilgate, unique
+from daemon_kit import Daemon, free_port, hilgate, unique
 from hilgate.client import Link
 from hilgate.gli.token import proof
 from hilgate.report.causes import RECEIVED, words
@@ -149,11 +149,7 @@ links:
   {a}: {{vehicle: va, host: A, address: 1, bitrate_bps: 1000, gli: [socket]}}
   {b}: {{vehicle: vb, host: B, address: 2, bitrate_bps: 1000, gli: [socket]}}
 """
-    ports = []
-    for _ in range(2):
-        with socket.socket() as probe:
-            probe.bind(("127.0.0.1", 0))
-            ports.append(probe.getsockname()[1])
+    ports = [free_port(), free_port()]
     (tmp_path / "A").mkdir()
     (tmp_path / "B").mkdir()
     host_a = Daemon(tmp_path / "A", scene, [a], "--host", "A", "--zenoh-listen", f"tcp/127.0.0.1:{ports[0]}",
