@@ -57,7 +57,8 @@ sim: $(VENV)/.installed
 # so more workers than cores keep both cores busy.  A test file stays on one worker (--dist loadscope):
 # its module fixtures (an installed venv, a paper's runs) are made once, not once per worker.  Tests that
 # time real-time behaviour or hold much of the user's POSIX-queue budget outside the test kit (marked
-# serial: tests/conftest.py says which and why) run after it, alone.
+# serial: tests/conftest.py says which and why) run after it, alone.  Each part prints its slowest tests (a
+# clean clone's run on CI then says where the minutes went).
 TEST_JOBS ?= 4
 
 # Where this user may (root, or wherever `unshare --ipc` is allowed), each pytest runs in an IPC namespace of
@@ -67,8 +68,8 @@ TEST_JOBS ?= 4
 ISOLATE = $(shell unshare --ipc true 2>/dev/null && echo unshare --ipc)
 
 test: $(VENV)/.installed-test $(BELLHOP_VENV)/.installed
-	$(ISOLATE) $(BIN)/python -m pytest -q -n $(TEST_JOBS) --dist loadscope -m "not serial"
-	$(ISOLATE) $(BIN)/python -m pytest -q -m serial
+	$(ISOLATE) $(BIN)/python -m pytest -q -n $(TEST_JOBS) --dist loadscope -m "not serial" --durations=15
+	$(ISOLATE) $(BIN)/python -m pytest -q -m serial --durations=10
 
 # BELLHOP for the channel that knows the water (docs/channel-models.md, "BELLHOP"): pelagic, GPL-3.0-or-later,
 # in an environment of its own that hilgate (MIT) never imports; hilgate runs tools/bellhop_run.py with its

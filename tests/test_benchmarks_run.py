@@ -7,7 +7,8 @@ printed its summary line.
 The benchmarks that start daemons (and pin processes to CPUs) run too, each on the smallest case its
 arguments allow, alone (conftest.SERIAL): only that each exits 0 and prints every one of its figure
 lines, never what the figures say.  Their link ids carry their process id, their queues are unlinked
-when their daemons stop, and their ports are the kernel's free ones."""
+when their daemons stop, and their ports are free ones below the kernel's ephemeral range
+(tests/ports.py)."""
 
 import os
 import re

@@ -72,6 +72,7 @@ import sys  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
 import uuid  # noqa: E402
+import warnings  # noqa: E402
 
 from daemon_kit import HANG_GUARD_S, free_port  # noqa: E402  (every wait: a hang guard)
 
@@ -264,6 +265,11 @@ class Process:
         except subprocess.TimeoutExpired:
             os.killpg(self.popen.pid, signal.SIGKILL)
             self.code = self.popen.wait()
+            # (a serial part of make test took 202 s where the walk takes 23: two of its commands, it seems,
+            # outlived this wait; said, so that the next run names them)
+            warnings.warn(f"`{self.command}` had not ended {HANG_GUARD_S:.0f} s after "
+                          f"{signal.Signals(sig).name if sig else 'its start'}: killed; its last lines:\n"
+                          + "".join(self.lines[-10:]))
         self.reader.join(HANG_GUARD_S)
         return self.output
 
