@@ -75,6 +75,30 @@ class InputBuffer:
             kept.append(fits)
         return kept
 
+    def fit(self, earliest: float, latest: list[float], byte_time: float) -> tuple[list[bool], float]:
+        """Bytes that came one after another, no closer than ``byte_time``, the first no earlier than
+        ``earliest + byte_time`` and byte ``i`` no later than ``latest[i]``, when exactly is unknown: each is
+        taken to come at the earliest moment it fits.  That is the arrival most favourable to it and to every
+        byte after it (an earlier byte leaves the buffer emptier later, and its followers more room), so a
+        byte is lost only where no arrival within the bounds keeps it.  Whether each fits, and when the last
+        one is taken to have come (lost bytes took the line's time too, at their earliest)."""
+        kept = []
+        t = earliest
+        for last in latest:
+            t += byte_time
+            if t > self.t:
+                self.level = max(0.0, self.level - (t - self.t) * self.drain_Bps)
+                self.t = t
+            if self.level + 1 > self.capacity + EPS and self.drain_Bps > 0:
+                room = self.t + (self.level + 1 - self.capacity) / self.drain_Bps  # when one byte's room is free
+                if room <= last + EPS:
+                    self.level, self.t, t = self.capacity - 1.0, room, room
+            fits = self.level + 1 <= self.capacity + EPS
+            if fits:
+                self.level += 1
+            kept.append(fits)
+        return kept, t
+
 
 
 def wire_class(packet: PacketClass) -> PacketClass:
