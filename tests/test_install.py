@@ -275,7 +275,7 @@ def test_make_targets_run_what_the_readme_says():
     assert last_line("fuzz") == 'HILGATE_FUZZ=1 .venv/bin/python -m pytest -q -k "fuzz or redteam"'
     allowed = shutil.which("unshare") and subprocess.run(["unshare", "--ipc", "true"], capture_output=True).returncode == 0
     isolate = "unshare --ipc " if allowed else ""  # an IPC namespace of its own where allowed (the Makefile's ISOLATE)
-    assert last_line("test") == f"{isolate}.venv/bin/python -m pytest -q -m serial"  # after the parallel part
+    assert last_line("test") == f"{isolate}.venv/bin/python -m pytest -q -m serial --durations=10"  # after the parallel part
     assert last_line("run") == ".venv/bin/hilgate run scenes/demo.yaml"
     assert last_line("run", "ARGS=--tcp 4280 --runtime-dir /tmp/x") == ".venv/bin/hilgate run scenes/demo.yaml --tcp 4280 --runtime-dir /tmp/x"
     assert last_line("sim", "SCENE=lab.yaml", "ARGS=--until 600 --seed 3") == ".venv/bin/hilgate sim lab.yaml --until 600 --seed 3"
