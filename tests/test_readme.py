@@ -271,6 +271,8 @@ class Process:
                           f"{signal.Signals(sig).name if sig else 'its start'}: killed; its last lines:\n"
                           + "".join(self.lines[-10:]))
         self.reader.join(HANG_GUARD_S)
+        if not self.reader.is_alive():
+            self.popen.stdout.close()
         return self.output
 
 
