@@ -33,7 +33,7 @@ max and min lateness in ms, deliveries, the daemon's CPU per wall second; then, 
 min/median/max and the ratios hilgate/bare and hilgate/ns-3 of the p99 (DESIGN.md: p99 <= 0.25 ms and
 max <= 1 ms on a quiet host, within 1.2 x the bare loop's p99 on a loaded one).
 
-    python benchmarks/realtime_lateness.py [--seconds 20] [--nodes 50] [--rate 0.5] [--repeats 3]
+    python benchmarks/realtime_lateness.py [--seconds 20] [--nodes 50] [--rate 0.5] [--repeats 3] [--warm-up 2]
                                            [--placement same|across|both] [--ns3-python PATH]
 """
 
@@ -64,6 +64,7 @@ from placement import Placement, choose, pin, pinned, pinned_command  # noqa: E4
 NS3_SCRIPT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "ns3_realtime.py")
 
 BITRATE, TX_DELAY, ON_AIR, SPEED, RADIUS = 9600, 0.001, 20, 1500.0, 200.0
+WARM_UP_S = 2.0  # from the applications' start to their first frame: every application has opened its links
 MIN_GAP = 0.05  # s between one link's frames: longer than its 17.7 ms on air, so none waits in the FIFO
 PAYLOAD = struct.Struct("<Hd")  # sender index, send time (time.perf_counter: CLOCK_MONOTONIC, one clock per host)
 TARGET_P99_MS, TARGET_MAX_MS, TARGET_LOADED = 0.25, 1.0, 1.2
@@ -167,16 +168,16 @@ def send_and_read(runtime_dir: str, links: list[tuple[int, str]], delay: list[li
 
 
 def through_hilgate(nodes: int, rate: float, seconds: float, apps: int, seed: int, daemon_args: tuple[str, ...],
-                    placement: Placement, priority: int = 0):
-    """The applications on the placement's step 0 (at the instrument's ``priority``), the daemon on step 1.
-    Returns the lateness, the frame-receiver pairs sent, the daemon's CPU per wall second, and what the
+                    placement: Placement, priority: int = 0, warm_up: float = WARM_UP_S):
+    """The applications on the placement's step 0 (at the instrument's ``priority``), the daemon on step 1;
+    they send from ``warm_up`` seconds after they start (every link opened by then).  Returns the lateness, the frame-receiver pairs sent, the daemon's CPU per wall second, and what the
     daemon counted (delivered, drops) and said it runs at (``scheduling``)."""
     prefix = f"rt{os.getpid()}x{seed}{placement.name[0]}_"
     names = [f"{prefix}{i}" for i in range(nodes)]
     daemon = Daemon(scene_text(nodes, prefix), tuple(names), daemon_args, cpu=placement.cpu(1))
     try:
         result = mp.Queue()
-        start_at = time.perf_counter() + 2.0  # every application has opened its links by then
+        start_at = time.perf_counter() + warm_up
         workers = [mp.Process(target=_application, args=(
             daemon.runtime, [(i, names[i]) for i in range(k, nodes, apps)], nodes, rate, seconds,
             seed, start_at, result, placement.cpu(0), priority)) for k in range(apps)]
@@ -296,6 +297,8 @@ def main() -> None:
     parser.add_argument("--rate", type=float, default=0.5, help="frames per second per node")
     parser.add_argument("--apps", type=int, default=2, help="application processes sharing the links")
     parser.add_argument("--repeats", type=int, default=3, help="runs of each side per placement, alternating")
+    parser.add_argument("--warm-up", type=float, default=WARM_UP_S,
+                        help="seconds from the applications' start to their first frame (every link opened)")
     parser.add_argument("--placement", choices=("same", "across", "both"), default="both")
     parser.add_argument("--realtime-priority", type=int, default=0,
                         help="real-time priority for the daemon, the bare loop and ns-3, as `hilgate run --realtime-priority` "
@@ -343,7 +346,7 @@ def main() -> None:
                     extra = f"{len(late):,} timers in {args.bare_seconds:g} s"
                 else:
                     late, expected, cpu, counted = through_hilgate(args.nodes, args.rate, args.seconds, args.apps, repeat,
-                                                                   daemon_args, placement)
+                                                                   daemon_args, placement, warm_up=args.warm_up)
                     extra = (f"{len(late):,} deliveries read of {expected:,} frame-receiver pairs sent in {args.seconds:g} s "
                              f"(the daemon delivered {counted['delivered']:,}, dropped {counted['drops']}; the rest were "
                              f"lost on the channel); daemon CPU {cpu:.2f} s per wall s")
