@@ -99,12 +99,12 @@ WITH_DAEMONS = {
                 *(rf"{case}, .*: honest \d+ of \d+ frames received during the flood .* delay p50 "
                   for case in ("zenoh door", "B's frames at A")),
                 r"  daemon RSS \d+ MB -> peak \d+ MB \(after \d+ MB\); STATUS answered \d+ of \d+ during the flood"]),
-    "web_cost": (["benchmarks/web_cost.py", "--seconds", "1", "--repeats", "1", "--warm-up", "0.5"],
+    "web_cost": (["benchmarks/web_cost.py", "--seconds", "0.5", "--repeats", "1", "--warm-up", "0.2"],
                  [r" +no web door +CPU ", r" +--web, no page +CPU ", r" +a page connected +CPU .* pictures ",
                   r" +3 pages connected +CPU .* pictures ", r" +--web, no page adds ", r" +a page connected adds ",
                   r" +3 pages connected adds "]),
     # (in Chromium: skipped by its own test where the browser is missing)
-    "web_redraws": (["benchmarks/web_redraws.py", "--seconds", "1", "--repeats", "1", "--warm-up", "0.5",
+    "web_redraws": (["benchmarks/web_redraws.py", "--seconds", "0.5", "--repeats", "1", "--warm-up", "0.2",
                      "--case", "demo", "--case", "exp1-acoustic-100x"],
                     [r" +demo +median +[\d.]+, min", r" +exp1-acoustic-100x +median ", r"Page redraws in headless Chromium"]),
 }
