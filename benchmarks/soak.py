@@ -25,7 +25,7 @@ any frame is unexplained, delivered twice or out of order.
 
 A restart comes only while ``--watch-after-restart`` seconds of the run are left after it: B's new run
 is watched that long at least (its memory, A's frames reaching it again).  ``make soak`` runs the hour;
-tests/test_benchmarks_run.py 24 s of it (reloads every 5 s, one restart, 10 s watched after it).
+tests/test_benchmarks_run.py 18 s of it (reloads every 4 s, one restart, 8 s watched after it).
 """
 
 from __future__ import annotations

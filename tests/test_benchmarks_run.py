@@ -55,24 +55,24 @@ WITH_DAEMONS = {
                     "--readers", "1", "--placement", "same"],
                    [r" +same CPU, +adaptive: \d+ frames delivered in the window, \d+ sent in it; lateness .* daemon CPU "]),
     # ns-3 is a peer this machine need not have: a Python without it is told, and the run goes on
-    "realtime_lateness": (["benchmarks/realtime_lateness.py", "--seconds", "1", "--bare-seconds", "1", "--nodes", "2",
+    "realtime_lateness": (["benchmarks/realtime_lateness.py", "--seconds", "0.5", "--bare-seconds", "0.5", "--nodes", "2",
                            "--rate", "10", "--apps", "1", "--repeats", "1", "--placement", "same", "--warm-up", "0.5",
                            "--ns3-python", sys.executable],
                           [r"ns-3: not run \(", r"run 1, +same CPU, +bare: lateness at the application p50 ",
                            r"run 1, +same CPU, hilgate: lateness at the application p50 .* daemon CPU ",
                            r" +same CPU: bare .* hilgate .* ns-3 not run; ratio hilgate / bare "]),
-    # 24 s of `make soak`'s hour: reloads every 5 s, one restart of B watched 10 s after; it exits 1 when a
+    # 18 s of `make soak`'s hour: reloads every 4 s, one restart of B watched 8 s after; it exits 1 when a
     # frame is unexplained, delivered twice or out of order (so this asserts the account balances)
-    "soak": (["benchmarks/soak.py", "--minutes", "0.4", "--reload-every", "5", "--restart-every", "8",
-              "--sample-every", "2", "--watch-after-restart", "10"],
-             [r"soak: .* at 100 frames/s, a reload every 5 s, B restarted every 8 s; ",
+    "soak": (["benchmarks/soak.py", "--minutes", "0.3", "--reload-every", "4", "--restart-every", "6",
+              "--sample-every", "2", "--watch-after-restart", "8"],
+             [r"soak: .* at 100 frames/s, a reload every 4 s, B restarted every 6 s; ",
               r"reloads: \d+ \(\d+ refused or unanswered\); restarts of B: 1; ",
               r"memory of daemon A \(one run, \d+ samples\): RSS .* slope ",
               r"memory of daemon B \(run 2, ", r"restart of B: down .* s after",
               r"account: sent \d+ = delivered \d+ \+ lost \d+ \(.*\) \+ unexplained 0; delivered twice 0, out of order 0; ",
               r"account balanced: "]),
     # four conditions (quiet/busy x normal/--realtime); as root the instrument and --realtime are real time
-    "realtime_load": (["benchmarks/realtime_load.py", "--seconds", "1", "--bare-seconds", "1", "--nodes", "2",
+    "realtime_load": (["benchmarks/realtime_load.py", "--seconds", "0.5", "--bare-seconds", "0.5", "--nodes", "2",
                        "--rate", "10", "--apps", "1", "--repeats", "1", "--placement", "same", "--hogs", "1",
                        "--wakers", "1", "--writers", "1", "--writer-mib", "4", "--settle", "0.5", "--warm-up", "0.5",
                        "--ns3-python", sys.executable],
