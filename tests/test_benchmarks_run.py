@@ -57,7 +57,7 @@ WITH_DAEMONS = {
     # ns-3 is a peer this machine need not have: a Python without it is told, and the run goes on
     "realtime_lateness": (["benchmarks/realtime_lateness.py", "--seconds", "0.5", "--bare-seconds", "0.5", "--nodes", "2",
                            "--rate", "10", "--apps", "1", "--repeats", "1", "--placement", "same", "--warm-up", "0.5",
-                           "--ns3-python", sys.executable],
+                           "--read-after", "0.3", "--ns3-python", sys.executable],
                           [r"ns-3: not run \(", r"run 1, +same CPU, +bare: lateness at the application p50 ",
                            r"run 1, +same CPU, hilgate: lateness at the application p50 .* daemon CPU ",
                            r" +same CPU: bare .* hilgate .* ns-3 not run; ratio hilgate / bare "]),
@@ -75,7 +75,7 @@ WITH_DAEMONS = {
     "realtime_load": (["benchmarks/realtime_load.py", "--seconds", "0.5", "--bare-seconds", "0.5", "--nodes", "2",
                        "--rate", "10", "--apps", "1", "--repeats", "1", "--placement", "same", "--hogs", "1",
                        "--wakers", "1", "--writers", "1", "--writer-mib", "4", "--settle", "0.5", "--warm-up", "0.5",
-                       "--ns3-python", sys.executable],
+                       "--read-after", "0.3", "--ns3-python", sys.executable],
                       [r"ns-3: not run \(", r"instrument \(applications, readers\): ",
                        *(rf"run 1, +same CPU, +{load}, +{scheduling}, +{side}: lateness p50 .* p99 "
                          for load in ("quiet", "busy") for scheduling in ("normal", "realtime") for side in ("bare", "hilgate")),
@@ -86,7 +86,7 @@ WITH_DAEMONS = {
                        r"  same CPU, busy: hilgate's median p99 .* with --realtime "]),
     # 4 daemons (in network namespaces as root, else on loopback) against one
     "hosts_scale": (["benchmarks/hosts_scale.py", "--links", "2", "--rate", "2", "--seconds", "1", "--repeats", "1",
-                     "--warm-up", "0.5"],
+                     "--warm-up", "0.5", "--read-after", "0.3"],
                     [r"4 daemons: (one per network namespace|on loopback)",
                      *(rf"run 1, +{side}: lateness p50 .* delivered of .* daemon CPU s per wall s: .* heard late \d+, "
                        rf"missing between hosts \d+" for side in ("4 daemons", "1 daemon")),
