@@ -121,7 +121,7 @@ bench: $(VENV)/.installed-test
 # The soak (benchmarks/soak.py, docs/performance.md "Soak"): two daemons of one scene (network namespaces as
 # root, else loopback), 50 links at 100 frames/s for an hour, a reload every minute, daemon B restarted every
 # ten minutes: the daemons' memory slope and an account of every frame.  Not part of `make test` (which runs
-# a minute and a half of it); `nohup make soak > soak.out &` and wait an hour.  SOAK_ARGS="--keep DIR" keeps
+# 18 s of it); `nohup make soak > soak.out &` and wait an hour.  SOAK_ARGS="--keep DIR" keeps
 # the traces and the applications' logs (about 200 MB).
 SOAK_ARGS ?=
 soak: $(VENV)/.installed-test

@@ -23,7 +23,7 @@ at, their delay from send to receipt (p50, p95, max) and its lateness (the delay
 p50); the daemon's memory (RSS at the start, the peak during the flood, after); STATUS asked over the
 control socket all along (answered, and the slowest answer); the daemon's drops by cause.
 
-    python benchmarks/floods.py [--seconds 10] [--rate 10] [--cases zenoh ros2 socket tx]
+    python benchmarks/floods.py [--seconds 10] [--rate 10] [--flood-margin 1] [--cases zenoh ros2 socket tx]
 """
 
 from __future__ import annotations
@@ -122,6 +122,7 @@ class Receiver:
         self.link = Link.open(link_id, runtime_dir=runtime)
         self.arrived: dict[bytes, float] = {}
         self.flood = 0
+        self.flooded = False  # (a flood has been started at this link)
         self.stop = threading.Event()
         self.thread = threading.Thread(target=self._run, daemon=True)
         self.thread.start()
@@ -220,7 +221,10 @@ RUNS = iter(range(1, 1000))
 
 
 def settle(receiver: Receiver) -> None:
-    """Wait until no flood frame has come for a second (what an earlier flood left queued has crossed)."""
+    """Wait until no flood frame has come for a second (what an earlier flood left queued has crossed);
+    at once before the first flood."""
+    if not receiver.flooded:
+        return
     last, since = receiver.flood, time.monotonic()
     deadline = since + 120.0
     while time.monotonic() - since < 1.0 and time.monotonic() < deadline:
@@ -229,19 +233,29 @@ def settle(receiver: Receiver) -> None:
             last, since = receiver.flood, time.monotonic()
 
 
+def crossed(sent: dict, receiver: Receiver, longest: float) -> None:
+    """Wait for the honest frames still on their way: until every one has arrived, or ``longest`` seconds
+    (one that has not arrived by then is not counted)."""
+    deadline = time.monotonic() + longest
+    while time.monotonic() < deadline and not all(p in receiver.arrived for p in sent):
+        time.sleep(0.02)
+
+
 def run_case(label: str, daemon: Daemon, send, receiver: Receiver, start_flood, link_id: str, args) -> None:
-    """The baseline, then the same honest run during the flood ``start_flood()`` (which returns its stop)."""
+    """The baseline, then the same honest run during the flood ``start_flood()`` (which returns its stop);
+    the flood runs alone ``args.flood_margin`` seconds before the honest run and after it."""
     run = next(RUNS)
     settle(receiver)
     sent, _ = honest_run(send, receiver, args.rate, args.seconds, f"{run}b")
-    time.sleep(1.0)
+    crossed(sent, receiver, 1.0)
     line, baseline = figures(f"{label}, baseline", sent, receiver, None, None, args.seconds)
     print(line, flush=True)
     watch = Watch(daemon)
+    receiver.flooded = True
     stop = start_flood()
-    time.sleep(1.0)  # the flood fills its queue first
+    time.sleep(args.flood_margin)  # the flood fills its queue first
     sent, _ = honest_run(send, receiver, args.rate, args.seconds, f"{run}f")
-    time.sleep(1.0)  # (the last honest frames' time to cross, the flood still on)
+    time.sleep(args.flood_margin)  # (the last honest frames' time to cross, the flood still on)
     flood_end = time.monotonic()
     memory = watch.close()
     flood = stop()
@@ -415,6 +429,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seconds", type=float, default=10.0, help="the honest sender's run, alone and during a flood")
     parser.add_argument("--rate", type=float, default=10.0, help="the honest sender's frames a second")
+    parser.add_argument("--flood-margin", type=float, default=1.0,
+                        help="seconds the flood runs alone before the honest run (filling its queue) and after it")
     parser.add_argument("--cases", nargs="+", default=["zenoh", "ros2", "socket", "tx"],
                         choices=["zenoh", "ros2", "socket", "tx"])
     args = parser.parse_args()

@@ -183,13 +183,17 @@ links:
 """
 
 
-def _echo(link: str, count: int, mode: str, result, timeout: float = 10.0, cpu: int | None = None) -> None:
+def _echo(link: str, count: int, mode: str, result, timeout: float = 10.0, cpu: int | None = None,
+          said=None) -> None:
     """On link b: echo every frame back to address 1 (``mode`` "echo"), or only count them ("count");
     put (frames received, time of the first, time of the last) on ``result``.  Runs pinned to ``cpu``
-    (None: where the kernel puts it).  Shared with multihost.py."""
+    (None: where the kernel puts it); sets the event ``said`` (if any) once it has said REQ_STATE.
+    Shared with multihost.py."""
     pin(cpu)
     tx, rx = open_queue(f"/{link}_tx_dlnk_phy"), open_queue(f"/{link}_rx_dlnk_phy")
     tx.send(b"\x01")  # REQ_STATE, as a dccomms application says when it starts: the daemon knows it is there
+    if said is not None:
+        said.set()
     received = 0
     first = last = 0.0
     while received < count:
@@ -292,10 +296,11 @@ def throughput(count: int, size: int, rate: float | None) -> tuple[float, int, i
     a, b = f"bta{os.getpid()}", f"btb{os.getpid()}"
     daemon = Daemon(SCENE.format(a=a, b=b), (a, b))
     try:
-        result = mp.Queue()
-        counter = mp.Process(target=_echo, args=(b, count, "count", result))
+        result, said = mp.Queue(), mp.Event()
+        counter = mp.Process(target=_echo, args=(b, count, "count", result), kwargs={"said": said})
         counter.start()
-        time.sleep(1.0)  # (the counter is up and has said REQ_STATE)
+        if not said.wait(60):
+            raise RuntimeError("the counter did not start")
         start = send_paced(a, count, size, rate)
         received, first, last = result.get(timeout=120)
         counter.join()

@@ -27,7 +27,8 @@ runs of each.  Printed per run: lateness p50/p99/max over all deliveries and per
 (seconds per wall second, over the sending window), frames delivered of those sent, what the daemons
 dropped, and the transmissions heard too late or missing between hosts; then the medians over the runs.
 
-    python benchmarks/hosts_scale.py [--links 50] [--rate 10] [--seconds 20] [--repeats 2] [--loopback] [--realtime]
+    python benchmarks/hosts_scale.py [--links 50] [--rate 10] [--seconds 20] [--repeats 2] [--warm-up 3]
+                                     [--read-after 1] [--loopback] [--realtime]
 """
 
 from __future__ import annotations
@@ -47,7 +48,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import netns  # noqa: E402
 from daemon_harness import Daemon, cpu_seconds  # noqa: E402
 from multihost import free_port  # noqa: E402
-from realtime_lateness import ON_AIR, percentile, send_and_read  # noqa: E402
+from realtime_lateness import ON_AIR, READ_AFTER_S, percentile, send_and_read  # noqa: E402
 
 HOSTS = ("A", "B", "C", "D")
 BITRATE, TX_DELAY, SPEED = 64000, 0.001, 1500.0
@@ -96,8 +97,8 @@ def delays(per_host: int) -> list[list[float]]:
 
 
 def _application(runtime_dir: str, links: list[tuple[int, str]], per_host: int, rate: float, seconds: float,
-                 seed: int, start_at: float, result) -> None:
-    send_and_read(runtime_dir, links, delays(per_host), rate, seconds, seed, start_at, result, MIN_GAP)
+                 seed: int, start_at: float, result, read_after: float) -> None:
+    send_and_read(runtime_dir, links, delays(per_host), rate, seconds, seed, start_at, result, MIN_GAP, read_after)
 
 
 class Hosts:
@@ -167,10 +168,10 @@ def run(side: str, args, repeat: int, spaces: netns.Namespaces | None) -> dict:
     setup = Hosts(per_host, prefix, spaces, extra) if side == "4 daemons" else One(per_host, prefix, extra)
     try:
         results = [FORK.Queue() for _ in HOSTS]
-        start_at = time.perf_counter() + WARM_UP_S
+        start_at = time.perf_counter() + args.warm_up
         apps = [FORK.Process(target=_application, args=(
             setup.runtime(h), [(h * per_host + i, f"{prefix}{h * per_host + i}") for i in range(per_host)], per_host,
-            args.rate, args.seconds, repeat, start_at, results[h])) for h in range(len(HOSTS))]
+            args.rate, args.seconds, repeat, start_at, results[h], args.read_after)) for h in range(len(HOSTS))]
         for app in apps:
             app.start()
         time.sleep(max(0.0, start_at - time.perf_counter()))
@@ -199,6 +200,10 @@ def main() -> None:
     parser.add_argument("--rate", type=float, default=10.0, help="frames per second per link")
     parser.add_argument("--seconds", type=float, default=20.0, help="of sending, per run")
     parser.add_argument("--repeats", type=int, default=2, help="runs of each side, alternating")
+    parser.add_argument("--warm-up", type=float, default=WARM_UP_S,
+                        help="seconds from the applications' start to their first frame (every link opened)")
+    parser.add_argument("--read-after", type=float, default=READ_AFTER_S,
+                        help="seconds the applications read on after their last frame (the frames on their way)")
     parser.add_argument("--loopback", action="store_true", help="4 daemons on loopback even where namespaces could be made")
     parser.add_argument("--realtime", action="store_true", help="every daemon with `hilgate run --realtime`")
     args = parser.parse_args()

@@ -234,10 +234,11 @@ def throughput(count: int, size: int, rate: float | None) -> tuple[float, int, i
     a, b = f"mta{os.getpid()}", f"mtb{os.getpid()}"
     network = Network(a, b)
     try:
-        result = SPAWN.Queue()
-        counter = SPAWN.Process(target=_echo, args=(b, count, "count", result))
+        result, said = SPAWN.Queue(), SPAWN.Event()
+        counter = SPAWN.Process(target=_echo, args=(b, count, "count", result), kwargs={"said": said})
         counter.start()
-        time.sleep(1.0)  # (the counter is up and has said REQ_STATE)
+        if not said.wait(60):
+            raise RuntimeError("the counter did not start")
         start = send_paced(a, count, size, rate)
         received, first, last = result.get(timeout=120)
         counter.join()

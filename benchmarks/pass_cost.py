@@ -53,6 +53,7 @@ from hilgate.gli.queues import unlink_queues  # noqa: E402
 
 CALLGRIND_WARM_UP = 200
 CALLGRIND_C = """#include <valgrind/callgrind.h>
+void hg_start(void) { CALLGRIND_START_INSTRUMENTATION; }
 void hg_toggle(void) { CALLGRIND_TOGGLE_COLLECT; }
 void hg_dump(const char *what) { CALLGRIND_DUMP_STATS_AT(what); }
 """
@@ -74,6 +75,9 @@ class Counting:
                 self.lib = ctypes.CDLL(library)  # (loaded: the files can go, it stays mapped)
             finally:
                 shutil.rmtree(directory, ignore_errors=True)
+            # (pass_instructions.py starts callgrind with instrumentation off: Python's start-up and the
+            # imports run several times faster uninstrumented, and nothing before the passes is counted)
+            self.lib.hg_start()
 
     def toggle(self, index: int) -> None:
         if self.lib is not None and index >= CALLGRIND_WARM_UP:

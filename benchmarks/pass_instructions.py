@@ -3,11 +3,12 @@
 for a cut of the frame's path on a shared machine (wall time moves with the load, instructions do not:
 deterministic here to a few tens a pass).
 
-``pass_cost.py`` runs under ``valgrind --tool=callgrind`` with collection off at the start; it switches
-collection on and off around each pass after its warm-up (``pass_cost.CALLGRIND_WARM_UP``), so only the
-daemon's own pass is counted (its ``epoll_wait``, the queue's ``receive``, the frame's and READY's ``send``,
-and its Python), never the harness's ``send`` and drains, and dumps the daemon's passes and the relay's
-apart.  Needs valgrind, its ``callgrind.h`` and a C compiler (``apt-get install valgrind gcc``).
+``pass_cost.py`` runs under ``valgrind --tool=callgrind`` with instrumentation and collection off at the
+start (Python's start-up and the imports run uninstrumented, several times faster); it starts
+instrumentation once its modules are imported, and switches collection on and off around each pass after
+its warm-up (``pass_cost.CALLGRIND_WARM_UP``), so only the daemon's own pass is counted (its
+``epoll_wait``, the queue's ``receive``, the frame's and READY's ``send``, and its Python), never the
+harness's ``send`` and drains, and dumps the daemon's passes and the relay's apart.  Needs valgrind, its ``callgrind.h`` and a C compiler (``apt-get install valgrind gcc``).
 
     python benchmarks/pass_instructions.py [PASSES (counted, default 1000)]
 """
@@ -48,7 +49,7 @@ def main() -> int:
     out = os.path.join(directory, "callgrind.out")
     environment = dict(os.environ, PASS_COST_CALLGRIND="1", PYTHONHASHSEED="0")
     try:
-        subprocess.run(["valgrind", "--tool=callgrind", "--collect-atstart=no", f"--callgrind-out-file={out}",
+        subprocess.run(["valgrind", "--tool=callgrind", "--instr-atstart=no", "--collect-atstart=no", f"--callgrind-out-file={out}",
                         sys.executable, os.path.join(HERE, "pass_cost.py"), str(counted + CALLGRIND_WARM_UP)],
                        env=environment, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         found = dict(totals(path) for path in glob.glob(out + "*"))

@@ -33,8 +33,8 @@ max and min lateness in ms, deliveries, the daemon's CPU per wall second; then, 
 min/median/max and the ratios hilgate/bare and hilgate/ns-3 of the p99 (DESIGN.md: p99 <= 0.25 ms and
 max <= 1 ms on a quiet host, within 1.2 x the bare loop's p99 on a loaded one).
 
-    python benchmarks/realtime_lateness.py [--seconds 20] [--nodes 50] [--rate 0.5] [--repeats 3]
-                                           [--placement same|across|both] [--ns3-python PATH]
+    python benchmarks/realtime_lateness.py [--seconds 20] [--nodes 50] [--rate 0.5] [--repeats 3] [--warm-up 2]
+                                           [--read-after 1] [--placement same|across|both] [--ns3-python PATH]
 """
 
 from __future__ import annotations
@@ -64,6 +64,8 @@ from placement import Placement, choose, pin, pinned, pinned_command  # noqa: E4
 NS3_SCRIPT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "ns3_realtime.py")
 
 BITRATE, TX_DELAY, ON_AIR, SPEED, RADIUS = 9600, 0.001, 20, 1500.0, 200.0
+WARM_UP_S = 2.0  # from the applications' start to their first frame: every application has opened its links
+READ_AFTER_S = 1.0  # the applications read on this long after their last frame: the frames still on their way
 MIN_GAP = 0.05  # s between one link's frames: longer than its 17.7 ms on air, so none waits in the FIFO
 PAYLOAD = struct.Struct("<Hd")  # sender index, send time (time.perf_counter: CLOCK_MONOTONIC, one clock per host)
 TARGET_P99_MS, TARGET_MAX_MS, TARGET_LOADED = 0.25, 1.0, 1.2
@@ -110,22 +112,26 @@ def percentile(values: list[float], q: float) -> float:
 
 
 def _application(runtime_dir: str, links: list[tuple[int, str]], nodes: int, rate: float, seconds: float,
-                 seed: int, start_at: float, result, cpu: int | None = None, priority: int = 0) -> None:
+                 seed: int, start_at: float, result, cpu: int | None = None, priority: int = 0,
+                 read_after: float = READ_AFTER_S) -> None:
     """Send from and read every link in ``links`` for ``seconds`` from ``start_at`` (perf_counter), then
-    one more second for the frames on their way; put (lateness list, frames sent, deliveries) on ``result``.
+    ``read_after`` seconds more for the frames on their way; put (lateness list, frames sent, deliveries)
+    on ``result``.
     ``priority``: the instrument's (:func:`instrument`)."""
     pin(cpu)
     where = positions(nodes)
     delay = [[TX_DELAY + ON_AIR * 8 / BITRATE + math.dist(a, b) / SPEED for b in where] for a in where]
     with instrument(priority):
-        send_and_read(runtime_dir, links, delay, rate, seconds, seed, start_at, result)
+        send_and_read(runtime_dir, links, delay, rate, seconds, seed, start_at, result, read_after=read_after)
 
 
 def send_and_read(runtime_dir: str, links: list[tuple[int, str]], delay: list[list[float]], rate: float,
-                  seconds: float, seed: int, start_at: float, result, min_gap: float = MIN_GAP) -> None:
+                  seconds: float, seed: int, start_at: float, result, min_gap: float = MIN_GAP,
+                  read_after: float = READ_AFTER_S) -> None:
     """The applications' loop: ``delay[sender][receiver]``, the model's delay from a frame's send to
     its delivery, between the scene's nodes by index; frames of ``ON_AIR`` bytes on air, sent by each
-    link in ``links`` as a Poisson process of ``rate`` with gaps of at least ``min_gap``."""
+    link in ``links`` as a Poisson process of ``rate`` with gaps of at least ``min_gap``; read ``read_after``
+    seconds after the sending ends."""
     from hilgate.client import Link
 
     opened = {index: Link.open(link_id, runtime_dir=runtime_dir) for index, link_id in links}
@@ -134,7 +140,7 @@ def send_and_read(runtime_dir: str, links: list[tuple[int, str]], delay: list[li
         selector.register(link.sock, selectors.EVENT_READ, (index, link))
     rng = random.Random(f"{seed}/{links[0][1]}")
     due = {index: start_at + rng.expovariate(rate) for index in opened}
-    stop, end = start_at + seconds, start_at + seconds + 1.0
+    stop, end = start_at + seconds, start_at + seconds + read_after
     late: list[float] = []
     sent = 0
     try:
@@ -167,19 +173,21 @@ def send_and_read(runtime_dir: str, links: list[tuple[int, str]], delay: list[li
 
 
 def through_hilgate(nodes: int, rate: float, seconds: float, apps: int, seed: int, daemon_args: tuple[str, ...],
-                    placement: Placement, priority: int = 0):
-    """The applications on the placement's step 0 (at the instrument's ``priority``), the daemon on step 1.
-    Returns the lateness, the frame-receiver pairs sent, the daemon's CPU per wall second, and what the
-    daemon counted (delivered, drops) and said it runs at (``scheduling``)."""
+                    placement: Placement, priority: int = 0, warm_up: float = WARM_UP_S,
+                    read_after: float = READ_AFTER_S):
+    """The applications on the placement's step 0 (at the instrument's ``priority``), the daemon on step 1;
+    they send from ``warm_up`` seconds after they start (every link opened by then) and read ``read_after``
+    seconds after their last frame.  Returns the lateness, the frame-receiver pairs sent, the daemon's CPU
+    per wall second, and what the daemon counted (delivered, drops) and said it runs at (``scheduling``)."""
     prefix = f"rt{os.getpid()}x{seed}{placement.name[0]}_"
     names = [f"{prefix}{i}" for i in range(nodes)]
     daemon = Daemon(scene_text(nodes, prefix), tuple(names), daemon_args, cpu=placement.cpu(1))
     try:
         result = mp.Queue()
-        start_at = time.perf_counter() + 2.0  # every application has opened its links by then
+        start_at = time.perf_counter() + warm_up
         workers = [mp.Process(target=_application, args=(
             daemon.runtime, [(i, names[i]) for i in range(k, nodes, apps)], nodes, rate, seconds,
-            seed, start_at, result, placement.cpu(0), priority)) for k in range(apps)]
+            seed, start_at, result, placement.cpu(0), priority, read_after)) for k in range(apps)]
         for worker in workers:
             worker.start()
         cpu0, wall0 = cpu_seconds(daemon.process.pid), time.perf_counter()
@@ -296,6 +304,10 @@ def main() -> None:
     parser.add_argument("--rate", type=float, default=0.5, help="frames per second per node")
     parser.add_argument("--apps", type=int, default=2, help="application processes sharing the links")
     parser.add_argument("--repeats", type=int, default=3, help="runs of each side per placement, alternating")
+    parser.add_argument("--warm-up", type=float, default=WARM_UP_S,
+                        help="seconds from the applications' start to their first frame (every link opened)")
+    parser.add_argument("--read-after", type=float, default=READ_AFTER_S,
+                        help="seconds the applications read on after their last frame (the frames on their way)")
     parser.add_argument("--placement", choices=("same", "across", "both"), default="both")
     parser.add_argument("--realtime-priority", type=int, default=0,
                         help="real-time priority for the daemon, the bare loop and ns-3, as `hilgate run --realtime-priority` "
@@ -343,7 +355,8 @@ def main() -> None:
                     extra = f"{len(late):,} timers in {args.bare_seconds:g} s"
                 else:
                     late, expected, cpu, counted = through_hilgate(args.nodes, args.rate, args.seconds, args.apps, repeat,
-                                                                   daemon_args, placement)
+                                                                   daemon_args, placement, warm_up=args.warm_up,
+                                                                   read_after=args.read_after)
                     extra = (f"{len(late):,} deliveries read of {expected:,} frame-receiver pairs sent in {args.seconds:g} s "
                              f"(the daemon delivered {counted['delivered']:,}, dropped {counted['drops']}; the rest were "
                              f"lost on the channel); daemon CPU {cpu:.2f} s per wall s")

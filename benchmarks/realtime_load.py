@@ -32,6 +32,7 @@ them); then a table per placement of the medians of p50 and p99 over the runs (p
 
     python benchmarks/realtime_load.py [--seconds 10] [--bare-seconds 5] [--nodes 50] [--rate 0.5] [--repeats 2]
                                        [--placement same|across|both] [--instrument realtime|normal] [--ns3-python PATH]
+                                       [--settle 2] [--warm-up 2] [--read-after 1]
 """
 
 from __future__ import annotations
@@ -50,7 +51,7 @@ from daemon_harness import cpu_seconds  # noqa: E402
 from loadkit import Neighbours  # noqa: E402
 from peers import check_python  # noqa: E402
 from placement import Placement, choose  # noqa: E402
-from realtime_lateness import bare, ns3_realtime, percentile, through_hilgate  # noqa: E402
+from realtime_lateness import READ_AFTER_S, WARM_UP_S, bare, ns3_realtime, percentile, through_hilgate  # noqa: E402
 
 REALTIME = 10  # hilgate.core.priority.DEFAULT_PRIORITY: what `hilgate run --realtime` asks
 INSTRUMENT = REALTIME + 1
@@ -90,7 +91,8 @@ def run_side(side: str, args, placement: Placement, repeat: int, scheduling: str
         return late, f"{len(late):,} deliveries read, {raw['sent']:,} frames sent in {args.seconds:g} s"
     daemon_args = ("--realtime",) if priority else ()
     late, expected, cpu, counted = through_hilgate(args.nodes, args.rate, args.seconds, args.apps, repeat, daemon_args,
-                                                   placement, instrument)
+                                                   placement, instrument, warm_up=args.warm_up,
+                                                   read_after=args.read_after)
     return late, (f"{len(late):,} deliveries read of {expected:,} pairs sent (the daemon dropped {counted['drops']}); "
                   f"daemon CPU {cpu:.2f} s per wall s; the daemon says: {counted['scheduling']}")
 
@@ -104,7 +106,7 @@ def measured(side: str, args, placement: Placement, repeat: int, load: str, sche
     if load == "busy":
         limit = max(args.seconds, args.bare_seconds) + 300  # a hang guard (ns-3 starts in seconds, slower when busy)
         neighbours = Neighbours(args.hogs, args.wakers, args.writers, args.writer_mib, limit_s=limit)
-        time.sleep(SETTLE_S)
+        time.sleep(args.settle)
     try:
         loadavg = os.getloadavg()[0]
         cpu0, wall0 = neighbours_cpu(neighbours), time.perf_counter()
@@ -144,6 +146,12 @@ def main() -> None:
     parser.add_argument("--wakers", type=int, default=4, help="busy: neighbours computing 5 ms and resting 1 ms")
     parser.add_argument("--writers", type=int, default=1, help="busy: neighbours writing files and syncing them")
     parser.add_argument("--writer-mib", type=int, default=256, help="busy: MiB each writer writes before it syncs")
+    parser.add_argument("--settle", type=float, default=SETTLE_S,
+                        help="busy: seconds from the neighbours' start to the run (their writer's first file under way)")
+    parser.add_argument("--warm-up", type=float, default=WARM_UP_S,
+                        help="seconds from the applications' start to their first frame (every link opened)")
+    parser.add_argument("--read-after", type=float, default=READ_AFTER_S,
+                        help="seconds the applications read on after their last frame (the frames on their way)")
     parser.add_argument("--ns3-python", help="a Python with the ns3 wheel: run ns-3's real-time scheduler alongside")
     args = parser.parse_args()
     why_not_ns3 = check_python(args.ns3_python, "ns")

@@ -21,9 +21,11 @@ every frame the applications sent is delivered or traced by a daemon with its ca
 any frame is unexplained, delivered twice or out of order.
 
     python benchmarks/soak.py [--minutes 60] [--reload-every 60] [--restart-every 600] [--sample-every 10]
-                              [--loopback] [--keep DIR]
+                              [--watch-after-restart 30] [--loopback] [--keep DIR]
 
-``make soak`` runs the hour; tests/test_benchmarks_run.py a minute (reloads every 10 s, one restart).
+A restart comes only while ``--watch-after-restart`` seconds of the run are left after it: B's new run
+is watched that long at least (its memory, A's frames reaching it again).  ``make soak`` runs the hour;
+tests/test_benchmarks_run.py 18 s of it (reloads every 4 s, one restart, 8 s watched after it).
 """
 
 from __future__ import annotations
@@ -195,6 +197,8 @@ def main() -> int:
     parser.add_argument("--reload-every", type=float, default=60.0, help="seconds between reloads")
     parser.add_argument("--restart-every", type=float, default=600.0, help="seconds between B's restarts")
     parser.add_argument("--sample-every", type=float, default=10.0, help="seconds between memory samples")
+    parser.add_argument("--watch-after-restart", type=float, default=30.0,
+                        help="the least seconds of the run left after a restart of B (none later)")
     parser.add_argument("--loopback", action="store_true", help="both daemons on loopback, even as root")
     parser.add_argument("--keep", help="keep the traces and logs in this directory (default: removed)")
     args = parser.parse_args()
@@ -271,7 +275,7 @@ def main() -> int:
                         refused += 1
                         print(f"reload of {host.name}: no answer ({type(exc).__name__}: {exc})", flush=True)
                 next_reload += args.reload_every
-            if now >= next_restart and now + PAUSE_S + 30 < end:
+            if now >= next_restart and now + PAUSE_S + args.watch_after_restart < end:
                 apps["B"].send_signal(signal.SIGUSR1)
                 time.sleep(PAUSE_S)
                 hosts["B"].stop()

@@ -55,26 +55,27 @@ WITH_DAEMONS = {
                     "--readers", "1", "--placement", "same"],
                    [r" +same CPU, +adaptive: \d+ frames delivered in the window, \d+ sent in it; lateness .* daemon CPU "]),
     # ns-3 is a peer this machine need not have: a Python without it is told, and the run goes on
-    "realtime_lateness": (["benchmarks/realtime_lateness.py", "--seconds", "1", "--bare-seconds", "1", "--nodes", "2",
-                           "--rate", "10", "--apps", "1", "--repeats", "1", "--placement", "same",
-                           "--ns3-python", sys.executable],
+    "realtime_lateness": (["benchmarks/realtime_lateness.py", "--seconds", "0.5", "--bare-seconds", "0.5", "--nodes", "2",
+                           "--rate", "10", "--apps", "1", "--repeats", "1", "--placement", "same", "--warm-up", "0.5",
+                           "--read-after", "0.3", "--ns3-python", sys.executable],
                           [r"ns-3: not run \(", r"run 1, +same CPU, +bare: lateness at the application p50 ",
                            r"run 1, +same CPU, hilgate: lateness at the application p50 .* daemon CPU ",
                            r" +same CPU: bare .* hilgate .* ns-3 not run; ratio hilgate / bare "]),
-    # a minute of `make soak`'s hour: reloads every 10 s, one restart of B; it exits 1 when a
+    # 18 s of `make soak`'s hour: reloads every 4 s, one restart of B watched 8 s after; it exits 1 when a
     # frame is unexplained, delivered twice or out of order (so this asserts the account balances)
-    "soak": (["benchmarks/soak.py", "--minutes", "1", "--reload-every", "10", "--restart-every", "25",
-              "--sample-every", "3"],
-             [r"soak: .* at 100 frames/s, a reload every 10 s, B restarted every 25 s; ",
+    "soak": (["benchmarks/soak.py", "--minutes", "0.3", "--reload-every", "4", "--restart-every", "6",
+              "--sample-every", "2", "--watch-after-restart", "8"],
+             [r"soak: .* at 100 frames/s, a reload every 4 s, B restarted every 6 s; ",
               r"reloads: \d+ \(\d+ refused or unanswered\); restarts of B: 1; ",
               r"memory of daemon A \(one run, \d+ samples\): RSS .* slope ",
               r"memory of daemon B \(run 2, ", r"restart of B: down .* s after",
               r"account: sent \d+ = delivered \d+ \+ lost \d+ \(.*\) \+ unexplained 0; delivered twice 0, out of order 0; ",
               r"account balanced: "]),
     # four conditions (quiet/busy x normal/--realtime); as root the instrument and --realtime are real time
-    "realtime_load": (["benchmarks/realtime_load.py", "--seconds", "1", "--bare-seconds", "1", "--nodes", "2",
+    "realtime_load": (["benchmarks/realtime_load.py", "--seconds", "0.5", "--bare-seconds", "0.5", "--nodes", "2",
                        "--rate", "10", "--apps", "1", "--repeats", "1", "--placement", "same", "--hogs", "1",
-                       "--wakers", "1", "--writers", "1", "--writer-mib", "4", "--ns3-python", sys.executable],
+                       "--wakers", "1", "--writers", "1", "--writer-mib", "4", "--settle", "0.5", "--warm-up", "0.5",
+                       "--read-after", "0.3", "--ns3-python", sys.executable],
                       [r"ns-3: not run \(", r"instrument \(applications, readers\): ",
                        *(rf"run 1, +same CPU, +{load}, +{scheduling}, +{side}: lateness p50 .* p99 "
                          for load in ("quiet", "busy") for scheduling in ("normal", "realtime") for side in ("bare", "hilgate")),
@@ -84,25 +85,26 @@ WITH_DAEMONS = {
                        *(rf" +same CPU, +{scheduling}: bare [0-9.]+, hilgate [0-9.]+" for scheduling in ("normal", "realtime")),
                        r"  same CPU, busy: hilgate's median p99 .* with --realtime "]),
     # 4 daemons (in network namespaces as root, else on loopback) against one
-    "hosts_scale": (["benchmarks/hosts_scale.py", "--links", "2", "--rate", "2", "--seconds", "2", "--repeats", "1"],
+    "hosts_scale": (["benchmarks/hosts_scale.py", "--links", "2", "--rate", "2", "--seconds", "1", "--repeats", "1",
+                     "--warm-up", "0.5", "--read-after", "0.3"],
                     [r"4 daemons: (one per network namespace|on loopback)",
                      *(rf"run 1, +{side}: lateness p50 .* delivered of .* daemon CPU s per wall s: .* heard late \d+, "
                        rf"missing between hosts \d+" for side in ("4 daemons", "1 daemon")),
                      r" +4 daemons: lateness p50 .* CPU per daemon [0-9.]+ [0-9.]+ [0-9.]+ [0-9.]+ s per wall s",
                      r" +1 daemon: lateness p50 .* CPU per daemon [0-9.]+ s per wall s"]),
     # (two of its four cases: the doors' test is tests/test_door_fairness.py, and make test's serial part is long)
-    "floods": (["benchmarks/floods.py", "--seconds", "1", "--cases", "zenoh", "tx"],
+    "floods": (["benchmarks/floods.py", "--seconds", "1", "--flood-margin", "0.3", "--cases", "zenoh", "tx"],
                [*(rf"{case}, baseline: honest \d+ of \d+ frames received \(no flood\)"
                   for case in ("zenoh door", "B's frames at A")),
                 *(rf"{case}, .*: honest \d+ of \d+ frames received during the flood .* delay p50 "
                   for case in ("zenoh door", "B's frames at A")),
                 r"  daemon RSS \d+ MB -> peak \d+ MB \(after \d+ MB\); STATUS answered \d+ of \d+ during the flood"]),
-    "web_cost": (["benchmarks/web_cost.py", "--seconds", "1", "--repeats", "1", "--warm-up", "0.5"],
+    "web_cost": (["benchmarks/web_cost.py", "--seconds", "0.5", "--repeats", "1", "--warm-up", "0.2"],
                  [r" +no web door +CPU ", r" +--web, no page +CPU ", r" +a page connected +CPU .* pictures ",
                   r" +3 pages connected +CPU .* pictures ", r" +--web, no page adds ", r" +a page connected adds ",
                   r" +3 pages connected adds "]),
     # (in Chromium: skipped by its own test where the browser is missing)
-    "web_redraws": (["benchmarks/web_redraws.py", "--seconds", "1", "--repeats", "1", "--warm-up", "0.5",
+    "web_redraws": (["benchmarks/web_redraws.py", "--seconds", "0.5", "--repeats", "1", "--warm-up", "0.2",
                      "--case", "demo", "--case", "exp1-acoustic-100x"],
                     [r" +demo +median +[\d.]+, min", r" +exp1-acoustic-100x +median ", r"Page redraws in headless Chromium"]),
 }
