@@ -374,13 +374,13 @@ def test_a_missing_program_is_one_clear_error(tmp_path):
 def test_the_cache_is_keyed_by_what_the_fields_depend_on(program, tmp_path):
     from hilgate.channel.runner import cache_file, field_key
     water = Water(depth_m=50.0, sound_speed=((0.0, 1500.0),), ranges=5, depths=5, source_depths=1,
-                  arrival_ranges=5, arrival_depths=5)
+                  arrival_ranges=5, arrival_depths=5, beams=500)  # a fan given: two runs, not a search of five
     prepare_fields(water, [10000.0], program=program, cache=str(tmp_path))
     assert [str(tmp_path / name) for name in os.listdir(tmp_path)] == [cache_file(str(tmp_path), water, 10000.0)]
     # from the cache: a program that cannot run is not asked
     prepare_fields(water, [10000.0], program=Program(("/nonexistent",), "x"), cache=str(tmp_path))
     changed = Water(depth_m=50.0, sound_speed=((0.0, 1490.0),), ranges=5, depths=5, source_depths=1,
-                    arrival_ranges=5, arrival_depths=5)
+                    arrival_ranges=5, arrival_depths=5, beams=500)
     assert field_key(changed, 10000.0) != field_key(water, 10000.0)
     assert field_key(water, 12000.0) != field_key(water, 10000.0)
     with pytest.raises(BellhopError):
@@ -449,7 +449,7 @@ def test_a_cached_field_that_does_not_fit_is_computed_again(program, tmp_path):
     from hilgate.channel.fieldcache import encode
     from hilgate.channel.runner import cache_file
     water = Water(depth_m=50.0, sound_speed=((0.0, 1500.0),), ranges=5, depths=5, source_depths=1,
-                  arrival_ranges=5, arrival_depths=5)
+                  arrival_ranges=5, arrival_depths=5, beams=500)  # a fan given: two runs, not a search of five
     path = tmp_path / os.path.basename(cache_file(str(tmp_path), water, 10000.0))
     path.write_bytes(encode({"tl": np.full((1, 2, 2), np.nan)}))  # wrong keys and shapes: another version's
     fields = prepare_fields(water, [10000.0], program=program, cache=str(tmp_path))[0]
@@ -474,9 +474,11 @@ def test_an_arrivals_lookup_agrees_with_the_separate_ones(program, cache):
 def test_a_sloping_bottom_reaches_the_field(program, cache):
     """``bathymetry`` (depth against range from the sender, BELLHOP's .bty): where the bottom has risen
     from 100 m to 70 m (1 km) and 43 m (1.9 km), a receiver at 80 m is in the sediment (tens of dB more
-    loss, or none of the sound), while at 30 m the field stays within 1 dB of the flat bottom's."""
+    loss, or none of the sound), while at 30 m the field stays within 1 dB of the flat bottom's.  Both with
+    the fan that convergence finds for either (8001 beams): the same fields without its ten runs each."""
     sloping = Water(depth_m=100.0, sound_speed=((0.0, 1500.0), (100.0, 1500.0)), bathymetry=((0.0, 100.0), (2000.0, 40.0)),
-                    range_m=2000.0, ranges=20, depths=20, source_depths=2, arrival_ranges=10, arrival_depths=10)
+                    range_m=2000.0, ranges=20, depths=20, source_depths=2, arrival_ranges=10, arrival_depths=10,
+                    beams=8001)
     flat = Water(**{**sloping.__dict__, "bathymetry": ()})
     slope, level = (prepare_fields(w, [12000.0], program=program, cache=cache)[0] for w in (sloping, flat))
     for r in (1000.0, 1900.0):

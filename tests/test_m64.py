@@ -282,7 +282,7 @@ def test_packets_the_model_loses_show_in_wcd_and_in_the_trace_and_channels_do_no
 def driver_scene(tmp_path, da, ea, eb, packet, db=None):
     pa, pb = tmp_path / "a", tmp_path / "b"
     far = (f"  {db}: {{vehicle: vb, backend: m64, port: {pb}, role: b, modem_channel: 2, address: 2, packet: {packet},"
-           f" gli: [socket]}}\n") if db else ""
+           f" gli: [socket], diagnostic_s: 1}}\n") if db else ""
     return f"""\
 {SCENE_HEAD}links:
   {da}: {{vehicle: va, backend: m64, port: {pa}, role: a, modem_channel: 2, address: 1, packet: {packet}, gli: [socket],
@@ -303,7 +303,13 @@ def test_hilgate_drivers_carry_frames_application_to_application_through_emulate
         lb.send(b"back", dst=1)
         message = la.recv(timeout=60)
         assert message is not None and message.data == b"back"
-    wait_until(lambda: [e for e in daemon.trace_so_far() if e["ev"] == "modem_stats" and e["link"] == db] or None)
+
+    def reports():
+        return [e for e in daemon.trace_so_far() if e["ev"] == "modem_stats" and e["link"] == db]
+
+    # the far modem's figures as it gives them after the exchange (asked every second), not before it
+    before = len(reports())
+    wait_until(lambda: len(reports()) > before)
     daemon.stop()
     events = daemon.trace_events()
     # the frame went as one WlUDPSocket datagram in 8-byte packets, one per slot of A, each reaching the

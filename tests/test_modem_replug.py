@@ -82,6 +82,13 @@ def micromodem_answers(address: int):
     return answer, packets
 
 
+def datagrams(packets: list[bytes]) -> list[bytes]:
+    """The datagrams that the M64 packets a modem queued carry, in order."""
+    deframer = m64_codec.Deframer()
+    return [e.data for packet in list(packets) for e in deframer.receive_packet(packet)
+            if isinstance(e, m64_codec.Datagram)]
+
+
 def wait_state(daemon, link, wanted, timeout=60):
     deadline = time.monotonic() + timeout
     while daemon.link_status(link)["state"] != wanted:
@@ -131,15 +138,11 @@ links:
                            + sentence("CARXD", 7, 5, 0, 1, b"from the far modem".hex().upper()))
             message = lr.recv(timeout=60)
             assert message is not None and message.data == b"from the far modem"
-            deadline = time.monotonic() + 60
-            while len(sent) < (3 * 3 if modem == "m64" else 3) and time.monotonic() < deadline:
-                time.sleep(0.02)
+            # until the modem has all three frames (an M64 datagram is as many packets as its length needs)
+            wait_until(lambda: len(datagrams(sent) if modem == "m64" else sent) >= 3,
+                       lambda: f"the three frames at the modem, got {sent}\n{daemon.output()}")
         if modem == "m64":
-            datagrams = []
-            deframer = m64_codec.Deframer()
-            for packet in sent:
-                datagrams += [e.data for e in deframer.receive_packet(packet) if isinstance(e, m64_codec.Datagram)]
-            assert datagrams == [b"while down %d" % i for i in range(3)]
+            assert datagrams(sent) == [b"while down %d" % i for i in range(3)]
             heard = b"".join(fake.heard)
             assert heard.count(b"wcs,a,2") == 4  # configured at start and after each replug
         else:

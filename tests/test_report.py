@@ -13,6 +13,10 @@ from hilgate.cli import main
 
 SCENES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes")
 
+DPI = 100
+"""The PNGs' resolution here: what these tests check (files, counts, what was drawn, the page) is laid out in
+inches and points, the same at any resolution; at the report's 300 dpi each PNG took nine times the pixels."""
+
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
@@ -29,7 +33,7 @@ def test_every_figure_is_written_and_the_page_shows_them(runs, tmp_path):
     folder, trace = runs
     out = tmp_path / "report"
     assert main(["report", str(trace), str(folder / "csma.json"), str(folder / "none.json"), "--out", str(out),
-                 "--csv"]) == 0
+                 "--csv", "--dpi", str(DPI)]) == 0
     pngs = sorted(p for p in os.listdir(out) if p.endswith(".png"))
     assert pngs == ["compare.png", "delay.png", "distance.png", "fifo.png", "timeline.png"]
     page = (out / "index.html").read_text()
@@ -51,7 +55,7 @@ def test_the_files_counted_are_the_files_written(runs, tmp_path, capsys, extra):
     format)."""
     folder, trace = runs
     out = tmp_path / "report"
-    assert main(["report", str(trace), str(folder / "csma.json"), "--out", str(out), *extra]) == 0
+    assert main(["report", str(trace), str(folder / "csma.json"), "--out", str(out), "--dpi", str(DPI), *extra]) == 0
     said = capsys.readouterr().out
     count = int(said.split(" files in ")[0].split()[-1])
     assert count == len(os.listdir(out)), (said, sorted(os.listdir(out)))
@@ -91,7 +95,7 @@ def test_figures_are_fit_for_a_paper(runs, tmp_path):
     summaries["none"]["flows"][0]["delay_mean_s"] = 150.0  # one MAC's delay, decades above the rest
     seen: dict = {}
     written = figures(trace, summaries, [first[0], first[1], "twin_a", "twin_b"], str(tmp_path),
-                      formats=("png", "svg", "pdf"), subtitle="scene paper-exp1-rf, seed 1", inspect=seen)
+                      formats=("png", "svg", "pdf"), subtitle="scene paper-exp1-rf, seed 1", inspect=seen, dpi=DPI)
     styles = seen["distance"]["styles"]
     for group in seen["distance"]["coinciding"]:
         assert len({styles[name] for name in group}) == len(group)  # each one visible
@@ -118,7 +122,7 @@ def test_a_dense_timeline_is_counted_per_window(tmp_path):
         trace.packets[i] = packet
     trace.end = 100.0
     seen: dict = {}
-    figures(trace, {}, [], str(tmp_path), inspect=seen)
+    figures(trace, {}, [], str(tmp_path), inspect=seen, dpi=DPI)
     assert seen["timeline"]["aggregated"] == ["a → b"]
 
 

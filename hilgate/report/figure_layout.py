@@ -1,6 +1,10 @@
 """Where a figure's texts go, and whether they can be read: legends above the axes that fit the figure's width,
 tick labels thinned or turned until none overlaps, captions wrapped, and the counts of what still collides or
-runs off the figure (what ``inspect`` reports, so tests check a figure from what was drawn)."""
+runs off the figure (what ``inspect`` reports, so tests check a figure from what was drawn).
+
+Every check lays the figure out with ``draw_without_rendering``: the texts are placed and measured by the
+renderer that saves the PNG, but no pixel is painted (a figure is laid out up to a dozen times and painted
+once, when saved; the PNGs and what ``inspect`` reports are the same, byte for byte)."""
 
 from __future__ import annotations
 
@@ -44,7 +48,7 @@ def fit_legends(fig) -> bool:
     """A legend that runs off the figure takes fewer columns (more rows), then shorter labels, until it
     fits."""
     changed = False
-    fig.canvas.draw()
+    fig.draw_without_rendering()
     for ax in fig.axes:
         made = getattr(ax, "_hilgate_legend", None)  # (by name: matplotlib's axes carry our mark)
         while made is not None and ax.get_legend() is not None and not inside(fig, ax.get_legend()):
@@ -58,7 +62,7 @@ def fit_legends(fig) -> bool:
             legend_above(ax, width_in, handles, labels, columns, chars)
             made = ax._hilgate_legend
             changed = True
-            fig.canvas.draw()
+            fig.draw_without_rendering()
     return changed
 
 
@@ -101,7 +105,7 @@ def legible(fig) -> tuple[bool, int]:
     from matplotlib.ticker import FixedLocator, MaxNLocator
 
     changed, still = False, 0
-    fig.canvas.draw()
+    fig.draw_without_rendering()
     renderer = fig.canvas.get_renderer()
     for ax in fig.axes:
         for axis in (ax.xaxis, ax.yaxis):
@@ -125,11 +129,11 @@ def legible(fig) -> tuple[bool, int]:
                 else:
                     count = max(2, len([t for t in axis.get_ticklabels() if t.get_text()]) // 2)
                     axis.set_major_locator(MaxNLocator(nbins=count, min_n_ticks=1))
-                fig.canvas.draw()
+                fig.draw_without_rendering()
             still += _overlapping(_tick_boxes(axis, renderer))
         if _clear_corners(ax, renderer):
             changed = True
-            fig.canvas.draw()
+            fig.draw_without_rendering()
     return changed, still
 
 
