@@ -229,13 +229,36 @@ class Walk:
         unlink_queues(f"{link}_{self.token}" for link in self.links)
 
 
+def _ctrl_c_as_at_a_terminal() -> None:
+    """In the command's process: SIGINT does what it does at a user's terminal.  A test run started in the
+    background by a script (``make test &``, a CI runner) has SIGINT ignored, which its children inherit, and a
+    Python program started so keeps ignoring it: `hilgate listen` then outlived its Ctrl-C, twice a walk, until
+    the 90 s guard killed it (the serial part of make test took 202 s where the walk takes 23)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def _process_state(pid: int) -> str:
+    """What a process that does not end is doing: its state, where it waits, and which signals it blocks,
+    ignores and catches (a hex mask each; SIGINT is bit 1)."""
+    try:
+        with open(f"/proc/{pid}/status") as status:
+            fields = dict(line.split(":", 1) for line in status if ":" in line)
+        with open(f"/proc/{pid}/wchan") as wchan:
+            waits = wchan.read()
+    except OSError as exc:
+        return str(exc)
+    return ", ".join([f"waits in {waits}", *(f"{k} {fields[k].strip()}" for k in ("State", "SigBlk", "SigIgn", "SigCgt")
+                                             if k in fields)])
+
+
 class Process:
     """One command of the walk, its output (stdout and stderr as a terminal shows them) read as it comes."""
 
     def __init__(self, command: str, argv: list[str], cwd, env):
         self.command = command  # as the README has it (with this walk's ids)
         self.popen = subprocess.Popen(argv, cwd=cwd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                      stderr=subprocess.STDOUT, text=True, start_new_session=True)
+                                      stderr=subprocess.STDOUT, text=True, start_new_session=True,
+                                      preexec_fn=_ctrl_c_as_at_a_terminal)
         self.lines: list[str] = []
         self.reader = threading.Thread(target=self._read, daemon=True)
         self.reader.start()
@@ -263,12 +286,13 @@ class Process:
         try:
             self.code = self.popen.wait(HANG_GUARD_S)
         except subprocess.TimeoutExpired:
+            self.stuck = _process_state(self.popen.pid)
             os.killpg(self.popen.pid, signal.SIGKILL)
             self.code = self.popen.wait()
-            # (a serial part of make test took 202 s where the walk takes 23: two of its commands, it seems,
-            # outlived this wait; said, so that the next run names them)
+            # (said, with what the process was doing: a test that passes slowly is still worth knowing about)
             warnings.warn(f"`{self.command}` had not ended {HANG_GUARD_S:.0f} s after "
-                          f"{signal.Signals(sig).name if sig else 'its start'}: killed; its last lines:\n"
+                          f"{signal.Signals(sig).name if sig else 'its start'}: killed ({self.stuck}); "
+                          f"the walk's own signals: {_process_state(os.getpid())}; its last lines:\n"
                           + "".join(self.lines[-10:]))
         self.reader.join(HANG_GUARD_S)
         if not self.reader.is_alive():
