@@ -60,7 +60,19 @@ SERIAL = {
 }
 
 
+# The files that take longest on one worker (a clean clone's `make test`, --durations), handed out first: the
+# workers take files in the order they are collected, and a long file taken last keeps one worker busy while the
+# others have finished (longest first is the classic cure).  Every other file keeps its place after them.
+LONGEST_FIRST = ["test_install.py", "test_plugin_package.py", "test_formation.py", "test_wheel.py",
+                 "test_s100_emulator.py", "test_unet.py", "test_trace_fuzz.py", "test_web.py", "test_door_fairness.py",
+                 "test_multihost.py", "test_web_access.py", "test_web_operator.py", "test_bellhop.py",
+                 "test_water_examples.py", "test_emulator_acks.py", "test_modems_e2e.py", "test_report.py",
+                 "test_report_figures.py", "test_live_poses.py", "test_swap_accounting.py"]
+
+
 def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.path.name in SERIAL or f"{item.path.name}::{item.originalname}" in SERIAL:
             item.add_marker(pytest.mark.serial)
+    rank = {name: n for n, name in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # (stable: the rest as collected)
