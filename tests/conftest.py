@@ -32,9 +32,21 @@ def daemon_of(tmp_path):
 @pytest.fixture
 def busy_host(tmp_path):
     """The topside PC as labs have it (tests/loadkit.py): for the test's duration, neighbours at its own
-    priority, twice as many CPU-bound ones and as many that wake every 6 ms as the host has cores, and a
-    writer that syncs 256 MiB at a time.  A test that takes it asserts what the modems do exactly as
-    without it: host load must change none of it."""
+    priority, a CPU-bound one and one that wakes every 6 ms for each of the host's cores (every core is
+    contested), and a writer that syncs 256 MiB at a time.  A test that takes it asserts what the modems do
+    exactly as without it: host load must change none of it.  (Twice as many, as :func:`crowded_host` has,
+    cost the whole parallel part of make test about half a minute: the suite is CPU-bound on two cores.)"""
+    from loadkit import Neighbours
+
+    cores = os.cpu_count() or 1
+    with Neighbours(hogs=cores, wakers=cores, writers=1, mib=256, directory=str(tmp_path)) as neighbours:
+        yield neighbours
+
+
+@pytest.fixture
+def crowded_host(tmp_path):
+    """Issue 36's reproduction of a lost S100 frame: twice as many CPU-bound neighbours and as many that wake
+    every 6 ms as the host has cores, and the writer that syncs."""
     from loadkit import Neighbours
 
     cores = os.cpu_count() or 1

@@ -570,7 +570,7 @@ def test_a_write_larger_than_the_modem_holds_overflows_whatever_the_host(tmp_pat
         emulator.close()
 
 
-def test_forty_frames_in_pieces_cross_an_emulated_s100_beside_busy_neighbours(tmp_path, daemon_of, busy_host):
+def test_forty_frames_in_pieces_cross_an_emulated_s100_beside_busy_neighbours(tmp_path, daemon_of, crowded_host):
     """Issue 36: hilgate's S100 driver writes 40 frames of 100 bytes on air (vl2b, 1800 bit/s, 19 200 baud,
     no flow control) into an emulated S100 on a pty, and a simulated link's socket application receives
     them, while CPU-bound neighbours, neighbours that wake every 6 ms and a disk writer that syncs share
