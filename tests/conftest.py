@@ -35,11 +35,8 @@ def busy_host(tmp_path):
     priority, a CPU-bound one and one that wakes every 6 ms for each of the host's cores (every core is
     contested), and a writer that syncs 256 MiB at a time.  A test that takes it asserts what the modems do
     exactly as without it: host load must change none of it.  (Twice as many, as :func:`crowded_host` has,
-    cost the whole parallel part of make test about half a minute: the suite is CPU-bound on two cores.)"""
-    from loadkit import Neighbours
-
-    cores = os.cpu_count() or 1
-    with Neighbours(hogs=cores, wakers=cores, writers=1, mib=256, directory=str(tmp_path)) as neighbours:
+    cost the parallel part of make test 25 s of its 476 on a clean clone here: it is CPU-bound on two cores.)"""
+    with _neighbours(tmp_path, per_core=1) as neighbours:
         yield neighbours
 
 
@@ -47,11 +44,16 @@ def busy_host(tmp_path):
 def crowded_host(tmp_path):
     """Issue 36's reproduction of a lost S100 frame: twice as many CPU-bound neighbours and as many that wake
     every 6 ms as the host has cores, and the writer that syncs."""
+    with _neighbours(tmp_path, per_core=2) as neighbours:
+        yield neighbours
+
+
+def _neighbours(tmp_path, per_core: int):
+    """``per_core`` CPU hogs and as many wakers for each of the host's cores, and one writer that syncs."""
     from loadkit import Neighbours
 
     cores = os.cpu_count() or 1
-    with Neighbours(hogs=2 * cores, wakers=2 * cores, writers=1, mib=256, directory=str(tmp_path)) as neighbours:
-        yield neighbours
+    return Neighbours(hogs=per_core * cores, wakers=per_core * cores, writers=1, mib=256, directory=str(tmp_path))
 
 
 # Tests that must not share the machine with the rest of the suite: they time a serial line or a
