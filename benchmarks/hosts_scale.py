@@ -48,7 +48,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import netns  # noqa: E402
 from daemon_harness import Daemon, cpu_seconds  # noqa: E402
 from multihost import free_port  # noqa: E402
-from realtime_lateness import ON_AIR, READ_AFTER_S, percentile, send_and_read  # noqa: E402
+from realtime_lateness import ON_AIR, add_application_timing, percentile, send_and_read  # noqa: E402
 
 HOSTS = ("A", "B", "C", "D")
 BITRATE, TX_DELAY, SPEED = 64000, 0.001, 1500.0
@@ -200,10 +200,7 @@ def main() -> None:
     parser.add_argument("--rate", type=float, default=10.0, help="frames per second per link")
     parser.add_argument("--seconds", type=float, default=20.0, help="of sending, per run")
     parser.add_argument("--repeats", type=int, default=2, help="runs of each side, alternating")
-    parser.add_argument("--warm-up", type=float, default=WARM_UP_S,
-                        help="seconds from the applications' start to their first frame (every link opened)")
-    parser.add_argument("--read-after", type=float, default=READ_AFTER_S,
-                        help="seconds the applications read on after their last frame (the frames on their way)")
+    add_application_timing(parser, WARM_UP_S)
     parser.add_argument("--loopback", action="store_true", help="4 daemons on loopback even where namespaces could be made")
     parser.add_argument("--realtime", action="store_true", help="every daemon with `hilgate run --realtime`")
     args = parser.parse_args()

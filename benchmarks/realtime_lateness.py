@@ -172,6 +172,15 @@ def send_and_read(runtime_dir: str, links: list[tuple[int, str]], delay: list[li
     result.put((late, sent))
 
 
+def add_application_timing(parser, warm_up: float = WARM_UP_S) -> None:
+    """``--warm-up`` and ``--read-after``, the applications' waits around their sending (shared with
+    realtime_load.py and hosts_scale.py)."""
+    parser.add_argument("--warm-up", type=float, default=warm_up,
+                        help="seconds from the applications' start to their first frame (every link opened)")
+    parser.add_argument("--read-after", type=float, default=READ_AFTER_S,
+                        help="seconds the applications read on after their last frame (the frames on their way)")
+
+
 def through_hilgate(nodes: int, rate: float, seconds: float, apps: int, seed: int, daemon_args: tuple[str, ...],
                     placement: Placement, priority: int = 0, warm_up: float = WARM_UP_S,
                     read_after: float = READ_AFTER_S):
@@ -304,10 +313,7 @@ def main() -> None:
     parser.add_argument("--rate", type=float, default=0.5, help="frames per second per node")
     parser.add_argument("--apps", type=int, default=2, help="application processes sharing the links")
     parser.add_argument("--repeats", type=int, default=3, help="runs of each side per placement, alternating")
-    parser.add_argument("--warm-up", type=float, default=WARM_UP_S,
-                        help="seconds from the applications' start to their first frame (every link opened)")
-    parser.add_argument("--read-after", type=float, default=READ_AFTER_S,
-                        help="seconds the applications read on after their last frame (the frames on their way)")
+    add_application_timing(parser)
     parser.add_argument("--placement", choices=("same", "across", "both"), default="both")
     parser.add_argument("--realtime-priority", type=int, default=0,
                         help="real-time priority for the daemon, the bare loop and ns-3, as `hilgate run --realtime-priority` "

@@ -51,7 +51,7 @@ from daemon_harness import cpu_seconds  # noqa: E402
 from loadkit import Neighbours  # noqa: E402
 from peers import check_python  # noqa: E402
 from placement import Placement, choose  # noqa: E402
-from realtime_lateness import READ_AFTER_S, WARM_UP_S, bare, ns3_realtime, percentile, through_hilgate  # noqa: E402
+from realtime_lateness import add_application_timing, bare, ns3_realtime, percentile, through_hilgate  # noqa: E402
 
 REALTIME = 10  # hilgate.core.priority.DEFAULT_PRIORITY: what `hilgate run --realtime` asks
 INSTRUMENT = REALTIME + 1
@@ -148,10 +148,7 @@ def main() -> None:
     parser.add_argument("--writer-mib", type=int, default=256, help="busy: MiB each writer writes before it syncs")
     parser.add_argument("--settle", type=float, default=SETTLE_S,
                         help="busy: seconds from the neighbours' start to the run (their writer's first file under way)")
-    parser.add_argument("--warm-up", type=float, default=WARM_UP_S,
-                        help="seconds from the applications' start to their first frame (every link opened)")
-    parser.add_argument("--read-after", type=float, default=READ_AFTER_S,
-                        help="seconds the applications read on after their last frame (the frames on their way)")
+    add_application_timing(parser)
     parser.add_argument("--ns3-python", help="a Python with the ns3 wheel: run ns-3's real-time scheduler alongside")
     args = parser.parse_args()
     why_not_ns3 = check_python(args.ns3_python, "ns")

@@ -62,18 +62,8 @@ class InputBuffer:
 
     def accept(self, t: float, size: int, byte_time: float) -> list[bool]:
         """Bytes arriving one every ``byte_time`` from ``t`` (the first at ``t + byte_time``): whether
-        each one fits."""
-        kept = []
-        for i in range(1, size + 1):
-            now = t + i * byte_time
-            if now > self.t:
-                self.level = max(0.0, self.level - (now - self.t) * self.drain_Bps)
-                self.t = now
-            fits = self.level + 1 <= self.capacity + EPS
-            if fits:
-                self.level += 1
-            kept.append(fits)
-        return kept
+        each one fits (:meth:`fit` with every byte's arrival known)."""
+        return self.fit(t, [t + i * byte_time for i in range(1, size + 1)], byte_time)[0]
 
     def fit(self, earliest: float, latest: list[float], byte_time: float) -> tuple[list[bool], float]:
         """Bytes that came one after another, no closer than ``byte_time``, the first no earlier than

@@ -71,10 +71,10 @@ class S100Emulator(EmulatedModem):
       capped at :data:`HANDOVER_CAP_S`), no closer than the line carries them.  Within that, each byte
       is taken to have come at the earliest moment it fits (:meth:`InputBuffer.fit`): a piece read late
       is not judged to have come late, which would leave too little room for the next one, read on time
-      (1 run in 10 lost a byte so beside 3 busy test runs, before).  On a quiet host that is the line's
-      own timing; a host that writes more than the modem holds at once loses the bytes the modem could not
-      hold, and each overflow's trace line says the window it was judged with (``window``).  Frames go to the channel at the times the line carries them from when they were
-      read, as before.
+      (a byte was lost so in 1 run of 34 beside busy test runs, before).  On a quiet host that is the
+      line's own timing; a host that writes more than the modem holds at once loses the bytes the modem
+      could not hold, and each overflow's trace line says the window it was judged with (``window``).
+      Frames go to the channel at the times the line carries them from when they were read, as before.
     """
 
     busy = False

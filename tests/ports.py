@@ -24,9 +24,9 @@ def _ephemeral_low() -> int:
         return 32768
 
 
-def _free(port: int, kind: int) -> bool:
+def _free(port: int) -> bool:
     """Whether ``port`` can be bound now for both TCP and UDP (a daemon may want either on it)."""
-    for probe_kind in {kind, socket.SOCK_STREAM, socket.SOCK_DGRAM}:
+    for probe_kind in (socket.SOCK_STREAM, socket.SOCK_DGRAM):
         with socket.socket(socket.AF_INET, probe_kind) as probe:
             try:
                 probe.bind(("127.0.0.1", port))
@@ -47,7 +47,7 @@ def free_port(kind: int = socket.SOCK_STREAM) -> int:
     chooser = random.SystemRandom()  # two runs on one machine start from different places
     for _ in range(200):
         port = chooser.randrange(LOWEST, high)
-        if port not in _given and _free(port, kind):
+        if port not in _given and _free(port):
             _given.add(port)
             return port
     raise RuntimeError(f"no free loopback port in {LOWEST}–{high - 1} after 200 tries")

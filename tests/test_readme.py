@@ -286,12 +286,12 @@ class Process:
         try:
             self.code = self.popen.wait(HANG_GUARD_S)
         except subprocess.TimeoutExpired:
-            self.stuck = _process_state(self.popen.pid)
+            stuck = _process_state(self.popen.pid)
             os.killpg(self.popen.pid, signal.SIGKILL)
             self.code = self.popen.wait()
             # (said, with what the process was doing: a test that passes slowly is still worth knowing about)
             warnings.warn(f"`{self.command}` had not ended {HANG_GUARD_S:.0f} s after "
-                          f"{signal.Signals(sig).name if sig else 'its start'}: killed ({self.stuck}); "
+                          f"{signal.Signals(sig).name if sig else 'its start'}: killed ({stuck}); "
                           f"the walk's own signals: {_process_state(os.getpid())}; its last lines:\n"
                           + "".join(self.lines[-10:]))
         self.reader.join(HANG_GUARD_S)
